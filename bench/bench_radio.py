@@ -1,0 +1,185 @@
+#!/usr/bin/env python3
+"""Setpoint throughput and host CPU cost of the radio path through one fake Crazyradio.
+
+For 1, 2, 4 and 8 Crazyflies sharing one dongle, every Crazyflie sends RPYT setpoints (port 3, 15
+bytes, safelink on) as fast as the dongle takes them, and the run reports:
+
+* setpoint packets per second (all Crazyflies together, and the slowest one: fairness),
+* host CPU time per packet = process CPU time (all threads) / packets acked,
+* next to the modelled capacity of the dongle in the same run: 1 / modelled round-trip time, where
+  the modelled round trip = bulk OUT+IN time + (control transfers per packet x control-transfer
+  time), both from the fake dongle's `DongleTiming` and its counters. With more than one Crazyflie
+  the dongle must be re-addressed (SET_RADIO_ADDRESS) before nearly every packet.
+
+Two ways to drive the dongle: "threads" (each Crazyflie a `RadioLink` sending from its own thread;
+the `SharedRadio` FIFO lock interleaves them, as the driver's per-Crazyflie workers do) and
+"round-robin" (one thread sending to each Crazyflie in turn). Each is run with the default timing
+model (PA: 0.8 ms per bulk round trip, 1.5 ms per control transfer, real sleeps) and with the model
+off (no sleeps: pure host overhead).
+
+The path measured is the real one from `RadioLink.send_bytes` down: safelink bits, `SharedRadio`,
+`Crazyradio` (pyusb `write`/`read`, vendor requests), the fake pyusb backend, `LocalMedium` and the
+simulated nRF + commander port of `SimulatedCrazyflie` (a vehicle that does nothing, so physics does
+not enter the figures), all in this process. Usage:
+    PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--out FILE]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import struct
+import sys
+import threading
+import time
+from typing import Dict, List
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
+
+from crazyflie_driver.link import RadioLink, RadioManager              # noqa: E402
+from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend  # noqa: E402
+from crazyflie_driver.sim.firmware import SimulatedCrazyflie            # noqa: E402
+from crazyflie_driver.sim.medium import LocalMedium                     # noqa: E402
+
+SETPOINT = bytes([0x30]) + struct.pack("<fffH", 0.0, 0.0, 0.0, 0)   # port 3 ch 0 RPYT, thrust 0
+WARMUP_S = 0.2
+
+
+class IdleVehicle:
+    """A vehicle that accepts everything and does nothing (clock = wall clock)."""
+
+    name = "bench"
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+
+    def time(self) -> float:
+        return time.monotonic() - self._t0
+
+    def read(self, name: str) -> float:
+        return 0.0
+
+    def param_defaults(self) -> Dict[str, float]:
+        return {}
+
+    def write_param(self, name: str, value: float) -> None:
+        pass
+
+    def set_rpyt(self, roll: float, pitch: float, yaw: float, thrust: int) -> None:
+        pass
+
+    def emergency_stop(self) -> None:
+        pass
+
+
+def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
+    medium = LocalMedium(dongles=1, seed=1)
+    sims = []
+    for i in range(n):
+        cf = SimulatedCrazyflie(bytes([0xE7, 0xE7, 0xE7, 0xE7, i + 1]), IdleVehicle())
+        medium.add_crazyflie(cf, 80, 2)
+        sims.append(cf)
+    backend = FakeUsbBackend(medium, dongles=1, timing=timing)
+    manager = RadioManager(backend=backend)
+    links = [RadioLink("radio://0/80/2M/E7E7E7E7%02X" % (i + 1), manager) for i in range(n)]
+    for link in links:
+        link.open()
+    assert all(link.safelink for link in links), "safelink was not negotiated"
+    counts: List[int] = [0] * n
+    failures: List[int] = [0] * n
+    stop = threading.Event()
+
+    def one_link(i: int) -> None:
+        link, send = links[i], links[i].send_bytes
+        while not stop.is_set():
+            if send(SETPOINT):
+                counts[i] += 1
+            else:
+                failures[i] += 1
+
+    def round_robin() -> None:
+        sends = [link.send_bytes for link in links]
+        while not stop.is_set():
+            for i, send in enumerate(sends):
+                if send(SETPOINT):
+                    counts[i] += 1
+                else:
+                    failures[i] += 1
+
+    if mode == "threads":
+        threads = [threading.Thread(target=one_link, args=(i,), daemon=True) for i in range(n)]
+    else:
+        threads = [threading.Thread(target=round_robin, daemon=True)]
+    for t in threads:
+        t.start()
+    time.sleep(WARMUP_S)
+    dongle = backend.dongles[0]
+    c0, ctrl0, setp0 = list(counts), dongle.control_transfers, [s.state.setpoints for s in sims]
+    cpu0, t0 = time.process_time(), time.monotonic()
+    time.sleep(seconds)
+    cpu1, t1 = time.process_time(), time.monotonic()
+    c1, ctrl1, setp1 = list(counts), dongle.control_transfers, [s.state.setpoints for s in sims]
+    stop.set()
+    for t in threads:
+        t.join(5.0)
+    for link in links:
+        link.close()
+    elapsed = t1 - t0
+    per_cf = [(b - a) / elapsed for a, b in zip(c0, c1)]
+    packets = sum(c1) - sum(c0)
+    delivered = sum(setp1) - sum(setp0)
+    ctrl_per_packet = (ctrl1 - ctrl0) / packets if packets else float("nan")
+    modelled_rtt = timing.bulk_round_trip_s + ctrl_per_packet * timing.control_transfer_s
+    return {"n": n, "mode": mode, "rate": packets / elapsed, "rate_min": min(per_cf),
+            "cpu_us": 1e6 * (cpu1 - cpu0) / packets if packets else float("nan"),
+            "cpu_share": (cpu1 - cpu0) / elapsed, "ctrl_per_packet": ctrl_per_packet,
+            "modelled_rtt_ms": 1000.0 * modelled_rtt,
+            "capacity": 1.0 / modelled_rtt if modelled_rtt > 0 else float("inf"),
+            "failures": sum(failures), "delivered_ratio": delivered / packets if packets else 0.0}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=2.0, help="measured time per case")
+    ap.add_argument("--counts", default="1,2,4,8")
+    ap.add_argument("--modes", default="threads,round-robin")
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "radio.txt"))
+    args = ap.parse_args()
+    model = DongleTiming()
+    lines = ["RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink -> Crazyradio -> pyusb ->",
+             "FakeUsbBackend -> LocalMedium -> simulated nRF + commander), %.1f s per case after %.1f s warm-up"
+             % (args.seconds, WARMUP_S),
+             "timing model: bulk round trip %.2f ms, control transfer %.2f ms; 'off' = DongleTiming.instant()"
+             % (1000 * model.bulk_round_trip_s, 1000 * model.control_transfer_s),
+             "machine: %s, %s, Python %s, %d CPUs" % (platform.machine(), platform.platform(terse=True),
+                                                    platform.python_version(), os.cpu_count() or 0),
+             "",
+             "%-6s %-11s %3s %10s %12s %13s %9s %12s %12s %10s" % (
+                 "timing", "mode", "CFs", "packets/s", "slowest CF/s", "CPU us/packet", "CPU load",
+                 "ctrl/packet", "model RTT ms", "capacity/s")]
+    print("\n".join(lines), flush=True)
+    for label, timing in (("model", model), ("off", DongleTiming.instant())):
+        for mode in args.modes.split(","):
+            for n in [int(x) for x in args.counts.split(",")]:
+                r = run_case(n, timing, mode, args.seconds)
+                if r["failures"] or abs(r["delivered_ratio"] - 1.0) > 0.01:
+                    print("warning: %d unacked, delivered/acked = %.3f" % (r["failures"], r["delivered_ratio"]))
+                capacity = "%10.0f" % r["capacity"] if label == "model" else "%10s" % "-"
+                line = "%-6s %-11s %3d %10.0f %12.0f %13.1f %8.0f%% %12.2f %12.2f %s" % (
+                    label, mode, n, r["rate"], r["rate_min"], r["cpu_us"], 100 * r["cpu_share"],
+                    r["ctrl_per_packet"], r["modelled_rtt_ms"] if label == "model" else 0.0, capacity)
+                print(line, flush=True)
+                lines.append(line)
+    lines += ["",
+              "packets/s: acked setpoints of all Crazyflies together (each was delivered to the simulated",
+              "commander once: safelink drops duplicates). CPU us/packet: process CPU time (all threads) /",
+              "packets. capacity/s = 1 / model RTT, model RTT = bulk round trip + ctrl/packet x control transfer."]
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("written to %s" % args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,147 @@
+#!/usr/bin/env python3
+"""crazyflie_server throughput and latency on one (simulated) Crazyradio.
+
+For 1, 2, 4 and 8 Crazyflies sharing one fake dongle (PA timing model: 0.8 ms per bulk round
+trip), with the fixed log blocks on or off: how many setpoints per second each Crazyflie actually
+receives when cmd_vel arrives at 100 Hz per Crazyflie, and the cmd_vel-to-radio latency (from the
+moment cmd_vel is handed to the worker until the setpoint's radio round trip is acked; median and
+p99). Also the IMU messages per second each Crazyflie delivers with logging on.
+
+Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.World stepping in real
+time, sim.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
+    PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_server.py [--seconds 3] [--out FILE]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import threading
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
+
+from crazyflie_driver.crazyflie import Crazyflie                     # noqa: E402
+from crazyflie_driver.link import RadioManager                       # noqa: E402
+from crazyflie_driver.registry import CrazyflieRegistry              # noqa: E402
+from crazyflie_driver.sim.fake_usb import FakeUsbBackend             # noqa: E402
+from crazyflie_driver.sim.server import WorldServer                  # noqa: E402
+from crazyflie_driver.sim.world import World                         # noqa: E402
+from crazyflie_driver.worker import WorkerConfig, WorkerListener     # noqa: E402
+
+CMD_RATE_HZ = 100.0
+
+
+class Counter(WorkerListener):
+    def __init__(self) -> None:
+        self.imu = 0
+
+    def on_log(self, topic, ts, values) -> None:
+        if topic == "imu":
+            self.imu += 1
+
+
+def percentile(values, p):
+    s = sorted(values)
+    return s[min(len(s) - 1, int(round(p / 100.0 * (len(s) - 1))))]
+
+
+def run_case(n: int, logging_on: bool, seconds: float, cache_dir: str) -> dict:
+    world = World(speed=1.0, seed=1)
+    server = WorldServer(world, dongles=1)
+    uris = ["radio://0/80/2M/E7E7E7E7%02X" % (i + 1) for i in range(n)]
+    for i, uri in enumerate(uris):
+        server.add_crazyflie(uri, "cf%d" % (i + 1), (0.5 * i, 0.0, 0.0))
+    world.start()
+    manager = RadioManager(backend=FakeUsbBackend(server.medium, dongles=1))
+    registry = CrazyflieRegistry(lambda uri: Crazyflie(uri, radio_manager=manager, cache_dir=cache_dir))
+    workers, counters, latencies = [], [], []
+    lat_lock = threading.Lock()
+    try:
+        for i, uri in enumerate(uris):
+            c = Counter()
+            w = registry.add(WorkerConfig(uri=uri, tf_prefix="cf%d" % (i + 1), enable_logging=logging_on,
+                                          enable_parameters=False), c, timeout=60.0)
+            own: list = []
+            w.latency_listener = own.append
+            workers.append(w)
+            counters.append(c)
+            latencies.append(own)
+        stop = threading.Event()
+
+        def commander(w):
+            period = 1.0 / CMD_RATE_HZ
+            next_t = time.monotonic()
+            while not stop.is_set():
+                w.cmd_vel(0.0, 0.0, 0.0, 0.0)
+                next_t += period
+                time.sleep(max(0.0, next_t - time.monotonic()))
+
+        time.sleep(0.5)                                   # let log blocks settle
+        for own in latencies:
+            own.clear()
+        sent0 = [w.setpoints_sent for w in workers]
+        imu0 = [c.imu for c in counters]
+        snap0 = [server.crazyflie(u).snapshot()["setpoints"] for u in uris]
+        trips0 = server.medium.round_trips
+        threads = [threading.Thread(target=commander, args=(w,), daemon=True) for w in workers]
+        t0 = time.monotonic()
+        for t in threads:
+            t.start()
+        time.sleep(seconds)
+        stop.set()
+        for t in threads:
+            t.join()
+        elapsed = time.monotonic() - t0
+        received = [(server.crazyflie(u).snapshot()["setpoints"] - s0) / elapsed for u, s0 in zip(uris, snap0)]
+        sent = [(w.setpoints_sent - s0) / elapsed for w, s0 in zip(workers, sent0)]
+        imu = [(c.imu - i0) / elapsed for c, i0 in zip(counters, imu0)]
+        all_lat = [x for own in latencies for x in own]
+        return {"n": n, "logging": logging_on, "received_min": min(received),
+                "received_mean": statistics.mean(received), "sent_mean": statistics.mean(sent),
+                "imu_min": min(imu) if logging_on else 0.0,
+                "lat_median_ms": 1000 * statistics.median(all_lat) if all_lat else float("nan"),
+                "lat_p99_ms": 1000 * percentile(all_lat, 99) if all_lat else float("nan"),
+                "world_rtf": world.realtime_factor,
+                "round_trips_per_s": (server.medium.round_trips - trips0) / elapsed}
+    finally:
+        registry.shutdown()
+        world.stop()
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument("--counts", default="1,2,4,8")
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "server.txt"))
+    args = ap.parse_args()
+    import tempfile
+    cache_dir = tempfile.mkdtemp(prefix="cf_bench_toc_")
+    lines = ["crazyflie_server core on one fake Crazyradio PA (0.8 ms per round trip), cmd_vel offered at "
+             "%.0f Hz per Crazyflie, %.1f s per case" % (CMD_RATE_HZ, args.seconds),
+             "machine: %s, %s, Python %s, %d CPUs" % (platform.machine(), platform.platform(terse=True),
+                                                    platform.python_version(), os.cpu_count() or 0),
+             "",
+             "%4s %8s %18s %16s %12s %14s %12s %12s %6s" % ("CFs", "logging", "setpoints/s/CF min", "mean",
+                                                       "IMU/s/CF min", "latency med ms", "p99 ms", "radio RT/s", "world RTF")]
+    print("\n".join(lines), flush=True)
+    for n in [int(x) for x in args.counts.split(",")]:
+        for logging_on in (False, True):
+            r = run_case(n, logging_on, args.seconds, cache_dir)
+            line = "%4d %8s %18.1f %16.1f %12s %14.2f %12.2f %12.0f %6.2f" % (
+                r["n"], "on" if logging_on else "off", r["received_min"], r["received_mean"],
+                "%.1f" % r["imu_min"] if logging_on else "-", r["lat_median_ms"], r["lat_p99_ms"],
+                r["round_trips_per_s"], r["world_rtf"])
+            print(line, flush=True)
+            lines.append(line)
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("written to %s" % args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""crazyflie_controller Python package."""

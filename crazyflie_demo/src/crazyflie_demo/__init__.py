@@ -1,0 +1,1 @@
+"""crazyflie_demo Python package."""

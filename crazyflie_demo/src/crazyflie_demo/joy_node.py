@@ -1,0 +1,63 @@
+"""joy_node: a Linux joystick as sensor_msgs/Joy on ``joy``, with the ROS joy package's parameters.
+
+Private params: ``~dev`` (/dev/input/js0), ``~deadzone`` (0.05), ``~autorepeat_rate`` (0 Hz = off),
+``~coalesce_interval`` (0.001 s). A missing device is retried every second; an unplugged one is
+reported as a neutral message (all axes 0, buttons released) and reopened.
+"""
+from __future__ import annotations
+
+import logging
+
+import rospy
+from sensor_msgs.msg import Joy
+
+from crazyflie_demo.joystick import Joystick, JoyState
+
+
+class _RospyLogHandler(logging.Handler):
+    """Sends the ROS-free joystick module's log lines to rosout."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = self.format(record)
+        if record.levelno >= logging.ERROR:
+            rospy.logerr(text)
+        elif record.levelno >= logging.WARNING:
+            rospy.logwarn(text)
+        else:
+            rospy.loginfo(text)
+
+
+def to_message(state: JoyState, frame_id: str) -> Joy:
+    msg = Joy()
+    msg.header.stamp = rospy.Time.now()
+    msg.header.frame_id = frame_id
+    msg.axes = list(state.axes)
+    msg.buttons = list(state.buttons)
+    return msg
+
+
+def main() -> None:
+    rospy.init_node("joy_node")
+    logger = logging.getLogger("crazyflie_demo.joy_node")
+    logger.propagate = False
+    logger.addHandler(_RospyLogHandler())
+    logger.setLevel(logging.INFO)
+    dev = str(rospy.get_param("~dev", "/dev/input/js0"))
+    try:
+        joystick = Joystick(dev=dev,
+                            deadzone=float(rospy.get_param("~deadzone", 0.05)),
+                            autorepeat_rate=float(rospy.get_param("~autorepeat_rate", 0.0)),
+                            coalesce_interval=float(rospy.get_param("~coalesce_interval", 0.001)),
+                            logger=logger)
+    except (TypeError, ValueError) as exc:
+        rospy.logfatal("joy_node: bad parameter: %s", exc)
+        return
+    pub = rospy.Publisher("joy", Joy, queue_size=10)
+    rospy.loginfo("joy_node: reading %s, publishing %s", dev, pub.resolved_name)
+    try:
+        for state in joystick.states(timeout=0.1, should_stop=rospy.is_shutdown):
+            pub.publish(to_message(state, dev))
+    except rospy.ROSInterruptException:
+        pass
+    finally:
+        joystick.close()

@@ -1,0 +1,71 @@
+"""publish_pose_teleop.py: a goal (PoseStamped) moved around by the joystick.
+
+Sticks change the goal at a speed, not the vehicle directly: the position controller keeps
+flying to wherever the goal is. Axes are 0-based indices into Joy.axes.
+"""
+from __future__ import annotations
+
+import math
+import threading
+from typing import Optional
+
+import rospy
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import Joy
+
+from crazyflie_demo.rosutil import make_goal
+
+
+class GoalTeleop:
+    """ROS-free: integrates stick deflections into a goal position and yaw."""
+
+    def __init__(self, x: float, y: float, z: float, speeds=(1.0, 1.0, 0.5, 2.0),
+                 axes=(4, 3, 1, 0), deadzone: float = 0.1, z_min: float = 0.0) -> None:
+        self.position = [x, y, z]
+        self.yaw = 0.0
+        self.speeds = speeds
+        self.axes = axes
+        self.deadzone = deadzone
+        self.z_min = z_min
+
+    def step(self, joy_axes, dt: float) -> None:
+        def axis(i: int) -> float:
+            v = joy_axes[i] if 0 <= i < len(joy_axes) else 0.0
+            return v if abs(v) > self.deadzone else 0.0
+        self.position[0] += axis(self.axes[0]) * self.speeds[0] * dt
+        self.position[1] += axis(self.axes[1]) * self.speeds[1] * dt
+        self.position[2] = max(self.z_min, self.position[2] + axis(self.axes[2]) * self.speeds[2] * dt)
+        self.yaw = math.remainder(self.yaw + axis(self.axes[3]) * self.speeds[3] * dt, 2 * math.pi)
+
+
+def main() -> None:
+    rospy.init_node("publish_pose_teleop", anonymous=True)
+    name = rospy.get_param("~name", "goal")
+    rate = float(rospy.get_param("~rate", 30.0))
+    joy_topic = rospy.get_param("~joy_topic", "joy")
+    world_frame = rospy.get_param("~worldFrame", "world")
+    teleop = GoalTeleop(float(rospy.get_param("~x", 0.0)), float(rospy.get_param("~y", 0.0)),
+                        float(rospy.get_param("~z", 0.5)))
+    lock = threading.Lock()
+    last: dict = {"axes": None}
+
+    def on_joy(msg: Joy) -> None:
+        with lock:
+            last["axes"] = list(msg.axes)
+
+    rospy.Subscriber(joy_topic, Joy, on_joy, queue_size=1)
+    pub = rospy.Publisher(name, PoseStamped, queue_size=1)
+    r = rospy.Rate(rate)
+    seq = 0
+    while not rospy.is_shutdown():
+        with lock:
+            axes: Optional[list] = last["axes"]
+        if axes is not None:
+            teleop.step(axes, 1.0 / rate)
+        seq += 1
+        x, y, z = teleop.position
+        pub.publish(make_goal(world_frame, x, y, z, teleop.yaw, seq))
+        try:
+            r.sleep()
+        except rospy.ROSInterruptException:
+            break

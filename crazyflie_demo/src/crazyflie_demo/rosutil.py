@@ -1,0 +1,80 @@
+"""Small rospy helpers shared by the demo nodes (imported only inside nodes)."""
+from __future__ import annotations
+
+import math
+from typing import Optional, Tuple
+
+import rospy
+from geometry_msgs.msg import PoseStamped
+
+
+def yaw_to_quaternion(yaw_rad: float) -> Tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation about z."""
+    return (0.0, 0.0, math.sin(yaw_rad / 2.0), math.cos(yaw_rad / 2.0))
+
+
+def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rad) of a quaternion, ZYX convention."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def make_goal(frame_id: str, x: float, y: float, z: float, yaw_rad: float,
+              seq: int = 0, stamp: Optional[rospy.Time] = None) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.seq = seq
+    msg.header.frame_id = frame_id.strip("/")   # tf2 refuses a leading slash
+    msg.header.stamp = stamp if stamp is not None else rospy.Time.now()
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+    q = yaw_to_quaternion(yaw_rad)
+    (msg.pose.orientation.x, msg.pose.orientation.y,
+     msg.pose.orientation.z, msg.pose.orientation.w) = q
+    return msg
+
+
+def wait_for_service(name: str, timeout: float) -> bool:
+    """Wait for a service; False (and a log line) instead of an exception on timeout."""
+    try:
+        rospy.wait_for_service(name, timeout=timeout)
+        return True
+    except rospy.ROSException:
+        rospy.logwarn("service %s not available after %.0f s", rospy.resolve_name(name), timeout)
+        return False
+
+
+def take_off_when_ready(timeout: float, state_topic: str = "controller/state") -> bool:
+    """Call the position controller's ``takeoff`` once it can act on it, and confirm it did.
+
+    Ready means the Crazyflie is on the server (its ``emergency`` service exists) and the
+    controller reports a fresh pose (``~state`` "Idle: ok"); a take-off the controller refused is
+    asked again. False (and a log line) if it has not taken off after ``timeout`` seconds.
+    """
+    from std_msgs.msg import String
+    from std_srvs.srv import Empty
+
+    deadline = rospy.get_time() + timeout
+    if not (wait_for_service("emergency", timeout) and wait_for_service("takeoff", timeout)):
+        return False
+    status = {"text": ""}
+
+    def on_state(msg: String) -> None:
+        status["text"] = msg.data
+
+    sub = rospy.Subscriber(state_topic, String, on_state, queue_size=5)
+    takeoff = rospy.ServiceProxy("takeoff", Empty)
+    try:
+        while not rospy.is_shutdown() and rospy.get_time() < deadline:
+            text = status["text"]
+            if text and not text.startswith("Idle"):
+                return True
+            if text.startswith("Idle: ok"):
+                try:
+                    takeoff()
+                except rospy.ServiceException as exc:
+                    rospy.logwarn("takeoff failed: %s", exc)
+            rospy.sleep(0.5)
+    except rospy.ROSInterruptException:
+        return False
+    finally:
+        sub.unregister()
+    rospy.logerr("no take-off after %.0f s (controller state: %r)", timeout, status["text"])
+    return False

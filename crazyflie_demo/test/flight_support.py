@@ -1,0 +1,127 @@
+"""Helpers for the flight rostests: the simulated world's true state, waits, hold-error figures.
+
+Flight tests judge the vehicles by the world's ground truth (``vehicle_state`` over the world
+server's control API), not by what the stack under test believes, so a wrong pose or frame in
+the stack cannot hide a bad flight.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any, Callable, Dict, List, Sequence, Tuple
+
+Vec3 = Tuple[float, float, float]
+
+
+def wait_until(cond: Callable[[], Any], timeout: float, period: float = 0.05) -> Any:
+    """cond()'s first truthy value, or its last value after ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while True:
+        v = cond()
+        if v or time.monotonic() >= end:
+            return v
+        time.sleep(period)
+
+
+def distance(a: Sequence[float], b: Sequence[float]) -> float:
+    return math.sqrt(sum((x - y) ** 2 for x, y in zip(a, b)))
+
+
+def hold_errors(positions: Sequence[Sequence[float]], target: Sequence[float]) -> Tuple[float, float]:
+    """(RMS, max) of the 3-D distance between each position and the target, in metres."""
+    if not positions:
+        raise ValueError("no positions to measure the hold error from")
+    d = [distance(p, target) for p in positions]
+    return math.sqrt(sum(e * e for e in d) / len(d)), max(d)
+
+
+class WorldProbe:
+    """Reads the simulated vehicles' true state from the world server (``sim_address`` host:port)."""
+
+    def __init__(self, address: str) -> None:
+        from crazyflie_driver.sim.medium import RemoteMedium
+
+        host, _, port = address.rpartition(":")
+        self.medium = RemoteMedium(host, int(port))
+
+    def wait_ready(self, names: Sequence[str], timeout: float = 30.0) -> None:
+        """Until the world server answers for every vehicle (it starts with the launch file)."""
+        last: Exception = TimeoutError("no answer")
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                for n in names:
+                    self.state(n)
+                return
+            except Exception as e:   # WorldNotRunning, or the vehicle not added yet
+                last = e
+                time.sleep(0.2)
+        raise AssertionError("simulated world not ready after %.0f s: %s" % (timeout, last))
+
+    def state(self, name: str) -> Dict[str, Any]:
+        """position, velocity, quaternion, motors, on_ground, thrust_locked, locked, vbat."""
+        return self.medium.control("vehicle_state", uri=name)
+
+    def position(self, name: str) -> Vec3:
+        return tuple(self.state(name)["position"])
+
+    def yaw(self, name: str) -> float:
+        x, y, z, w = self.state(name)["quaternion"]
+        return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+    def firmware(self, name: str) -> Dict[str, Any]:
+        """The simulated firmware's view (emergency flag, last setpoint, ...)."""
+        return self.medium.crazyflie_state(name)
+
+    def sample(self, names: Sequence[str], duration: float, period: float = 0.02) -> Dict[str, List[Vec3]]:
+        """Positions of each vehicle every ``period`` s for ``duration`` s."""
+        out: Dict[str, List[Vec3]] = {n: [] for n in names}
+        end = time.monotonic() + duration
+        while time.monotonic() < end:
+            for n in names:
+                out[n].append(self.position(n))
+            time.sleep(period)
+        return out
+
+    def wait_near(self, name: str, target: Sequence[float], tolerance: float, timeout: float) -> bool:
+        return bool(wait_until(lambda: distance(self.position(name), target) < tolerance, timeout))
+
+
+class Track:
+    """Samples vehicles' true positions in a background thread (world time-stamped by monotonic)."""
+
+    def __init__(self, probe: WorldProbe, names: Sequence[str], period: float = 0.05) -> None:
+        self.probe, self.names, self.period = probe, list(names), period
+        self.samples: Dict[str, List[Tuple[float, Dict[str, Any]]]] = {n: [] for n in names}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="track", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            for n in self.names:
+                try:
+                    s = self.probe.state(n)
+                except Exception:   # the world going away at shutdown
+                    return
+                with self._lock:
+                    self.samples[n].append((time.monotonic(), s))
+            self._stop.wait(self.period)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+
+    def at(self, name: str, t: float) -> Dict[str, Any]:
+        """The sample of ``name`` closest to monotonic time ``t``."""
+        with self._lock:
+            rows = list(self.samples[name])
+        if not rows:
+            raise ValueError("no samples of %s yet" % name)
+        return min(rows, key=lambda r: abs(r[0] - t))[1]
+
+    def between(self, name: str, t0: float, t1: float) -> List[Dict[str, Any]]:
+        with self._lock:
+            return [s for t, s in self.samples[name] if t0 <= t <= t1]

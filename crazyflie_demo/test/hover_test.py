@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Hover launch files in the simulator: each vehicle takes off by itself and holds its point.
+
+Private params: ``sim_address``; ``vehicles`` = [{name, target: [x, y, z]}] (name = the world's
+vehicle = the launch file's namespace); ``rms_bound`` / ``max_bound`` (m) on the hold error over
+``measure_s`` seconds after ``settle_s`` seconds near the target; ``mocap`` (vicon|vrpn): the
+motion-capture names the poses must come through.
+"""
+from __future__ import annotations
+
+import sys
+import time
+import unittest
+
+import rospy
+import rostest
+import tf2_ros
+from geometry_msgs.msg import PoseStamped, TransformStamped
+
+from flight_support import WorldProbe, hold_errors, wait_until
+
+
+class Hover(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("hover_test")
+        cls.probe = WorldProbe(rospy.get_param("~sim_address"))
+        cls.vehicles = rospy.get_param("~vehicles")
+        cls.probe.wait_ready([v["name"] for v in cls.vehicles])
+        cls.mocap = rospy.get_param("~mocap", "vicon")
+        cls.rms_bound = float(rospy.get_param("~rms_bound"))
+        cls.max_bound = float(rospy.get_param("~max_bound"))
+        cls.settle_s = float(rospy.get_param("~settle_s", 5.0))
+        cls.measure_s = float(rospy.get_param("~measure_s", 5.0))
+        cls.tf = tf2_ros.Buffer()
+        cls.listener = tf2_ros.TransformListener(cls.tf)
+
+    def test_a_poses_come_through_the_motion_capture_names(self):
+        for v in self.vehicles:
+            name = v["name"]
+            if self.mocap == "vicon":
+                msg = rospy.wait_for_message("/vicon/%s/%s" % (name, name), TransformStamped, timeout=20.0)
+                self.assertEqual(msg.child_frame_id, "vicon/%s/%s" % (name, name))
+                frame = "vicon/%s/%s" % (name, name)
+            else:
+                msg = rospy.wait_for_message("/vrpn_client_node/%s/pose" % name, PoseStamped, timeout=20.0)
+                self.assertEqual(msg.header.frame_id, "world")
+                frame = name
+            t = self.tf.lookup_transform("world", frame, rospy.Time(0), rospy.Duration(5.0))
+            true = self.probe.position(name)
+            self.assertAlmostEqual(t.transform.translation.x, true[0], delta=0.05)
+            self.assertAlmostEqual(t.transform.translation.y, true[1], delta=0.05)
+
+    def test_b_each_vehicle_takes_off_and_holds_its_point(self):
+        names = [v["name"] for v in self.vehicles]
+        targets = {v["name"]: tuple(float(c) for c in v["target"]) for v in self.vehicles}
+        t0 = time.monotonic()
+        for n in names:
+            reached = self.probe.wait_near(n, targets[n], 0.05, 40.0 - (time.monotonic() - t0))
+            self.assertTrue(reached, "%s never came within 5 cm of %s (it is at %s)"
+                            % (n, targets[n], self.probe.position(n)))
+        rospy.loginfo("all within 5 cm after %.1f s", time.monotonic() - t0)
+        time.sleep(self.settle_s)
+        samples = self.probe.sample(names, self.measure_s, period=0.02)
+        for n in names:
+            rms, worst = hold_errors(samples[n], targets[n])
+            rospy.loginfo("%s hold error over %.0f s: RMS %.4f m, max %.4f m (%d samples)",
+                          n, self.measure_s, rms, worst, len(samples[n]))
+            print("HOVER %s rms=%.4f max=%.4f samples=%d" % (n, rms, worst, len(samples[n])))
+            self.assertLess(rms, self.rms_bound, n)
+            self.assertLess(worst, self.max_bound, n)
+            self.assertFalse(self.probe.state(n)["on_ground"])
+
+
+if __name__ == "__main__":
+    rostest.rosrun("crazyflie_demo", "hover", Hover, sys.argv)

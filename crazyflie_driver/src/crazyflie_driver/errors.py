@@ -1,0 +1,53 @@
+"""Exceptions of the library. Each message names the URI and what was being done."""
+from __future__ import annotations
+
+
+class CrazyflieError(Exception):
+    """Base class of every error this library raises on purpose."""
+
+
+class UriError(CrazyflieError, ValueError):
+    """A malformed Crazyflie URI; the message names the bad part."""
+
+
+class RadioNotFound(CrazyflieError):
+    """No Crazyradio dongle at the requested index."""
+
+
+class RadioAccessDenied(CrazyflieError):
+    """The dongle exists but cannot be opened (usually missing udev rules)."""
+
+
+class RadioUnplugged(CrazyflieError):
+    """The dongle disappeared while in use."""
+
+
+class LinkTimeout(CrazyflieError, TimeoutError):
+    """The Crazyflie did not answer in time."""
+
+
+class LinkLost(CrazyflieError):
+    """Too many packets in a row went unacknowledged."""
+
+
+class ProtocolError(CrazyflieError):
+    """The Crazyflie answered something the protocol does not allow."""
+
+
+class UnknownName(CrazyflieError, KeyError):
+    """A parameter or log variable that is not in the Crazyflie's TOC."""
+
+    def __str__(self) -> str:  # KeyError would add quotes
+        return str(self.args[0]) if self.args else "unknown name"
+
+
+class LogConfigError(CrazyflieError, ValueError):
+    """A log block the firmware cannot hold (too big, too many, bad period)."""
+
+
+class ReadOnlyParam(CrazyflieError):
+    """A write to a parameter the firmware marks read-only."""
+
+
+class ParamValueError(CrazyflieError, ValueError):
+    """A parameter value that cannot be converted to the parameter's type or is out of range."""

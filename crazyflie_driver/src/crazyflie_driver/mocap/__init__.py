@@ -1,0 +1,1 @@
+"""Motion capture: VRPN client and helpers (no rospy outside *_node modules)."""

@@ -1,0 +1,1 @@
+"""rospy nodes of crazyflie_driver; each module has a main()."""

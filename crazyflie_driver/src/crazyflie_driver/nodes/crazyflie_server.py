@@ -1,0 +1,314 @@
+"""``crazyflie_server``: one process serving every Crazyflie; thin ROS glue over worker and registry.
+
+Global services ``/add_crazyflie`` and ``/remove_crazyflie``; per Crazyflie, under its tf_prefix:
+``cmd_vel`` (sub), ``emergency`` and ``update_params`` (services), ``imu``, ``temperature``,
+``magnetic_field``, ``pressure``, ``battery``, ``rssi`` and one GenericLogData topic per custom
+log block (pubs); its parameters mirrored to ``/<tf_prefix>/<group>/<name>``.
+``magnetic_field`` carries the firmware's ``mag.x/y/z`` values unscaled, as the original did.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+from typing import Any, Dict, List, Optional
+
+import rospy
+from geometry_msgs.msg import Twist
+from sensor_msgs.msg import Imu, MagneticField, Temperature
+from std_msgs.msg import Float32
+from std_srvs.srv import Empty, EmptyResponse
+
+from crazyflie_driver.msg import GenericLogData
+from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCrazyflie,
+                                  RemoveCrazyflieResponse, UpdateParams, UpdateParamsResponse)
+
+from ..log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
+                        TEMPERATURE_TOPIC, LogBlockSpec)
+from ..registry import CrazyflieRegistry
+from ..worker import CrazyflieWorker, WorkerConfig, WorkerListener
+
+GRAVITY = 9.81
+DEG_TO_RAD = math.pi / 180.0
+XMLRPC_INT_MAX = 2 ** 31 - 1
+
+
+def namespace(tf_prefix: str) -> str:
+    """``"crazyflie1"`` -> ``"/crazyflie1"``; ``""`` -> ``""`` (global names)."""
+    p = tf_prefix.strip("/")
+    return "/" + p if p else ""
+
+
+def param_server_value(value: Any) -> Any:
+    """A Crazyflie parameter value the ROS parameter server can hold (XML-RPC ints are 32-bit)."""
+    if isinstance(value, int) and not -XMLRPC_INT_MAX - 1 <= value <= XMLRPC_INT_MAX:
+        return float(value)
+    return value
+
+
+class RosCrazyflie(WorkerListener):
+    """The ROS face of one Crazyflie: publishers, the cmd_vel subscriber, its services."""
+
+    def __init__(self, config: WorkerConfig) -> None:
+        self.config = config
+        self.ns = namespace(config.tf_prefix)
+        self.frame_id = (config.tf_prefix.strip("/") + "/base_link") if config.tf_prefix.strip("/") else "base_link"
+        self.worker: Optional[CrazyflieWorker] = None
+        self._services: List[Any] = []
+        self._subscribers: List[Any] = []
+        # Publishers are made once the Crazyflie answered (attach): an absent one costs the server
+        # no master registrations. Log packets of the connect sequence before that are dropped.
+        self._pubs: Dict[str, rospy.Publisher] = {}
+        self._rssi_pub: Optional[rospy.Publisher] = None
+        self._custom: Dict[str, rospy.Publisher] = {}
+
+    # -- after the Crazyflie answered --------------------------------------------------------------
+    def attach(self, worker: CrazyflieWorker) -> None:
+        self.worker = worker
+        config = self.config
+        name = lambda topic: self.ns + "/" + topic
+        pubs: Dict[str, rospy.Publisher] = {}
+        if config.enable_logging:
+            pubs[IMU_TOPIC] = rospy.Publisher(name("imu"), Imu, queue_size=10)
+            pubs[TEMPERATURE_TOPIC] = rospy.Publisher(name("temperature"), Temperature, queue_size=10)
+            pubs[MAGNETIC_FIELD_TOPIC] = rospy.Publisher(name("magnetic_field"), MagneticField, queue_size=10)
+            pubs[PRESSURE_TOPIC] = rospy.Publisher(name("pressure"), Float32, queue_size=10)
+            pubs[BATTERY_TOPIC] = rospy.Publisher(name("battery"), Float32, queue_size=10)
+        self._custom = {b.topic_name: rospy.Publisher(name(b.topic_name), GenericLogData, queue_size=10)
+                        for b in config.log_blocks}
+        self._rssi_pub = rospy.Publisher(name("rssi"), Float32, queue_size=10)
+        self._pubs = pubs       # one assignment: the worker thread reads it meanwhile
+        self._subscribers.append(rospy.Subscriber(name("cmd_vel"), Twist, self._on_cmd_vel, queue_size=1,
+                                                  tcp_nodelay=True))
+        self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
+        self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
+
+    def detach(self) -> None:
+        for s in self._subscribers:
+            s.unregister()
+        for s in self._services:
+            s.shutdown("Crazyflie %s removed" % self.config.uri)
+        pubs = list(self._pubs.values()) + list(self._custom.values()) + [self._rssi_pub]
+        self._pubs, self._custom, self._rssi_pub = {}, {}, None
+        for p in pubs:
+            if p is not None:
+                p.unregister()
+        self._subscribers, self._services = [], []
+
+    # -- ROS callbacks ------------------------------------------------------------------------------
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        try:
+            if not self.worker.cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z):
+                rospy.logwarn_throttle(5.0, "%s: cmd_vel ignored after emergency (remove and add the "
+                                            "Crazyflie again to fly)" % self.config.uri)
+        except ValueError as e:
+            rospy.logwarn_throttle(1.0, "%s: cmd_vel refused: %s" % (self.config.uri, e))
+
+    def _on_emergency(self, _req) -> EmptyResponse:
+        self.worker.emergency()
+        return EmptyResponse()
+
+    def _on_update_params(self, req) -> UpdateParamsResponse:
+        values: Dict[str, Any] = {}
+        errors: List[str] = []
+        for p in req.params:
+            ros_name = "%s/%s" % (self.ns, p.strip("/"))
+            if "/" not in p.strip("/"):
+                errors.append("%s: not of the form group/name" % p)
+                continue
+            try:
+                values[p.strip("/").replace("/", ".")] = rospy.get_param(ros_name)
+            except KeyError:
+                errors.append("%s: ROS parameter %s is not set" % (p, ros_name))
+        written, write_errors = self.worker.update_params(values)
+        errors.extend(write_errors)
+        for name in written:
+            rospy.loginfo("%s: parameter %s updated", self.config.uri, name)
+        if errors:
+            for e in errors:
+                rospy.logerr("%s: update_params: %s", self.config.uri, e)
+            raise rospy.ServiceException("update_params: %d of %d not applied: %s"
+                                         % (len(errors), len(req.params), "; ".join(errors)))
+        return UpdateParamsResponse()
+
+    # -- worker callbacks (worker thread) -----------------------------------------------------------
+    def on_params(self, values: Dict[str, Any]) -> None:
+        groups: Dict[str, Dict[str, Any]] = {}
+        for full, value in values.items():
+            group, _, name = full.partition(".")
+            groups.setdefault(group, {})[name] = param_server_value(value)
+        for group, entries in groups.items():        # one call per group, not per parameter
+            rospy.set_param("%s/%s" % (self.ns, group), entries)
+
+    def on_log(self, topic: str, onboard_timestamp_ms: int, values: List[float]) -> None:
+        stamp = rospy.Time.now()
+        pub = self._pubs.get(topic)
+        custom = self._custom
+        if topic == IMU_TOPIC and pub:
+            msg = Imu()
+            msg.header.stamp, msg.header.frame_id = stamp, self.frame_id
+            msg.orientation_covariance[0] = -1.0
+            msg.linear_acceleration.x = values[0] * GRAVITY
+            msg.linear_acceleration.y = values[1] * GRAVITY
+            msg.linear_acceleration.z = values[2] * GRAVITY
+            msg.angular_velocity.x = values[3] * DEG_TO_RAD
+            msg.angular_velocity.y = values[4] * DEG_TO_RAD
+            msg.angular_velocity.z = values[5] * DEG_TO_RAD
+            pub.publish(msg)
+        elif topic == TEMPERATURE_TOPIC and pub:
+            msg = Temperature()
+            msg.header.stamp, msg.header.frame_id = stamp, self.frame_id
+            msg.temperature = values[0]
+            pub.publish(msg)
+        elif topic == MAGNETIC_FIELD_TOPIC and pub:
+            msg = MagneticField()
+            msg.header.stamp, msg.header.frame_id = stamp, self.frame_id
+            msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = values[0], values[1], values[2]
+            pub.publish(msg)
+        elif topic in (PRESSURE_TOPIC, BATTERY_TOPIC) and pub:
+            pub.publish(Float32(values[0]))
+        elif topic in custom:
+            msg = GenericLogData()
+            msg.header.stamp, msg.header.frame_id = stamp, self.frame_id
+            msg.onboard_timestamp = int(onboard_timestamp_ms) & 0xFFFFFFFF
+            msg.values = [float(v) for v in values]
+            custom[topic].publish(msg)
+
+    def on_rssi(self, rssi: float) -> None:
+        pub = self._rssi_pub
+        if pub is not None:
+            pub.publish(Float32(rssi))
+
+    def on_link_lost(self, reason: str) -> None:
+        pass    # logged by the worker through the forwarded logger
+
+    def on_emergency(self) -> None:
+        pass
+
+
+class RosLogHandler(logging.Handler):
+    """Sends the library's Python log records to rosout."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = self.format(record)
+        except Exception:
+            text = record.getMessage()
+        if record.levelno >= logging.ERROR:
+            rospy.logerr(text)
+        elif record.levelno >= logging.WARNING:
+            rospy.logwarn(text)
+        elif record.levelno >= logging.INFO:
+            rospy.loginfo(text)
+        else:
+            rospy.logdebug(text)
+
+
+def config_from_request(req) -> WorkerConfig:
+    return WorkerConfig(
+        uri=req.uri, tf_prefix=req.tf_prefix.strip("/"), roll_trim=float(req.roll_trim),
+        pitch_trim=float(req.pitch_trim), enable_logging=bool(req.enable_logging),
+        enable_parameters=bool(req.enable_parameters),
+        log_blocks=tuple(LogBlockSpec(b.topic_name, int(b.frequency), tuple(b.variables))
+                         for b in req.log_blocks))
+
+
+class CrazyflieServer:
+    """The services of the server and the ROS objects of each Crazyflie."""
+
+    def __init__(self, registry: CrazyflieRegistry, add_timeout: float) -> None:
+        self.registry = registry
+        self.add_timeout = add_timeout
+        self._ros: Dict[str, RosCrazyflie] = {}
+        self._lock = threading.Lock()
+        rospy.Service("/add_crazyflie", AddCrazyflie, self._on_add)
+        rospy.Service("/remove_crazyflie", RemoveCrazyflie, self._on_remove)
+
+    def _on_add(self, req) -> AddCrazyflieResponse:
+        try:
+            config = config_from_request(req)
+            key = self.registry.canonical_uri(config.uri)
+        except ValueError as e:
+            rospy.logerr("add_crazyflie: %s", e)
+            raise rospy.ServiceException(str(e))
+        taken = [w for w in self.registry.workers()
+                 if w.uri == key or self.registry.canonical_uri(w.uri) == key or w.config.tf_prefix == config.tf_prefix]
+        if taken:   # refused before any publisher is made, so the served one's topics stay untouched
+            msg = "could not add %s: %s is already served as %r" % (key, taken[0].uri, taken[0].config.tf_prefix)
+            rospy.logerr(msg)
+            raise rospy.ServiceException(msg)
+        rospy.loginfo("adding %s as %r", key, config.tf_prefix)
+        ros = None
+        try:
+            ros = RosCrazyflie(config)
+            worker = self.registry.add(config, ros, timeout=self.add_timeout)
+        except Exception as e:
+            if ros is not None:
+                ros.detach()
+            msg = "could not add %s: %s" % (key, e)
+            rospy.logerr(msg)
+            raise rospy.ServiceException(msg)
+        ros.attach(worker)
+        with self._lock:
+            self._ros[key] = ros
+        rospy.loginfo("%s ready (%s%s)", key, "logging: %s" % ", ".join(worker.log_topics)
+                      if worker.log_topics else "no logging",
+                      "; no %s on this Crazyflie" % ", ".join(worker.missing_fixed_topics)
+                      if worker.missing_fixed_topics else "")
+        return AddCrazyflieResponse()
+
+    def _on_remove(self, req) -> RemoveCrazyflieResponse:
+        try:
+            key = self.registry.canonical_uri(req.uri)
+            self.registry.remove(key)
+        except (ValueError, KeyError) as e:
+            msg = "could not remove %s: %s" % (req.uri, str(e).strip("'\""))
+            rospy.logerr(msg)
+            raise rospy.ServiceException(msg)
+        with self._lock:
+            ros = self._ros.pop(key, None)
+        if ros is not None:
+            ros.detach()
+        rospy.loginfo("%s removed", key)
+        return RemoveCrazyflieResponse()
+
+    def shutdown(self) -> None:
+        self.registry.shutdown()
+
+
+def make_factory(timeout: float):
+    """Crazyflies sharing one RadioManager (one SharedRadio per dongle)."""
+    from ..crazyflie import Crazyflie
+    from ..link import RadioManager
+
+    manager = RadioManager()
+    cache_dir = os.environ.get("CRAZYFLIE_TOC_CACHE") or None
+
+    def factory(uri: str):
+        return Crazyflie(uri, radio_manager=manager, cache_dir=cache_dir, timeout=timeout)
+    return factory
+
+
+def main() -> None:
+    rospy.init_node("crazyflie_server")
+    handler = RosLogHandler()
+    lib_log = logging.getLogger("crazyflie_driver")
+    lib_log.addHandler(handler)
+    lib_log.setLevel(logging.INFO)
+    lib_log.propagate = False
+    timeout = float(rospy.get_param("~timeout", 1.0))
+    add_timeout = float(rospy.get_param("~add_timeout", 30.0))
+    try:
+        registry = CrazyflieRegistry(make_factory(timeout))
+    except Exception as e:       # e.g. no usable USB backend
+        rospy.logfatal("crazyflie_server cannot start: %s", e)
+        raise SystemExit(1)
+    server = CrazyflieServer(registry, add_timeout)
+    rospy.on_shutdown(server.shutdown)
+    rospy.loginfo("crazyflie_server ready (backend: %s)", os.environ.get("CRAZYFLIE_BACKEND", "usb"))
+    rospy.spin()
+
+
+if __name__ == "__main__":
+    main()

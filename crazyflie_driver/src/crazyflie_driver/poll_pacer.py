@@ -1,0 +1,65 @@
+"""When to poll a Crazyflie for queued log packets while no setpoint is being sent.
+
+Crazyflies sharing a dongle pay an address switch on almost every round trip, so an empty poll
+after each log packet would cost as much dongle time as the data itself. The pacer times polls
+to the rate the started log blocks produce packets (see ``log_plan.log_packet_rate``).
+"""
+from __future__ import annotations
+
+
+class PollPacer:
+    """When the next poll (null packet) should go out, from the log packets the Crazyflie is due to send.
+
+    ``rate`` is the packets per second the started log blocks produce. The pacer keeps the count
+    of packets due but not yet fetched (``backlog``: grows at ``rate``, one less per packet
+    fetched, zero after an empty ack, since the Crazyflie's queue was empty then):
+
+    * a poll that fetched a packet is followed at once while at least one more is due, and at
+      least every ``DRAIN_INTERVAL`` s until an ack comes back empty (so a standing backlog,
+      e.g. after the link was busy, never lingers: the data would be old when published);
+    * after an empty ack the next poll is a ``keepalive_period`` later (10 ms: the firmware's
+      shortest log period, so at most one packet per block can be queued by then);
+    * otherwise it is timed for when the next packet should be there, ``MARGIN`` times faster
+      than ``rate`` so a slow host clock never falls behind, and never later than
+      ``keepalive_period``.
+
+    Without log blocks (``rate`` 0) this is a plain keep-alive every ``keepalive_period``.
+    """
+
+    MARGIN = 1.3
+    DRAIN_INTERVAL = 0.05
+    MAX_BURST = 8           # immediate polls in a row; a queued setpoint goes out in between anyway
+
+    def __init__(self, keepalive_period: float, rate: float = 0.0, now: float = 0.0) -> None:
+        self.keepalive_period = keepalive_period
+        self.rate = max(0.0, float(rate))
+        self.backlog = 0.0
+        self._at = now
+        self._empty_at = now
+        self._burst = 0
+
+    def reset(self, rate: float, now: float) -> None:
+        """New log blocks (after connecting or a restored link)."""
+        self.rate = max(0.0, float(rate))
+        self.backlog = 0.0
+        self._at = self._empty_at = now
+        self._burst = 0
+
+    def after_round_trip(self, packets: int, now: float) -> float:
+        """Seconds until the next poll, after a round trip that fetched ``packets`` log packets."""
+        self.backlog += self.rate * max(0.0, now - self._at)
+        self._at = now
+        if packets > 0:
+            self.backlog = max(-1.0, self.backlog - packets)
+        else:
+            self.backlog = 0.0
+            self._empty_at = now
+        self.backlog = min(self.backlog, 8.0)
+        if packets > 0 and self._burst < self.MAX_BURST and (
+                self.backlog >= 1.0 or now - self._empty_at >= self.DRAIN_INTERVAL):
+            self._burst += 1
+            return 0.0
+        self._burst = 0
+        if self.rate <= 0.0 or packets == 0:
+            return self.keepalive_period
+        return min(self.keepalive_period, max(0.0, (1.0 - self.backlog) / (self.rate * self.MARGIN)))

@@ -1,0 +1,1 @@
+"""The simulated Crazyflie world: fake Crazyradio, firmware protocol side, physics (no rospy)."""

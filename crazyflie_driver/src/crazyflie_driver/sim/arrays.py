@@ -1,0 +1,45 @@
+"""Per-vehicle state kept as a structure of numpy arrays (one row per vehicle).
+
+Every model of the simulated world (physics, onboard firmware, sensors, battery) keeps its state
+this way so that one numpy expression advances all vehicles; adding or removing a vehicle adds or
+deletes one row in every array.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, Tuple
+
+import numpy as np
+
+
+class Rows:
+    """Named arrays sharing their first axis. Subclasses list `FIELDS = {name: (tail shape, dtype)}`."""
+
+    FIELDS: Dict[str, Tuple[Tuple[int, ...], Any]] = {}
+
+    def __init__(self) -> None:
+        for name, (tail, dtype) in self.FIELDS.items():
+            setattr(self, name, np.zeros((0,) + tuple(tail), dtype=dtype))
+
+    def __len__(self) -> int:
+        first = next(iter(self.FIELDS))
+        return int(getattr(self, first).shape[0])
+
+    def append_row(self, **values: Any) -> int:
+        """Add one vehicle; fields not given start at zero. Returns its row index."""
+        unknown = set(values) - set(self.FIELDS)
+        if unknown:
+            raise KeyError("unknown state field(s): %s" % ", ".join(sorted(unknown)))
+        for name, (tail, dtype) in self.FIELDS.items():
+            row = np.zeros((1,) + tuple(tail), dtype=dtype)
+            if name in values:
+                row[0] = values[name]
+            setattr(self, name, np.concatenate([getattr(self, name), row]))
+        return len(self) - 1
+
+    def delete_row(self, index: int) -> None:
+        for name in self.FIELDS:
+            setattr(self, name, np.delete(getattr(self, name), index, axis=0))
+
+    def row(self, index: int) -> Dict[str, Any]:
+        """A copy of one vehicle's values (for inspection and tests)."""
+        return {name: np.array(getattr(self, name)[index]) for name in self.FIELDS}

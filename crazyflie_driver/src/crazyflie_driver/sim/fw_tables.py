@@ -1,0 +1,273 @@
+"""The simulated firmware's variable tables: log variables, parameters, their C types and TOC CRC.
+
+The tables mirror the groups users of the ROS stack touch (sensors, battery, attitude, PID gains,
+LED ring, flight modes), with the C types the real firmware declares, so that every type path of a
+host library (u8/u16/u32/i8/i16/i32/float, read-only entries, an extended/persistent parameter) gets
+exercised. Entries carry the firmware generations they exist in.
+"""
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Tuple, Union
+
+Number = Union[int, float]
+
+GEN_CURRENT = "current"
+GEN_2016 = "2016.02"
+GENERATIONS = (GEN_CURRENT, GEN_2016)
+
+
+@dataclass(frozen=True)
+class CType:
+    """One C type as both TOCs and the wire know it."""
+
+    name: str
+    fmt: str            # struct format, little-endian
+    param_type: int     # parameter TOC type byte (without flags)
+    log_type: int       # log TOC / fetch type id (1..8)
+
+    @property
+    def size(self) -> int:
+        return struct.calcsize(self.fmt)
+
+    @property
+    def is_float(self) -> bool:
+        return self.fmt[-1] in "fe"
+
+
+CTYPES: Dict[str, CType] = {c.name: c for c in (
+    CType("uint8_t", "<B", 0x08, 1),
+    CType("uint16_t", "<H", 0x09, 2),
+    CType("uint32_t", "<I", 0x0A, 3),
+    CType("int8_t", "<b", 0x00, 4),
+    CType("int16_t", "<h", 0x01, 5),
+    CType("int32_t", "<i", 0x02, 6),
+    CType("float", "<f", 0x06, 7),
+    CType("FP16", "<e", 0x05, 8),
+)}
+LOG_TYPES: Dict[int, CType] = {c.log_type: c for c in CTYPES.values()}
+PARAM_TYPES_BY_BYTE: Dict[int, CType] = {c.param_type: c for c in CTYPES.values()}
+
+PARAM_EXTENDED = 0x10
+PARAM_CORE = 0x20
+PARAM_RO = 0x40
+PARAM_GROUP_START = 0x81
+PARAM_GROUP_STOP = 0x80
+EXTENDED_PERSISTENT = 0x01
+LOG_GROUP_START = 0x81
+LOG_GROUP_STOP = 0x80
+
+
+def convert(value: Number, ctype: CType) -> Number:
+    """Value as a variable of `ctype` holds it: integers truncated toward zero and wrapped like a C
+    cast, floats rounded to their width. Non-finite values become 0 for integer types."""
+    if ctype.is_float:
+        try:
+            return struct.unpack(ctype.fmt, struct.pack(ctype.fmt, float(value)))[0]
+        except (OverflowError, struct.error):
+            return float("inf") if float(value) > 0 else float("-inf")
+    try:
+        iv = int(value)
+    except (OverflowError, ValueError):
+        return 0
+    bits = ctype.size * 8
+    iv &= (1 << bits) - 1
+    if ctype.fmt[-1].islower() and iv >= 1 << (bits - 1):  # signed formats are lower case
+        iv -= 1 << bits
+    return iv
+
+
+def clamp(value: Number, ctype: CType) -> Number:
+    """Value saturated to the range of `ctype` (how a physics reading lands in a firmware variable)."""
+    if ctype.is_float:
+        return convert(value, ctype)
+    try:
+        iv = int(value)
+    except (OverflowError, ValueError):
+        return 0
+    bits = ctype.size * 8
+    if ctype.fmt[-1].islower():
+        lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    else:
+        lo, hi = 0, (1 << bits) - 1
+    return max(lo, min(hi, iv))
+
+
+def pack(value: Number, ctype: CType) -> bytes:
+    return struct.pack(ctype.fmt, convert(value, ctype))
+
+
+def unpack(data: bytes, ctype: CType) -> Number:
+    return struct.unpack(ctype.fmt, data[:ctype.size])[0]
+
+
+@dataclass(frozen=True)
+class LogVar:
+    group: str
+    name: str
+    ctype: str
+    generations: Tuple[str, ...] = GENERATIONS
+
+    @property
+    def full_name(self) -> str:
+        return "%s.%s" % (self.group, self.name)
+
+
+@dataclass(frozen=True)
+class ParamVar:
+    group: str
+    name: str
+    ctype: str
+    default: Number = 0
+    readonly: bool = False
+    persistent: bool = False          # extended type: PERSISTENT (current firmware only)
+    core: bool = False                # CORE flag (current firmware only)
+    generations: Tuple[str, ...] = GENERATIONS
+
+    @property
+    def full_name(self) -> str:
+        return "%s.%s" % (self.group, self.name)
+
+    def type_byte(self, generation: str) -> int:
+        t = CTYPES[self.ctype].param_type
+        if self.readonly:
+            t |= PARAM_RO
+        if generation == GEN_CURRENT:
+            if self.persistent:
+                t |= PARAM_EXTENDED
+            if self.core:
+                t |= PARAM_CORE
+        return t
+
+
+_CUR = (GEN_CURRENT,)
+_OLD = (GEN_2016,)
+
+
+def _lv(group: str, names: str, ctype: str, gens: Tuple[str, ...] = GENERATIONS) -> List[LogVar]:
+    return [LogVar(group, n, ctype, gens) for n in names.split()]
+
+
+LOG_TABLE: Tuple[LogVar, ...] = tuple(
+    _lv("acc", "x y z", "float")
+    + _lv("gyro", "x y z", "float")
+    + _lv("gyro", "xRaw yRaw zRaw", "int16_t", _CUR)
+    + _lv("mag", "x y z", "float")
+    + _lv("mag_raw", "x y z", "int16_t", _OLD)
+    + _lv("baro", "asl temp pressure", "float")
+    + _lv("pm", "vbat", "float")
+    + _lv("pm", "state", "int8_t")
+    + _lv("pm", "batteryLevel", "uint8_t", _CUR)
+    + _lv("stabilizer", "roll pitch yaw", "float")
+    + _lv("stabilizer", "thrust", "float", _CUR)
+    + _lv("stabilizer", "thrust", "uint16_t", _OLD)
+    + _lv("stateEstimate", "x y z vx vy vz roll pitch yaw", "float", _CUR)
+    + _lv("motor", "m1 m2 m3 m4", "uint16_t", _CUR)
+    + _lv("motor", "m1 m2 m3 m4", "int32_t", _OLD)
+    + _lv("radio", "rssi", "uint8_t")
+    + _lv("radio", "isConnected", "uint8_t", _CUR)
+    + _lv("sys", "canfly", "uint8_t")
+    + _lv("sys", "isFlying isTumbled", "uint8_t", _CUR)
+    + _lv("sys", "armed", "int8_t", _CUR)
+    + _lv("supervisor", "info", "uint16_t", _CUR)
+    + _lv("sys", "tick", "uint32_t")
+)
+
+
+def _pid(group: str, gains: Dict[str, Tuple[float, float, float]]) -> List[ParamVar]:
+    out = []
+    for axis, kpid in gains.items():
+        for suffix, value in zip(("kp", "ki", "kd"), kpid):
+            out.append(ParamVar(group, "%s_%s" % (axis, suffix), "float", value))
+    return out
+
+
+# Defaults of the current firmware (PHYSICS.md §2.4); the world overrides them per generation.
+PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
+    [ParamVar("sound", "effect", "uint8_t", 0), ParamVar("sound", "neffect", "uint32_t", 14, readonly=True),
+     ParamVar("sound", "freq", "uint16_t", 4000)]
+    + [ParamVar("ring", "effect", "uint8_t", 6, persistent=True),
+       ParamVar("ring", "neffect", "uint32_t", 20, readonly=True),
+       ParamVar("ring", "solidRed", "uint8_t", 20), ParamVar("ring", "solidGreen", "uint8_t", 20),
+       ParamVar("ring", "solidBlue", "uint8_t", 20),
+       ParamVar("ring", "headlightEnable", "uint8_t", 0),
+       ParamVar("ring", "emptyCharge", "float", 3.1), ParamVar("ring", "fullCharge", "float", 4.2),
+       ParamVar("ring", "glowstep", "int16_t", 1)]
+    + [ParamVar("commander", "enHighLevel", "uint8_t", 0, core=True, generations=_CUR)]
+    + [ParamVar("flightmode", "althold", "uint8_t", 0, generations=_OLD)]
+    + [ParamVar("flightmode", "stabModeRoll", "uint8_t", 1), ParamVar("flightmode", "stabModePitch", "uint8_t", 1),
+       ParamVar("flightmode", "stabModeYaw", "uint8_t", 0)]
+    + _pid("pid_attitude", {"roll": (6.0, 3.0, 0.0), "pitch": (6.0, 3.0, 0.0), "yaw": (6.0, 1.0, 0.35)})
+    + _pid("pid_rate", {"roll": (250.0, 500.0, 2.5), "pitch": (250.0, 500.0, 2.5), "yaw": (120.0, 16.7, 0.0)})
+    + [ParamVar("stabilizer", "estimator", "uint8_t", 1, core=True, generations=_CUR),
+       ParamVar("stabilizer", "controller", "uint8_t", 1, core=True, generations=_CUR),
+       ParamVar("stabilizer", "stop", "uint8_t", 0, generations=_CUR)]
+    + [ParamVar("motorPowerSet", "enable", "uint8_t", 0)]
+    + [ParamVar("motorPowerSet", "m%d" % i, "uint16_t", 0) for i in range(1, 5)]
+    + [ParamVar("system", "selftestPassed", "int8_t", 1, readonly=True, generations=_CUR),
+       ParamVar("system", "taskDump", "uint8_t", 0, generations=_CUR),
+       ParamVar("system", "forceArm", "int8_t", 0, generations=_CUR)]
+    + [ParamVar("health", "startPropTest", "uint8_t", 0, generations=_CUR)]
+    + [ParamVar("kalman", "resetEstimation", "uint8_t", 0, generations=_CUR),
+       ParamVar("kalman", "pNAcc_xy", "float", 0.5, generations=_CUR)]
+    + [ParamVar("imu_tests", "MPU6500", "uint8_t", 1, readonly=True, generations=_OLD),
+       ParamVar("imu_sensors", "AK8963", "uint8_t", 1, readonly=True),
+       ParamVar("imu_sensors", "LPS25H", "uint8_t", 1, readonly=True)]
+    + [ParamVar("cpu", "flash", "uint16_t", 1024, readonly=True),
+       ParamVar("cpu", "id0", "uint32_t", 0x00320024, readonly=True),
+       ParamVar("cpu", "id1", "uint32_t", 0x3435470D, readonly=True),
+       ParamVar("cpu", "id2", "uint32_t", 0x37323731, readonly=True)]
+    + [ParamVar("firmware", "revision0", "uint32_t", 0x2A18FC29, readonly=True),
+       ParamVar("firmware", "revision1", "uint16_t", 0, readonly=True),
+       ParamVar("firmware", "modified", "uint8_t", 0, readonly=True)]
+    + [ParamVar("lighthouse", "systemType", "int32_t", 2, generations=_CUR)]
+)
+
+
+def select(table: Sequence, generation: str) -> list:
+    """Entries of a table that exist in `generation`, grouped as the linker lays them out (first
+    appearance of a group decides its position; order inside a group is kept)."""
+    entries = [e for e in table if generation in e.generations]
+    groups: Dict[str, list] = {}
+    for e in entries:
+        groups.setdefault(e.group, []).append(e)
+    return [e for members in groups.values() for e in members]
+
+
+def toc_crc(entries: Sequence, type_byte) -> int:
+    """Chained CRC32 over the raw table including group start/stop markers (CRTP.md §P4):
+    crc_i = CRC32(LE32(crc_{i-1}) + type byte + name)."""
+    crc = 0
+    last_group: Optional[str] = None
+
+    def step(t: int, name: str) -> None:
+        nonlocal crc
+        crc = zlib.crc32(struct.pack("<I", crc) + bytes([t]) + name.encode("ascii")) & 0xFFFFFFFF
+
+    for e in entries:
+        if e.group != last_group:
+            if last_group is not None:
+                step(PARAM_GROUP_STOP, "stop_" + last_group)
+            step(PARAM_GROUP_START, e.group)
+            last_group = e.group
+        step(type_byte(e), e.name)
+    if last_group is not None:
+        step(PARAM_GROUP_STOP, "stop_" + last_group)
+    return crc
+
+
+def toc_item_name(entry) -> bytes:
+    """`group NUL name NUL` as TOC items carry them."""
+    return entry.group.encode("ascii") + b"\x00" + entry.name.encode("ascii") + b"\x00"
+
+
+def check_names(entries: Sequence) -> None:
+    """The firmware asserts strlen(group)+strlen(name)+2 <= 26 at boot; so do we."""
+    for e in entries:
+        if len(e.group) + len(e.name) + 2 > 26:
+            raise ValueError("TOC entry %s.%s: group+name longer than the firmware allows (24 chars)"
+                             % (e.group, e.name))
+        if e.ctype not in CTYPES:
+            raise ValueError("TOC entry %s.%s: unknown C type %r" % (e.group, e.name, e.ctype))

@@ -1,0 +1,144 @@
+#!/usr/bin/env python3
+"""One simulated Crazyflie behind crazyflie_server: topics, rates, params, cmd_vel, custom logs, emergency."""
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+import unittest
+
+import rospy
+import rostest
+from geometry_msgs.msg import Twist
+from sensor_msgs.msg import Imu, MagneticField, Temperature
+from std_msgs.msg import Float32
+from std_srvs.srv import Empty
+
+from crazyflie_driver.msg import GenericLogData
+from crazyflie_driver.srv import UpdateParams
+
+from rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world
+
+NS = "/crazyflie1"
+
+
+def twist(x=0.0, y=0.0, z=0.0, yaw=0.0) -> Twist:
+    t = Twist()
+    t.linear.x, t.linear.y, t.linear.z, t.angular.z = x, y, z, yaw
+    return t
+
+
+class DriverSingle(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("driver_single_test")
+        cls.uri = rospy.get_param("~uri")
+        cls.world = world(rospy.get_param("~sim_address"))
+        wait_for_crazyflie("crazyflie1", 60.0)
+        cls.imu = TopicRecorder(NS + "/imu", Imu)
+        cls.battery = TopicRecorder(NS + "/battery", Float32)
+        cls.log1 = TopicRecorder(NS + "/log1", GenericLogData)
+        cls.motors = TopicRecorder(NS + "/motors", GenericLogData)
+        cls.cmd_vel = rospy.Publisher(NS + "/cmd_vel", Twist, queue_size=1)
+        wait_until(lambda: cls.imu.count() > 10 and cls.cmd_vel.get_num_connections() > 0, 10.0)
+
+    def state(self):
+        return self.world.crazyflie_state(self.uri)
+
+    def send_for(self, msg: Twist, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.cmd_vel.publish(msg)
+            time.sleep(0.02)
+
+    def test_a_topics_have_the_right_types(self):
+        expected = {NS + "/imu": "sensor_msgs/Imu", NS + "/temperature": "sensor_msgs/Temperature",
+                    NS + "/magnetic_field": "sensor_msgs/MagneticField", NS + "/pressure": "std_msgs/Float32",
+                    NS + "/battery": "std_msgs/Float32", NS + "/rssi": "std_msgs/Float32",
+                    NS + "/log1": "crazyflie_driver/GenericLogData",
+                    NS + "/motors": "crazyflie_driver/GenericLogData"}
+        published = dict(rospy.get_published_topics())
+        for topic, type_name in expected.items():
+            self.assertEqual(published.get(topic), type_name, topic)
+        for topic, msg_type in ((NS + "/temperature", Temperature), (NS + "/magnetic_field", MagneticField),
+                                (NS + "/pressure", Float32), (NS + "/rssi", Float32)):
+            rospy.wait_for_message(topic, msg_type, timeout=3.0)
+
+    def test_b_sensor_rates_and_units(self):
+        imu_rate = self.imu.rate(3.0)
+        battery = len(self.battery.since(time.monotonic() - 3.0)) / 3.0
+        self.assertGreater(imu_rate, 85.0)
+        self.assertLess(imu_rate, 115.0)
+        self.assertGreater(battery, 8.0)
+        self.assertLess(battery, 12.0)
+        msg = self.imu.latest()
+        self.assertEqual(msg.header.frame_id, "crazyflie1/base_link")
+        self.assertEqual(msg.orientation_covariance[0], -1.0)
+        self.assertAlmostEqual(msg.linear_acceleration.z, 9.81, delta=0.5)   # resting on the ground: 1 g
+        self.assertLess(abs(msg.angular_velocity.z), 0.1)
+        vbat = self.battery.latest().data
+        self.assertTrue(3.0 < vbat < 4.3, vbat)
+
+    def test_c_parameters_mirrored(self):
+        self.assertIn(rospy.get_param(NS + "/ring/headlightEnable"), (0, 1))
+        self.assertAlmostEqual(float(rospy.get_param(NS + "/pid_rate/roll_kp")),
+                               float(self.state()["params"]["pid_rate.roll_kp"]), places=3)
+
+    def test_d_update_params_reaches_the_crazyflie(self):
+        update = rospy.ServiceProxy(NS + "/update_params", UpdateParams)
+        rospy.set_param(NS + "/ring/headlightEnable", 1)
+        update(["ring/headlightEnable"])
+        self.assertEqual(self.state()["params"]["ring.headlightEnable"], 1)
+        rospy.set_param(NS + "/ring/headlightEnable", 0)
+        with self.assertRaises(rospy.ServiceException) as ctx:
+            update(["ring/headlightEnable", "nosuch/param"])
+        self.assertIn("nosuch", str(ctx.exception))
+        self.assertEqual(self.state()["params"]["ring.headlightEnable"], 0)   # the known one went through
+
+    def test_e_cmd_vel_reaches_the_crazyflie_with_trims_and_pitch_sign(self):
+        self.send_for(twist(x=2.0, y=3.0, z=12000.0, yaw=10.0), 0.3)
+        sp = wait_until(lambda: (lambda s: s if s and s[3] == 12000 else None)(self.state()["last_setpoint"]), 2.0)
+        self.assertIsNotNone(sp)
+        roll, pitch, yaw, thrust = sp
+        self.assertAlmostEqual(roll, 3.0 + 1.5, places=4)        # linear.y + roll_trim
+        self.assertAlmostEqual(pitch, -(2.0 - 0.5), places=4)    # -(linear.x + pitch_trim)
+        self.assertAlmostEqual(yaw, 10.0, places=4)
+        self.send_for(twist(z=70000.0), 0.2)
+        self.assertEqual(wait_until(lambda: self.state()["last_setpoint"][3] == 60000, 2.0), True)
+        self.send_for(twist(), 0.2)
+
+    def test_f_custom_log_blocks_at_their_period(self):
+        t0 = time.monotonic()
+        time.sleep(2.0)
+        log1 = [m for _, m in self.log1.since(t0)]
+        motors = [m for _, m in self.motors.since(t0)]
+        self.assertTrue(15 <= len(log1) <= 25, len(log1))          # 100 ms
+        self.assertTrue(80 <= len(motors) <= 120, len(motors))     # 20 ms
+        periods = [b.onboard_timestamp - a.onboard_timestamp for a, b in zip(log1, log1[1:])]
+        self.assertEqual(statistics.median(periods), 100)
+        periods = [b.onboard_timestamp - a.onboard_timestamp for a, b in zip(motors, motors[1:])]
+        self.assertEqual(statistics.median(periods), 20)
+        self.assertEqual(len(log1[-1].values), 1)
+        self.assertTrue(3.0 < log1[-1].values[0] < 4.3)
+        self.assertEqual(len(motors[-1].values), 4)
+        stamp_age = rospy.Time.now() - log1[-1].header.stamp
+        self.assertLess(abs(stamp_age.to_sec()), 1.0)
+
+    def test_g_emergency_stops_the_motors_for_good(self):
+        self.send_for(twist(z=30000.0), 0.5)
+        spinning = self.motors.latest().values
+        self.assertTrue(all(v > 0 for v in spinning), spinning)
+        rospy.ServiceProxy(NS + "/emergency", Empty)()
+        self.assertTrue(self.state()["emergency"])
+        rospy.ServiceProxy(NS + "/emergency", Empty)()            # idempotent
+        self.send_for(twist(z=45000.0), 0.5)                        # ignored from now on
+        t0 = time.monotonic()
+        self.send_for(twist(z=45000.0), 0.5)
+        late = [m.values for _, m in self.motors.since(t0)]
+        self.assertTrue(late)
+        self.assertTrue(all(v == 0 for vals in late for v in vals), late[-1])
+        self.assertEqual(self.state()["last_setpoint"][3], 0)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("crazyflie_driver", "driver_single", DriverSingle, sys.argv)

@@ -1,0 +1,48 @@
+"""crazyflie_add's parameters: defaults, the custom log block lists and their errors."""
+from __future__ import annotations
+
+import pytest
+
+from crazyflie_driver.add_config import AddConfigError, config_from_params
+from crazyflie_driver.log_plan import LogBlockSpec
+
+
+def test_defaults_like_the_original():
+    c = config_from_params({"uri": "radio://0/80/2M"})
+    assert (c.tf_prefix, c.roll_trim, c.pitch_trim, c.enable_logging, c.enable_parameters, c.log_blocks) == \
+        ("", 0.0, 0.0, True, True, ())
+
+
+def test_custom_log_blocks_period_in_ms():
+    c = config_from_params({
+        "uri": "radio://0/80/2M/E7E7E7E701", "tf_prefix": "/crazyflie1/", "roll_trim": 1, "pitch_trim": "-0.5",
+        "enable_logging": "False",
+        "genericLogTopics": ["log1", "log2"], "genericLogTopicFrequencies": [10, 100],
+        "genericLogTopic_log1_Variables": ["pm.vbat"],
+        "genericLogTopic_log2_Variables": ["acc.x", "acc.y", "acc.z"]})
+    assert c.tf_prefix == "crazyflie1" and c.roll_trim == 1.0 and c.pitch_trim == -0.5
+    assert c.enable_logging is False
+    assert c.log_blocks == (LogBlockSpec("log1", 10, ("pm.vbat",)),
+                            LogBlockSpec("log2", 100, ("acc.x", "acc.y", "acc.z")))
+
+
+@pytest.mark.parametrize("params,message", [
+    ({}, "~uri is required"),
+    ({"uri": "radio://0/300/2M"}, "channel 300"),
+    ({"uri": "radio://0/80/2M", "roll_trim": "left"}, "~roll_trim"),
+    ({"uri": "radio://0/80/2M", "enable_logging": "maybe"}, "~enable_logging"),
+    ({"uri": "radio://0/80/2M", "genericLogTopics": ["a", "b"], "genericLogTopicFrequencies": [10],
+      "genericLogTopic_a_Variables": ["pm.vbat"], "genericLogTopic_b_Variables": ["pm.vbat"]},
+     "2 entries but ~genericLogTopicFrequencies has 1"),
+    ({"uri": "radio://0/80/2M", "genericLogTopics": ["a"], "genericLogTopicFrequencies": [10]},
+     "~genericLogTopic_a_Variables is not set"),
+    ({"uri": "radio://0/80/2M", "genericLogTopics": ["a"], "genericLogTopicFrequencies": [2.5],
+      "genericLogTopic_a_Variables": ["pm.vbat"]}, "whole number"),
+    ({"uri": "radio://0/80/2M", "genericLogTopics": ["a"], "genericLogTopicFrequencies": [10],
+      "genericLogTopic_a_Variables": ["vbat"]}, "group.name"),
+    ({"uri": "radio://0/80/2M", "genericLogTopics": ["a"], "genericLogTopicFrequencies": [10],
+      "genericLogTopic_a_Variables": "pm.vbat"}, "must be a list"),
+])
+def test_errors_name_the_parameter(params, message):
+    with pytest.raises(AddConfigError, match=message.replace("~", "~").replace(".", r"\.")):
+        config_from_params(params)

@@ -1,0 +1,390 @@
+"""RadioManager / SharedRadio / RadioLink, packet by packet through the fake dongle."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.errors import CrazyflieError, LinkTimeout, RadioUnplugged
+from crazyflie_driver.link import FairLock, LinkStatistics, RadioLink, RadioManager
+from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
+
+from radio_doubles import AirReply, NrfPeer, ScriptedMedium
+
+URI = "radio://0/80/2M/E7E7E7E701"
+
+
+class Air:
+    """Several NrfPeers on one ScriptedMedium: each packet reaches the peer at its channel/address."""
+
+    def __init__(self, *peers):
+        self.peers = list(peers)
+
+    def __call__(self, tx):
+        for peer in self.peers:
+            if peer.hears(tx):
+                return peer(tx)
+        return AirReply(False, retries=tx.arc)
+
+
+def setup(*peers, dongles=1):
+    medium = ScriptedMedium(Air(*peers), dongles=dongles)
+    backend = FakeUsbBackend(medium, dongles=dongles, timing=DongleTiming.instant())
+    return medium, backend, RadioManager(backend)
+
+
+def headers_for(medium, peer):
+    return [t.data[0] for t in medium.transmits if peer.hears(t)]
+
+
+def test_open_with_safelink_then_sequence_bits():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = RadioLink(URI, manager)
+    link.open()
+    assert link.safelink and not link.needs_resending
+    assert medium.transmits[-1].data == b"\xff\x05\x01"
+    assert (medium.transmits[-1].channel, medium.transmits[-1].address) == (80, b"\xe7\xe7\xe7\xe7\x01")
+    for i in range(4):
+        assert link.send(CRTPPacket(3, 0, bytes([i])))
+    sent = [t.data for t in medium.transmits[-4:]]
+    # bit 3 = up (0, 1, 0, 1); bit 2 = down, flipped by every fresh downlink (empty acks included)
+    assert [d[0] & 0x0C for d in sent] == [0x00, 0x0C, 0x00, 0x0C]
+    assert [d[0] & 0xF3 for d in sent] == [0x30] * 4
+    assert peer.received == [bytes([0x30, i]) for i in range(4)]
+    link.close()
+
+
+def test_fallback_to_plain_acks_when_the_handshake_is_not_echoed():
+    peer = NrfPeer(safelink_capable=False)
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    assert not link.safelink and link.needs_resending
+    assert [t.data for t in medium.transmits if peer.hears(t)] == [b"\xff\x05\x01"] * 10
+    assert link.send(CRTPPacket(2, 1, b"\x05"))
+    assert medium.transmits[-1].data == b"\x2d\x05"       # cflib's header form, bits 3-2 set
+    link.close()
+
+
+def test_open_without_any_ack_raises_and_releases_the_dongle():
+    medium, backend, manager = setup()                  # nobody on the air
+    link = RadioLink(URI, manager)
+    with pytest.raises(LinkTimeout, match="radio://0/80/2M/E7E7E7E701: no answer"):
+        link.open()
+    assert manager.users(0) == 0
+    assert backend.dongles[0].claimed_by is None          # dongle closed again
+    assert link.stats.sent == 10 and link.stats.acked == 0
+
+
+def test_safelink_ack_loss_resends_same_bit_and_the_peer_drops_the_duplicate():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    peer.lose_ack = {peer.count, peer.count + 1}         # the peer hears it, the acks get lost twice
+    assert link.send(CRTPPacket(3, 0, b"\x01"))
+    tries = [t.data for t in medium.transmits[-3:]]
+    assert tries[0] == tries[1] == tries[2]              # same sequence bit every time
+    assert peer.received == [b"\x30\x01"]                 # delivered once
+    assert link.send(CRTPPacket(3, 0, b"\x02"))
+    assert peer.received == [b"\x30\x01", b"\x30\x02"]
+    assert link.stats.sent == 1 + 3 + 1 and link.stats.acked == 3
+
+
+def test_safelink_downlink_delivered_once_despite_lost_acks():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    got = []
+    link.subscribe(0, None, got.append)
+    peer.queue.extend([b"\x00first", b"\x00second"])
+    peer.lose_ack = {peer.count + 1}     # the ack carrying "first" is lost on the 2nd round trip
+    for _ in range(6):
+        link.poll()
+    assert [p.data for p in got] == [b"first", b"second"]
+
+
+def test_plain_link_dispatch_and_null_acks_ignored():
+    peer = NrfPeer(safelink_capable=False)
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    on_port2, on_2_1, anything = [], [], []
+    unsubscribe = link.subscribe(2, None, on_port2.append)
+    link.subscribe(2, 1, on_2_1.append)
+    link.subscribe(0, None, anything.append)
+    peer.queue.extend([b"\x28\x00\x01", b"\x29\x07", b"\x00hi"])
+    for _ in range(5):
+        link.poll()
+    assert [(p.port, p.channel, p.data) for p in on_port2] == [(2, 0, b"\x00\x01"), (2, 1, b"\x07")]
+    assert [p.data for p in on_2_1] == [b"\x07"]
+    assert [p.data for p in anything] == [b"hi"]       # the empty acks (F3/F7) never reach anyone
+    unsubscribe()
+    peer.queue.append(b"\x28\x09")
+    link.poll()
+    assert len(on_port2) == 2 and len(on_2_1) == 2 - 1
+
+
+def test_rssi_from_three_byte_empty_acks():
+    peer = NrfPeer(rssi=42)
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    assert link.stats.rssi is None                      # the handshake echo carries no RSSI
+    link.poll()
+    assert link.stats.rssi == 42
+    peer.rssi = 55
+    link.poll()
+    assert link.stats.rssi == 55
+
+
+def test_callback_errors_do_not_break_the_sender(caplog):
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    good = []
+    link.subscribe(0, None, lambda p: 1 / 0)
+    link.subscribe(0, None, good.append)
+    peer.queue.append(b"\x00x")
+    link.poll()
+    assert len(good) == 1
+    assert "callback" in caplog.text
+
+
+def test_request_returns_the_matching_reply():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    peer.on_packet = lambda data: peer.queue.extend([b"\x00noise", bytes([0xDD, 0x00, 0x0C])])
+    reply = link.request(CRTPPacket(13, 1, b"\x00"), lambda p: p.port == 13 and p.channel == 1,
+                         what="protocol version")
+    assert reply == CRTPPacket(13, 1, b"\x00\x0c")
+    assert peer.received == [b"\xd1\x00"]
+
+
+def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink():
+    peer = NrfPeer(safelink_capable=False)
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    t0 = time.monotonic()
+    with pytest.raises(LinkTimeout) as info:
+        link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.25, resend_interval=0.05,
+                     what="param TOC info")
+    assert time.monotonic() - t0 < 1.0
+    assert "radio://0/80/2M/E7E7E7E701" in str(info.value) and "param TOC info" in str(info.value)
+    sends = sum(1 for r in peer.received if r == b"\x20\x03")
+    assert 4 <= sends <= 6                               # first send + one per 50 ms
+
+    peer2 = NrfPeer()
+    medium2, backend2, manager2 = setup(peer2)
+    link2 = manager2.open_link(URI)
+    with pytest.raises(LinkTimeout):
+        link2.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.15, resend_interval=0.02)
+    assert peer2.received == [b"\x20\x03"]               # safelink: sent (and delivered) once
+
+
+def test_request_match_error_is_raised_in_the_requesting_thread():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    peer.queue.append(b"\x00x")
+    with pytest.raises(ZeroDivisionError):
+        link.request(CRTPPacket(0, 0, b""), lambda p: 1 / 0, timeout=0.5)
+
+
+def test_statistics_window_and_link_lost():
+    stats = LinkStatistics(lost_threshold=5, window=4)
+    assert stats.ack_ratio == 0.0 and stats.retries == 0.0
+    for acked, retries in [(True, 2), (False, 0), (True, 4), (True, 0)]:
+        stats.record(acked, retries)
+    assert stats.ack_ratio == 0.75 and stats.retries == 2.0
+    stats.record(False, 3)        # pushes out (True, 2)
+    assert stats.ack_ratio == 0.5 and stats.retries == 2.0
+    for _ in range(3):
+        stats.record(False, 3)
+    assert stats.ack_ratio == 0.0 and stats.consecutive_failures == 4 and not stats.link_lost
+    stats.record(False, 3)
+    assert stats.link_lost and stats.sent == 9 and stats.acked == 3
+    stats.record(True, 1)
+    assert not stats.link_lost and stats.consecutive_failures == 0
+
+
+def test_loss_statistics_on_a_link():
+    peer = NrfPeer(safelink_capable=False)
+    medium, backend, manager = setup(peer)
+    link = RadioLink(URI, manager, lost_threshold=20)
+    link.open()
+    start = peer.count
+    peer.lose_uplink = {start + i for i in range(100) if i % 4 == 0}    # every 4th packet lost
+    results = [link.poll() for _ in range(100)]
+    assert results.count(False) == 25
+    assert link.stats.ack_ratio == pytest.approx(0.75)
+    peer.lose_uplink = set(range(peer.count, peer.count + 1000))
+    for _ in range(19):
+        link.poll()
+    assert not link.stats.link_lost
+    link.poll()
+    assert link.stats.link_lost and link.stats.consecutive_failures == 20
+
+
+def test_safelink_gives_up_then_resynchronises():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = RadioLink(URI, manager, safelink_resends=2)
+    link.open()
+    peer.lose_uplink = set(range(peer.count, peer.count + 3))
+    assert not link.send(CRTPPacket(3, 0, b"\x01"))
+    assert peer.received == []
+    assert link.send(CRTPPacket(3, 0, b"\x02"))
+    assert [t.data for t in medium.transmits[-2:]] == [b"\xff\x05\x01", b"\x30\x02"]
+    assert peer.received == [b"\x30\x02"]
+
+
+def test_two_links_on_one_dongle_reconfigure_only_when_needed():
+    a = NrfPeer(channel=80, address=b"\xe7\xe7\xe7\xe7\x01")
+    b = NrfPeer(channel=90, address=b"\xe7\xe7\xe7\xe7\x01")
+    c = NrfPeer(channel=90, address=b"\xe7\xe7\xe7\xe7\x02")
+    medium, backend, manager = setup(a, b, c)
+    la = manager.open_link("radio://0/80/2M/E7E7E7E701")
+    lb = manager.open_link("radio://0/90/2M/E7E7E7E701")
+    lc = manager.open_link("radio://0/90/2M/E7E7E7E702")
+    assert manager.users(0) == 3
+    dongle = backend.dongles[0]
+
+    def vendor_after(fn):
+        before = len(dongle.vendor_requests)
+        fn()
+        return [(r[1], r[2], r[4]) for r in list(dongle.vendor_requests)[before:]]
+
+    assert vendor_after(lambda: [lc.poll() for _ in range(5)]) == []
+    assert vendor_after(lb.poll) == [(0x02, 0, b"\xe7\xe7\xe7\xe7\x01")]   # address only
+    assert vendor_after(la.poll) == [(0x01, 80, b"")]                       # channel only
+    assert vendor_after(lc.poll) == [(0x01, 90, b""), (0x02, 0, b"\xe7\xe7\xe7\xe7\x02")]
+    assert vendor_after(lambda: (lc.poll(), lc.poll())) == []
+    assert len(a.received) == len(b.received) == len(c.received) == 0      # polls only
+
+
+def test_reference_counting_closes_the_dongle_with_the_last_link():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    l1 = manager.open_link(URI)
+    l2 = manager.open_link(URI)
+    dongle = backend.dongles[0]
+    assert dongle.claimed_by is not None
+    l1.close()
+    l1.close()                                            # idempotent
+    assert manager.users(0) == 1 and dongle.claimed_by is not None
+    assert l2.poll()
+    with pytest.raises(CrazyflieError, match="not open"):
+        l1.poll()
+    l2.close()
+    assert manager.users(0) == 0 and dongle.claimed_by is None
+    l3 = manager.open_link(URI)                           # re-opened from scratch
+    assert l3.poll()
+    l3.close()
+
+
+def test_two_dongles():
+    p0 = NrfPeer(channel=80)
+    p1 = NrfPeer(channel=81)
+    medium, backend, manager = setup(p0, p1, dongles=2)
+    l0 = manager.open_link("radio://0/80/2M/E7E7E7E701")
+    l1 = manager.open_link("radio://1/81/2M/E7E7E7E701")
+    l0.send(CRTPPacket(3, 0, b"\x00"))
+    l1.send(CRTPPacket(3, 0, b"\x01"))
+    assert {(t.dongle, t.channel) for t in medium.transmits if t.data[0] & 0xF3 == 0x30} == {(0, 80), (1, 81)}
+    assert manager.users(0) == manager.users(1) == 1
+
+
+def test_unplug_raises_from_send():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    backend.unplug(0)
+    with pytest.raises(RadioUnplugged):
+        link.send(CRTPPacket(3, 0, b""))
+    link.close()
+    assert manager.users(0) == 0
+
+
+def test_link_carries_on_after_the_dongle_is_plugged_back_in():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    shared = manager.acquire(0)
+    shared._reopen_interval = 0.0
+    backend.unplug(0)
+    with pytest.raises(RadioUnplugged):
+        link.send(CRTPPacket(3, 0, b""))
+    with pytest.raises(RadioUnplugged, match="unplugged"):   # still out: reopening fails cleanly
+        link.send(CRTPPacket(3, 0, b""))
+    backend.replug(0)
+    before = len(medium.transmits)
+    assert link.send(CRTPPacket(3, 0, b"\x01")) or link.send(CRTPPacket(3, 0, b"\x01"))
+    after = [t for t in medium.transmits[before:]]
+    assert after and after[-1].channel == 80 and after[-1].address == bytes.fromhex("E7E7E7E701")
+    manager.release(shared)
+    link.close()
+    assert manager.users(0) == 0
+
+
+def test_several_threads_share_one_safelink_link():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    got = []
+    link.subscribe(0, None, got.append)
+    peer.on_packet = lambda data: peer.queue.append(b"\x00" + data[1:])   # echo on port 0
+    peer.lose_ack = set(range(peer.count, peer.count + 2000, 7))
+
+    def worker(k):
+        for i in range(100):
+            assert link.send(CRTPPacket(3, 0, bytes([k, i])))
+
+    threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10)
+    for _ in range(20):
+        link.poll()
+    expected = sorted(bytes([0x30, k, i]) for k in range(4) for i in range(100))
+    assert sorted(peer.received) == expected                       # each exactly once
+    assert sorted(p.data for p in got) == sorted(r[1:] for r in expected)
+    for k in range(4):                                              # per-thread order kept
+        mine = [r for r in peer.received if r[1] == k]
+        assert mine == [bytes([0x30, k, i]) for i in range(100)]
+
+
+def test_fair_lock_serves_waiters_in_arrival_order():
+    lock = FairLock()
+    order = []
+    lock.acquire()
+    threads = []
+    for k in range(4):
+        t = threading.Thread(target=lambda k=k: (lock.acquire(), order.append(k), lock.release()))
+        t.start()
+        threads.append(t)
+        while len(lock._waiters) < k + 1:
+            time.sleep(0.001)
+    lock.release()
+    for t in threads:
+        t.join(5)
+    assert order == [0, 1, 2, 3]
+    assert lock.acquire(timeout=0.01)
+    assert not FairLock.acquire(lock, timeout=0.01)    # held: times out
+    lock.release()
+    assert not lock.locked()
+
+
+def test_safelink_drops_a_downlink_packet_with_the_old_sequence_bit():
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = manager.open_link(URI)
+    got = []
+    link.subscribe(0, None, got.append)
+    # Host expects down = 0: a payload with bit 2 set is a repeat of an earlier one.
+    medium.push(AirReply(True, b"\x04repeat"), AirReply(True, b"\x00fresh"), AirReply(True, b"\x04next"))
+    assert link.poll() and link.poll() and link.poll()
+    assert [p.data for p in got] == [b"fresh", b"next"]
+    downs = [t.data[0] & 0x04 for t in medium.transmits[-3:]]
+    assert downs == [0x00, 0x00, 0x04]      # flipped only by the fresh packet

@@ -1,0 +1,83 @@
+"""RadioLink through the whole radio path of the simulator: Crazyradio -> fake dongle ->
+LocalMedium -> simulated Crazyflie firmware (nRF link layer, port 15), both firmware generations."""
+from __future__ import annotations
+
+import pytest
+
+from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.link import RadioManager
+from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.medium import LocalMedium
+from crazyflie_driver.uri import parse_uri
+
+from sim_doubles import FakeVehicle
+
+URI = "radio://0/80/2M/E7E7E7E701"
+
+
+def make_air(firmware="current", seed=7):
+    medium = LocalMedium(dongles=1, seed=seed)
+    backend = FakeUsbBackend(medium, dongles=1, timing=DongleTiming.instant())
+    u = parse_uri(URI)
+    fw = SimulatedCrazyflie(u.address, FakeVehicle(), firmware=firmware)
+    medium.add_crazyflie(fw, u.channel, u.datarate)
+    return medium, backend, RadioManager(backend), fw
+
+
+def is_echo(payload):
+    return lambda p: p.port == 15 and p.channel == 0 and p.data == payload
+
+
+@pytest.mark.parametrize("firmware", ["current", "2016.02"])
+def test_safelink_and_link_source(firmware):
+    medium, backend, manager, fw = make_air(firmware)
+    link = manager.open_link(URI)
+    try:
+        assert link.safelink
+        reply = link.request(CRTPPacket(15, 1, b"\x00"), lambda p: p.port == 15 and p.channel == 1,
+                             what="link source")
+        assert reply.data[:18] == b"Bitcraze Crazyflie"
+        for i in range(5):
+            payload = bytes([i]) * 4
+            assert link.request(CRTPPacket(15, 0, payload), is_echo(payload), what="echo").data == payload
+    finally:
+        link.close()
+
+
+def test_rssi_from_2016_empty_acks_only():
+    for firmware, expect_rssi in (("2016.02", True), ("current", False)):
+        medium, backend, manager, fw = make_air(firmware)
+        link = manager.open_link(URI)
+        for _ in range(100):                       # drain the boot console text first
+            link.poll()
+            if fw.pending_outgoing() == 0:
+                break
+        link.poll()
+        link.poll()
+        assert (link.stats.rssi is not None) == expect_rssi, firmware
+        if expect_rssi:
+            assert 30 <= link.stats.rssi <= 50     # default model: about -40 dBm
+        link.close()
+
+
+def test_every_echo_exactly_once_through_ack_loss():
+    medium, backend, manager, fw = make_air(seed=3)
+    link = manager.open_link(URI)
+    got = []
+    link.subscribe(15, 0, got.append)
+    # Fault injection the way a Crazyradio 2.0 takes it: request 0x30 [packet loss %, ack loss %].
+    shared = manager.acquire(0)
+    shared.radio.device.ctrl_transfer(0x40, 0x30, 0, 0, b"\x0a\x1e")
+    manager.release(shared)
+    assert medium.dongle_faults(0).ack_loss == 30.0
+    sent = [bytes([i, i ^ 0x5A]) for i in range(60)]
+    for payload in sent:
+        assert link.send(CRTPPacket(15, 0, payload))
+    for _ in range(200):
+        link.poll()
+        if len(got) >= len(sent):
+            break
+    assert [p.data for p in got] == sent           # in order, none lost, none twice
+    assert 0.4 < link.stats.ack_ratio < 0.8         # about (1 - 0.1) * (1 - 0.3) = 0.63
+    link.close()

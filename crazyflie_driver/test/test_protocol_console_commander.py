@@ -1,0 +1,102 @@
+"""Console text assembly and the setpoint / stop / emergency packets."""
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.errors import LinkTimeout
+
+from scripted_link import make_crazyflie
+
+
+def test_console_joins_packets_into_lines():
+    cf, link, fw = make_crazyflie(12)
+    lines, chunks = [], []
+    cf.console.on_line(lines.append)
+    cf.console.on_text(chunks.append)
+    link.push(CRTPPacket(0, 0, b"SYS: Crazyflie 2.1 is up and"),
+              CRTPPacket(0, 0, b" running!\nSYS: Free heap: 1"),
+              CRTPPacket(0, 0, b"2 bytes\n<F>\n\x00"))
+    link.drain()
+    assert lines == ["SYS: Crazyflie 2.1 is up and running!", "SYS: Free heap: 12 bytes", "<F>"]
+    assert "".join(chunks) == cf.console.text()
+    assert cf.console.text().endswith("12 bytes\n<F>\n")
+
+
+def test_console_utf8_split_across_packets():
+    cf, link, fw = make_crazyflie(12)
+    text = "temp 25 \u00b0C\n".encode()
+    cut = text.index(b"\xb0")  # between the two bytes of the degree sign
+    link.push(CRTPPacket(0, 0, text[:cut]), CRTPPacket(0, 0, text[cut:]))
+    link.drain()
+    assert cf.console.text() == "temp 25 \u00b0C\n"
+
+
+def test_rpyt_setpoint_bytes():
+    cf, link, fw = make_crazyflie(12)
+    assert cf.send_setpoint(1.5, -2.0, 30.0, 40000)
+    packet = link.sent[-1]
+    assert packet.to_bytes()[0] == 0x3C
+    assert packet.data == struct.pack("<fffH", 1.5, -2.0, 30.0, 40000)
+    assert len(packet.data) == 14
+
+
+@pytest.mark.parametrize("thrust, wire", [(-5, 0), (0, 0), (60000, 60000), (70000, 60000),
+                                          (np.int64(1234), 1234), (12345.9, 12345)])
+def test_thrust_clamped(thrust, wire):
+    cf, link, fw = make_crazyflie(12)
+    cf.send_setpoint(0, 0, 0, thrust)
+    assert struct.unpack("<H", link.sent[-1].data[12:])[0] == wire
+
+
+def test_non_finite_setpoint_is_refused():
+    cf, link, fw = make_crazyflie(12)
+    before = len(link.sent)
+    with pytest.raises(ValueError, match="pitch"):
+        cf.send_setpoint(0, float("nan"), 0, 0)
+    assert len(link.sent) == before
+
+
+@pytest.mark.parametrize("version, estop, stop", [
+    (12, "9d 03", "7c 00"),          # supervisor port, generic stop
+    (11, "6d 03", "7c 00"),          # localization e-stop
+    (2, "6d 03", "3c" + " 00" * 14),  # FW16: no port 7, zero RPYT
+])
+def test_emergency_stop_packets(version, estop, stop):
+    cf, link, fw = make_crazyflie(version)
+    link.clear()
+    cf.emergency_stop()
+    assert link.raw_sent() == [estop, stop]
+
+
+def test_keepalive_is_a_poll_and_delivers_downlink():
+    cf, link, fw = make_crazyflie(12)
+    link.push(CRTPPacket(0, 0, b"hi\n"))
+    n = len(link.sent)
+    assert cf.send_keepalive()
+    assert len(link.sent) == n  # a poll, not a CRTP packet
+    assert cf.console.text() == "hi\n"
+
+
+@pytest.mark.parametrize("call, step", [
+    (lambda cf: cf.params.fetch_toc(), "parameter TOC info"),
+    (lambda cf: cf.log.fetch_toc(), "log TOC info"),
+])
+def test_silent_port_times_out_naming_uri_and_step(call, step):
+    cf, link, fw = make_crazyflie(12)
+    fw.silent_ports.update({2, 5})
+    with pytest.raises(LinkTimeout) as info:
+        call(cf)
+    assert str(info.value).startswith("radio://0/80/2M/E7E7E7E701: no answer to " + step)
+
+
+def test_close_and_reconnect():
+    cf, link, fw = make_crazyflie(12)
+    cf.close()
+    cf.close()
+    assert link.closed == 2 and not cf.connected
+    cf.connect()
+    assert cf.connected and link.opened == 2

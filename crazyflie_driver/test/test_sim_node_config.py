@@ -1,0 +1,40 @@
+"""The sim node's parameters, without ROS (its mocap frames are sim.mocap.MocapModel's, tested with the world)."""
+from __future__ import annotations
+
+import pytest
+
+from crazyflie_driver.nodes.sim_node import (MocapConfig, SimConfigError, dongles_needed, mocap_from_params,
+                                             vehicles_from_params)
+
+
+def test_vehicle_list_and_single_vehicle():
+    v = vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701", "name": "cf1", "x": 1, "y": 2},
+                                           {"uri": "radio://1/80/2M/E7E7E7E702", "name": "cf2",
+                                            "position": [0, -0.75, 0]}]})
+    assert [(x.name, x.position) for x in v] == [("cf1", (1.0, 2.0, 0.0)), ("cf2", (0.0, -0.75, 0.0))]
+    assert dongles_needed(v, None) == 2
+    with pytest.raises(SimConfigError, match="radio index 1"):
+        dongles_needed(v, 1)
+    single = vehicles_from_params({"uri": "radio://0/80/2M", "name": "crazyflie"})
+    assert single[0].uri == "radio://0/80/2M/E7E7E7E7E7" and single[0].name == "crazyflie"
+
+
+@pytest.mark.parametrize("params,message", [
+    ({}, "no vehicles"),
+    ({"vehicles": [{"name": "a"}]}, "needs at least a 'uri'"),
+    ({"vehicles": [{"uri": "radio://0/999/2M"}]}, "channel 999"),
+    ({"vehicles": [{"uri": "radio://0/80/2M", "name": "cf-1"}]}, "not a valid ROS name"),
+    ({"vehicles": [{"uri": "radio://0/80/2M", "name": "a"}, {"uri": "radio://0/80/2M", "name": "b"}]}, "twice"),
+    ({"vehicles": [{"uri": "radio://0/80/2M", "colour": "red"}]}, "unknown keys colour"),
+])
+def test_vehicle_errors(params, message):
+    with pytest.raises(SimConfigError, match=message):
+        vehicles_from_params(params)
+
+
+def test_mocap_params():
+    assert mocap_from_params({}) == MocapConfig()
+    with pytest.raises(SimConfigError, match="vicon|vrpn|both|none"):
+        mocap_from_params({"mocap": "optitrack"})
+    with pytest.raises(SimConfigError, match="mocap_dropout"):
+        mocap_from_params({"mocap_dropout": 1.5})

@@ -1,0 +1,28 @@
+"""The world server's vehicle_state control op: the true body state of a simulated Crazyflie."""
+from __future__ import annotations
+
+import pytest
+
+from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.sim.medium import RemoteMedium
+from crazyflie_driver.sim.server import WorldServer
+from crazyflie_driver.sim.world import World
+
+
+def test_vehicle_state_by_uri_and_name():
+    world = World(speed=0.0, seed=1)
+    server = WorldServer(world, port=0, seed=1)
+    server.add_crazyflie("radio://0/80/2M/E7E7E7E701", "cf1", (0.5, -0.25, 0.0))
+    host, port = server.start()
+    try:
+        world.step(100)
+        medium = RemoteMedium(host, port)
+        by_uri = medium.control("vehicle_state", uri="radio://0/80/2M/E7E7E7E701")
+        by_name = medium.control("vehicle_state", uri="cf1")
+        assert by_uri["name"] == by_name["name"] == "cf1"
+        assert by_uri["position"][:2] == pytest.approx([0.5, -0.25], abs=1e-6)
+        assert by_uri["motors"] == [0, 0, 0, 0] and by_uri["on_ground"]
+        with pytest.raises(CrazyflieError, match="E7E7E7E7AA"):
+            medium.control("vehicle_state", uri="radio://0/80/2M/E7E7E7E7AA")
+    finally:
+        server.stop()

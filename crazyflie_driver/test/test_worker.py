@@ -1,0 +1,250 @@
+"""CrazyflieWorker with a fake Crazyflie: what goes on the wire, when, and what the listener hears."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from crazyflie_driver.errors import RadioNotFound, UnknownName
+from crazyflie_driver.log_plan import LogBlockSpec
+from crazyflie_driver.worker import CrazyflieWorker, WorkerConfig, WorkerState
+
+from worker_doubles import LOG_VARS, FakeCrazyflie, Recorder, started, wait_for
+
+
+def test_connect_sequence_order_blocks_and_params():
+    cfg = WorkerConfig(uri="radio://0/80/2M/E7E7E7E701", tf_prefix="cf1",
+                       log_blocks=(LogBlockSpec("attitude", 50, ("stabilizer.roll", "stabilizer.pitch")),))
+    w, cf, rec = started(config=cfg)
+    try:
+        order = [c for c in cf.calls if c != "log.create_block"]
+        assert order == ["connect", "log.reset", "params.fetch_toc", "params.read_all", "log.fetch_toc"]
+        assert rec.params["ring.headlightEnable"] == 0
+        periods = sorted((b.period_ms, tuple(b.variables)) for b in cf.log.blocks)
+        imu = [b for b in cf.log.blocks if b.period_ms == 10]
+        assert [b.variables for b in imu] == [["acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z"]]
+        slow = [v for b in cf.log.blocks if b.period_ms == 100 for v in b.variables]
+        assert sorted(slow) == sorted(["baro.temp", "mag.x", "mag.y", "mag.z", "baro.pressure",
+                                       "pm.vbat", "radio.rssi"])
+        assert all(sum(1 if LOG_VARS[v] == "uint8_t" else 4 for v in b.variables) <= 26
+                   for b in cf.log.blocks)
+        assert (50, ("stabilizer.roll", "stabilizer.pitch")) in periods
+        # thrust lock released with a zero setpoint before anything else is sent
+        assert cf.packets[0][1:] == ("setpoint", (0.0, 0.0, 0.0, 0))
+        # log packets are split back into topics
+        battery_block = next(b for b in cf.log.blocks if "pm.vbat" in b.variables)
+        vals = [float(i) for i in range(len(battery_block.variables))]
+        battery_block.deliver(1234, vals)
+        got = {t: v for t, ts, v in rec.logs}
+        assert got["battery"] == [float(battery_block.variables.index("pm.vbat"))]
+        if "radio.rssi" in battery_block.variables:
+            assert rec.rssi == [float(battery_block.variables.index("radio.rssi"))]
+        imu[0].deliver(77, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+        assert ("imu", 77, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]) in rec.logs
+    finally:
+        w.stop()
+
+
+def test_radio_not_there_yet_is_retried_but_not_forever():
+    cf = FakeCrazyflie()
+    cf.radio_missing_for = 2
+    w, cf, _ = started(cf=cf)
+    assert cf.calls.count("connect") == 3 and w.state == WorkerState.RUNNING
+    w.stop()
+    cf = FakeCrazyflie()
+    cf.radio_missing_for = 100
+    w = CrazyflieWorker(WorkerConfig(uri=cf.uri), cf, Recorder(), device_retry_window=0.6)
+    w.start()
+    with pytest.raises(RadioNotFound):
+        w.wait_ready(3.0)
+
+
+def test_missing_sensor_skips_its_topic_only():
+    cf = FakeCrazyflie()
+    for v in ("mag.x", "mag.y", "mag.z"):
+        del cf.log_vars[v]
+    w, cf, rec = started(cf=cf)
+    try:
+        assert w.missing_fixed_topics == ["magnetic_field"]
+        assert "battery" in w.log_topics and "imu" in w.log_topics
+    finally:
+        w.stop()
+
+
+def test_unknown_custom_variable_fails_the_add_clearly():
+    cfg = WorkerConfig(uri="radio://0/80/2M/E7E7E7E701",
+                       log_blocks=(LogBlockSpec("x", 10, ("acc.x", "foo.bar")),))
+    w = CrazyflieWorker(cfg, FakeCrazyflie(), Recorder())
+    w.start()
+    with pytest.raises(UnknownName, match="foo.bar"):
+        w.wait_ready(2.0)
+    assert w.state == WorkerState.FAILED
+
+
+def test_keepalive_every_10ms_when_no_setpoints():
+    w, cf, _ = started()
+    try:
+        time.sleep(0.3)
+        nulls = cf.of_kind("null")
+        assert 20 <= len(nulls) <= 32
+        gaps = [b[0] - a[0] for a, b in zip(nulls, nulls[1:])]
+        assert max(gaps) < 0.03
+    finally:
+        w.stop()
+
+
+def test_queued_log_data_is_drained_without_waiting_for_the_keepalive_period():
+    w, cf, rec = started(keepalive_period=0.05)
+    try:
+        time.sleep(0.06)
+        battery = next(b for b in cf.log.blocks if "pm.vbat" in b.variables)
+        t0 = time.monotonic()
+        cf.downlink.extend((battery, i, [3.7] * len(battery.variables)) for i in range(6))
+        assert wait_for(lambda: len([l for l in rec.logs if l[0] == "battery"]) == 6, 1.0)
+        assert time.monotonic() - t0 < 0.1      # not 6 x 50 ms
+    finally:
+        w.stop()
+
+
+def test_setpoint_sent_at_once_and_only_latest_counts():
+    w, cf, _ = started(keepalive_period=0.5)   # no keep-alive can hide a slow wake-up
+    try:
+        time.sleep(0.05)
+        t0 = time.monotonic()
+        w.cmd_vel(1.0, 2.0, 30000.0, 10.0)
+        assert wait_for(lambda: len(cf.of_kind("setpoint")) >= 2)
+        sp = cf.of_kind("setpoint")[-1]
+        assert sp[0] - t0 < 0.01
+        assert sp[2] == (2.0, -1.0, 10.0, 30000)
+        # a burst while the thread is busy: only the last one goes out
+        with w._send_lock:
+            for i in range(5):
+                w.cmd_vel(0.0, 0.0, 1000.0 * i, 0.0)
+        assert wait_for(lambda: len(cf.of_kind("setpoint")) >= 3)
+        time.sleep(0.05)
+        sps = cf.of_kind("setpoint")
+        assert len(sps) == 3 and sps[-1][2][3] == 4000
+    finally:
+        w.stop()
+
+
+def test_emergency_is_immediate_idempotent_and_final():
+    w, cf, _ = started()
+    try:
+        w.cmd_vel(0.0, 0.0, 40000.0, 0.0)
+        assert wait_for(lambda: any(p[2][3] == 40000 for p in cf.of_kind("setpoint")))
+        w.emergency()
+        n_estop = len(cf.of_kind("estop"))
+        assert n_estop == 1
+        t_estop = cf.of_kind("estop")[0][0]
+        w.emergency()
+        assert w.emergency_active
+        assert w.cmd_vel(0.0, 0.0, 50000.0, 0.0) is False
+        time.sleep(0.1)
+        after = [p for p in cf.packets if p[0] > t_estop]
+        assert after, "zero-thrust setpoints keep going after the e-stop"
+        assert all(p[1] in ("setpoint", "estop") for p in after)
+        assert all(p[2] == (0.0, 0.0, 0.0, 0) for p in after if p[1] == "setpoint")
+        assert not any(p[1] == "null" for p in after)
+    finally:
+        w.stop()
+
+
+def test_emergency_from_many_threads_never_lets_a_setpoint_through():
+    w, cf, _ = started()
+    try:
+        stop = threading.Event()
+
+        def spam():
+            while not stop.is_set():
+                w.cmd_vel(0.0, 0.0, 45000.0, 0.0)
+
+        spammer = threading.Thread(target=spam)
+        spammer.start()
+        time.sleep(0.05)
+        threads = [threading.Thread(target=w.emergency) for _ in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        first = cf.of_kind("estop")[0][0]
+        time.sleep(0.05)
+        stop.set()
+        spammer.join()
+        assert not [p for p in cf.of_kind("setpoint") if p[0] > first and p[2][3] != 0]
+    finally:
+        w.stop()
+
+
+def test_link_quality_warning_per_crazyflie():
+    good, bad = FakeCrazyflie("radio://0/80/2M/E7E7E7E701"), FakeCrazyflie("radio://0/80/2M/E7E7E7E702")
+    wg, _, rg = started(cf=good, config=WorkerConfig(uri=good.uri, tf_prefix="a"))
+    wb, _, rb = started(cf=bad, config=WorkerConfig(uri=bad.uri, tf_prefix="b"), link_lost_timeout=10.0,
+                        quality_warning_interval=10.0)
+    try:
+        bad.acking = False
+        time.sleep(0.5)   # ~50 round trips, all unacked on the bad one
+        assert rb.quality and rb.quality[0][1] is True and rb.quality[0][0] < 0.7
+        assert rg.quality == []
+        bad.acking = True
+        assert wait_for(lambda: rb.quality[-1][1] is False, 2.0)
+        assert rb.quality[-1][0] >= 0.8          # hysteresis: recovered means clearly above 0.7
+        assert len(rb.quality) == 2              # one warning, one recovery: no flapping
+    finally:
+        wg.stop()
+        wb.stop()
+
+
+def test_lost_link_is_reported_retried_slowly_and_restored():
+    w, cf, rec = started(link_lost_timeout=0.1, lost_retry_period=0.1)
+    try:
+        cf.acking = False
+        assert wait_for(lambda: rec.lost, 1.0)
+        assert w.state == WorkerState.LOST
+        n0 = len(cf.packets)
+        time.sleep(0.5)
+        assert 3 <= len(cf.packets) - n0 <= 7            # ~every 0.1 s, not every 10 ms
+        resets = cf.log.resets
+        cf.acking = True
+        assert wait_for(lambda: rec.restored == 1, 1.0)
+        assert w.state == WorkerState.RUNNING
+        assert cf.log.resets == resets + 1 and cf.log.blocks    # logging set up again
+    finally:
+        w.stop()
+
+
+def test_unplugged_dongle_is_reported_without_killing_the_worker():
+    w, cf, rec = started(lost_retry_period=0.05)
+    try:
+        cf.unplugged = True
+        assert wait_for(lambda: rec.lost, 1.0)
+        assert "unplugged" in rec.lost[0]
+        cf.unplugged = False
+        assert wait_for(lambda: rec.restored == 1, 1.0)
+    finally:
+        w.stop()
+
+
+def test_rssi_from_acks_when_they_carry_it():
+    cf = FakeCrazyflie()
+    cf.link.stats.rssi = 42.0
+    w, cf, rec = started(cf=cf)
+    try:
+        assert not any("radio.rssi" in b.variables for b in cf.log.blocks)
+        assert wait_for(lambda: len(rec.rssi) >= 2, 1.0) and rec.rssi[0] == 42.0
+    finally:
+        w.stop()
+
+
+def test_update_params_applies_known_and_reports_unknown():
+    w, cf, _ = started()
+    try:
+        written, errors = w.update_params({"ring.headlightEnable": True, "nope.x": 1,
+                                           "pid_rate.roll_kp": "300"})
+        assert sorted(written) == ["pid_rate.roll_kp", "ring.headlightEnable"]
+        assert cf.params.values["ring.headlightEnable"] == 1
+        assert cf.params.values["pid_rate.roll_kp"] == 300.0
+        assert len(errors) == 1 and "nope.x" in errors[0]
+    finally:
+        w.stop()

@@ -1,0 +1,1 @@
+"""crazyflie_tools Python package."""

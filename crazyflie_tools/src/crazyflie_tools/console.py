@@ -1,0 +1,44 @@
+"""console: print what the Crazyflie's firmware prints, for a number of seconds."""
+from __future__ import annotations
+
+import sys
+import time
+from typing import List, Optional
+
+from crazyflie_driver.crazyflie import Crazyflie
+
+from .common import parser, run
+
+POLL_PAUSE_S = 0.002
+
+
+def _write(text: str) -> None:
+    sys.stdout.write(text)
+    sys.stdout.flush()
+
+
+def _console(args) -> int:
+    if args.seconds < 0:
+        raise ValueError("--seconds must be >= 0, got %g" % args.seconds)
+    cf = Crazyflie(args.uri, timeout=args.timeout)
+    cf.console.on_text(_write)   # before connect: the boot text arrives right away
+    cf.connect()
+    try:
+        deadline = time.monotonic() + args.seconds
+        while time.monotonic() < deadline:
+            cf.send_keepalive()
+            time.sleep(POLL_PAUSE_S)
+    finally:
+        cf.close()
+    return 0
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    p = parser("Print the console text of a Crazyflie.")
+    p.add_argument("--seconds", type=float, default=5.0,
+                   help="how long to listen (default %(default)s)")
+    return run(_console, p.parse_args(argv), "console")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,31 @@
+"""scan: list every Crazyflie that answers on any data rate and channel at one address."""
+from __future__ import annotations
+
+import sys
+from typing import List, Optional
+
+from crazyflie_driver.scan import parse_address, scan
+
+from .common import parser, run
+
+
+def _scan(args) -> int:
+    address = parse_address(args.address)
+    found = scan(args.radio, address)
+    for uri in found:
+        print(uri)
+    if not found:
+        print("no Crazyflie answered at address %s" % address.hex().upper(), file=sys.stderr)
+    return 0
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    p = parser("Find Crazyflies: a null packet on every data rate and channel 0-125.", uri=False)
+    p.add_argument("--address", default="E7E7E7E7E7",
+                   help="radio address, up to 10 hex digits (default %(default)s)")
+    p.add_argument("--radio", type=int, default=0, help="Crazyradio index (default 0)")
+    return run(_scan, p.parse_args(argv), "scan")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,237 @@
+"""The command-line tools against simulated Crazyflies in this process: output formats,
+exit codes and the one-line errors (no traceback)."""
+from __future__ import annotations
+
+import errno
+import threading
+import time
+
+import pytest
+import usb.core
+
+from crazyflie_driver import usb_backend
+from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.medium import LocalMedium
+from crazyflie_driver.uri import parse_uri
+from crazyflie_tools import (battery, console, get_param, list_log_variables, list_params, scan,
+                             set_param, version)
+
+URI1 = "radio://0/80/2M/E7E7E7E701"
+URI2 = "radio://0/80/2M/E7E7E7E702"
+
+
+class ClockVehicle:
+    """A vehicle that stands still on a real clock (enough for the protocol side)."""
+
+    name = "cf"
+
+    def __init__(self, vbat: float = 3.87) -> None:
+        self.t0 = time.monotonic()
+        self.vbat = vbat
+        self.written = {}
+
+    def time(self) -> float:
+        return time.monotonic() - self.t0
+
+    def read(self, name: str) -> float:
+        return self.vbat if name == "pm.vbat" else 0.0
+
+    def param_defaults(self):
+        return {}
+
+    def write_param(self, name, value):
+        self.written[name] = value
+
+    def set_rpyt(self, *args):
+        pass
+
+    def emergency_stop(self):
+        pass
+
+
+class Sim:
+    def __init__(self, backend_class=FakeUsbBackend, dongles: int = 1) -> None:
+        self.medium = LocalMedium(dongles=max(dongles, 1), seed=2)
+        self.backend = backend_class(self.medium, dongles=dongles, timing=DongleTiming.instant())
+        self.firmwares = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._tick, daemon=True)
+        self._thread.start()
+
+    def add(self, uri: str, firmware: str = "current", vbat: float = 3.87):
+        u = parse_uri(uri)
+        fw = SimulatedCrazyflie(u.address, ClockVehicle(vbat), firmware=firmware)
+        self.medium.add_crazyflie(fw, u.channel, u.datarate)
+        self.firmwares.append(fw)
+        return fw
+
+    def _tick(self) -> None:
+        while not self._stop.wait(0.002):
+            for fw in list(self.firmwares):
+                fw.tick(fw.now())
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+
+
+@pytest.fixture
+def sim(monkeypatch, tmp_path):
+    monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path / "toc"))
+    s = Sim()
+    with usb_backend.use_backend(s.backend):
+        yield s
+    s.stop()
+
+
+def test_scan_lists_each_answering_uri(sim, capsys):
+    sim.add(URI1)
+    sim.add(URI2)
+    sim.add("radio://0/5/250K/E7E7E7E701")
+    assert scan.main(["--address", "E7E7E7E701"]) == 0
+    assert capsys.readouterr().out.splitlines() == ["radio://0/5/250K/E7E7E7E701", URI1]
+    assert scan.main(["--address", "0xE7E7E7E702"]) == 0
+    assert capsys.readouterr().out.splitlines() == [URI2]
+
+
+def test_scan_default_address_finds_nothing_here(sim, capsys):
+    sim.add(URI1)
+    assert scan.main([]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and "no Crazyflie answered at address E7E7E7E7E7" in captured.err
+
+
+def test_scan_bad_address(sim, capsys):
+    assert scan.main(["--address", "XYZ"]) == 1
+    assert "scan: error: address 'XYZ' is not up to 10 hex digits" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("firmware", ["current", "2016.02"])
+def test_list_params_format(sim, capsys, firmware):
+    sim.add(URI1, firmware)
+    assert list_params.main(["--uri", URI1]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "ring.effect (uint8_t)" in lines
+    assert "cpu.flash (uint16_t, readonly)" in lines
+    assert all(line.count(" (") == 1 and line.endswith(")") for line in lines)
+
+
+def test_list_params_with_values(sim, capsys):
+    sim.add(URI1)
+    assert list_params.main(["--uri", URI1, "--values"]) == 0
+    assert "ring.effect (uint8_t) = 6" in capsys.readouterr().out.splitlines()
+
+
+@pytest.mark.parametrize("firmware", ["current", "2016.02"])
+def test_list_log_variables_format(sim, capsys, firmware):
+    sim.add(URI1, firmware)
+    assert list_log_variables.main(["--uri", URI1]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "pm.vbat (float)" in lines
+    assert len(lines) > 10
+
+
+def test_get_and_set_param(sim, capsys):
+    fw = sim.add(URI1)
+    assert get_param.main(["--uri", URI1, "--name", "ring.effect"]) == 0
+    assert capsys.readouterr().out == "6\n"
+    assert set_param.main(["--uri", URI1, "--name", "ring.effect", "--value", "11"]) == 0
+    assert capsys.readouterr().out == "ring.effect = 11\n"
+    assert fw.vehicle.written["ring.effect"] == 11
+    assert get_param.main(["--uri", URI1, "--name", "ring.effect"]) == 0
+    assert capsys.readouterr().out == "11\n"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--name", "ring.nope"], "unknown parameter 'ring.nope'"),
+    (["--name", "cpu.flash", "--value", "3"], "cpu.flash is read-only"),
+    (["--name", "ring.effect", "--value", "300"], "out of range 0..255"),
+    (["--name", "ring.effect", "--value", "abc"], "is not an integer"),
+])
+def test_set_param_errors(sim, capsys, argv, message):
+    sim.add(URI1)
+    if "--value" not in argv:
+        argv = argv + ["--value", "1"]
+    assert set_param.main(["--uri", URI1] + argv) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("setParam: error: ") and message in err
+    assert "Traceback" not in err and err.count("\n") == 1
+
+
+def test_get_param_unknown_name(sim, capsys):
+    sim.add(URI1)
+    assert get_param.main(["--uri", URI1, "--name", "nope"]) == 1
+    assert "unknown parameter 'nope'" in capsys.readouterr().err
+
+
+def test_console_prints_boot_text(sim, capsys):
+    sim.add(URI1)
+    assert console.main(["--uri", URI1, "--seconds", "0.2"]) == 0
+    assert "is up and running!" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("firmware", ["current", "2016.02"])
+def test_battery(sim, capsys, firmware):
+    sim.add(URI1, firmware, vbat=3.87)
+    assert battery.main(["--uri", URI1]) == 0
+    assert capsys.readouterr().out == "3.87 V\n"
+
+
+def test_version(sim, capsys):
+    sim.add(URI1)
+    assert version.main(["--uri", URI1]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    serial = sim.backend.dongles[0].serial
+    assert lines[0] == "Crazyradio 0: firmware 0.53, serial %s" % serial
+    assert lines[1] == "%s: protocol version 12, firmware 2026.04" % URI1
+
+
+def test_absent_crazyflie(sim, capsys):
+    sim.add(URI1)
+    assert get_param.main(["--uri", URI2, "--name", "ring.effect", "--timeout", "0.2"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("getParam: error: %s" % URI2) and "switched on" in err
+    assert "Traceback" not in err
+
+
+def test_bad_uri(sim, capsys):
+    assert list_params.main(["--uri", "radio://0/200/2M"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("listParams: error: bad URI:") and "channel 200" in err
+
+
+def test_missing_dongle(monkeypatch, tmp_path, capsys):
+    monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path))
+    s = Sim(dongles=0)
+    try:
+        with usb_backend.use_backend(s.backend):
+            assert list_params.main(["--uri", URI1]) == 1
+            assert "no Crazyradio found" in capsys.readouterr().err
+            assert scan.main([]) == 1
+            assert "no Crazyradio found" in capsys.readouterr().err
+            assert version.main([]) == 1
+            assert "no Crazyradio found" in capsys.readouterr().err
+    finally:
+        s.stop()
+
+
+class DeniedBackend(FakeUsbBackend):
+    """A dongle the user may not open (no udev rules)."""
+
+    def open_device(self, dev):
+        raise usb.core.USBError("Access denied (insufficient permissions)", -3, errno.EACCES)
+
+
+def test_permission_denied_mentions_udev_and_plugdev(monkeypatch, tmp_path, capsys):
+    monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path))
+    s = Sim(DeniedBackend)
+    try:
+        with usb_backend.use_backend(s.backend):
+            for tool in (list_params.main, scan.main):
+                assert tool([]) == 1
+                err = capsys.readouterr().err
+                assert "permission denied" in err and "plugdev" in err
+                assert "crazyflie_driver/udev" in err and err.count("\n") == 1
+    finally:
+        s.stop()
