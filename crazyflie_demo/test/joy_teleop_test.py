@@ -13,7 +13,9 @@ import threading
 import time
 import unittest
 from typing import List, Optional, Tuple
+from xmlrpc.client import ServerProxy
 
+import rosgraph
 import rospy
 import rostest
 from geometry_msgs.msg import Twist
@@ -30,7 +32,10 @@ class CmdVelProbe:
         self._lock = threading.Lock()
         self._last: Optional[Fields] = None
         self.count = 0
-        rospy.Subscriber(topic, Twist, self._on_twist, queue_size=50)
+        self._sub = rospy.Subscriber(topic, Twist, self._on_twist, queue_size=50)
+
+    def connected(self) -> bool:
+        return self._sub.get_num_connections() > 0
 
     def _on_twist(self, msg: Twist) -> None:
         with self._lock:
@@ -54,6 +59,30 @@ class CmdVelProbe:
             return self._last
 
 
+def inbound_connected(node: str, topic: str) -> bool:
+    """Whether ``node`` has a live subscription connection on ``topic`` (its getBusInfo says so)."""
+    try:
+        uri = rosgraph.Master(rospy.get_name()).lookupNode(node)
+        code, _, connections = ServerProxy(uri).getBusInfo(rospy.get_name())
+    except Exception:                # node not up yet, or its XML-RPC server still starting
+        return False
+    return code == 1 and any(c[2] == "i" and c[4] == topic and c[5] for c in connections)
+
+
+def wait_for_pipeline(ns: str, probe: "CmdVelProbe", timeout: float) -> None:
+    """Block until joy -> quadrotor_teleop -> this test is connected in namespace ``ns``.
+
+    joy_node publishes the initial stick state once, when it opens the device; a connection still
+    being set up would lose it, so the fake joystick is plugged in only after both hops are live.
+    """
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if probe.connected() and inbound_connected("/%s/quadrotor_teleop" % ns, "/%s/joy" % ns):
+            return
+        time.sleep(0.05)
+    raise AssertionError("%s: joy -> quadrotor_teleop -> test not connected after %.0f s" % (ns, timeout))
+
+
 class JoyTeleop(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
@@ -62,6 +91,7 @@ class JoyTeleop(unittest.TestCase):
         cls.probes = {}
         for ns, axes in (("xbox", 8), ("ps3", 4)):
             cls.probes[ns] = CmdVelProbe("/%s/cmd_vel" % ns)
+            wait_for_pipeline(ns, cls.probes[ns], timeout=20.0)
             pad = FakeJoystick(rospy.get_param("~%s_dev" % ns), axes=axes, buttons=11)
             pad.plug_in(timeout=20.0)       # joy_node retries every second until the FIFO exists
             cls.pads[ns] = pad
