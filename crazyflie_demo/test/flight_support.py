@@ -24,6 +24,22 @@ def wait_until(cond: Callable[[], Any], timeout: float, period: float = 0.05) ->
         time.sleep(period)
 
 
+def inbound_connected(node: str, topic: str, caller: str = "/flight_support") -> bool:
+    """Whether ``node`` holds a live subscription connection on ``topic`` (by its getBusInfo).
+
+    A node publishing once (the joy node's initial stick state) loses that message to a
+    subscriber whose connection is still being set up; tests wait for this before triggering it.
+    """
+    from xmlrpc.client import ServerProxy
+    import rosgraph
+    try:
+        uri = rosgraph.Master(caller).lookupNode(node)
+        code, _, connections = ServerProxy(uri).getBusInfo(caller)
+    except Exception:                # node not registered yet, or its XML-RPC server starting
+        return False
+    return code == 1 and any(c[2] == "i" and c[4] == topic and c[5] for c in connections)
+
+
 def distance(a: Sequence[float], b: Sequence[float]) -> float:
     return math.sqrt(sum((x - y) ** 2 for x, y in zip(a, b)))
 

@@ -13,15 +13,14 @@ import threading
 import time
 import unittest
 from typing import List, Optional, Tuple
-from xmlrpc.client import ServerProxy
 
-import rosgraph
 import rospy
 import rostest
 from geometry_msgs.msg import Twist
 
 from crazyflie_demo.fake_joystick import FakeJoystick
 from crazyflie_demo.joystick import scale_axis
+from flight_support import inbound_connected
 
 UP, DOWN, LEFT, RIGHT = -32767, 32767, -32767, 32767
 Fields = Tuple[float, float, float, float]    # linear.x, linear.y, linear.z, angular.z
@@ -59,16 +58,6 @@ class CmdVelProbe:
             return self._last
 
 
-def inbound_connected(node: str, topic: str) -> bool:
-    """Whether ``node`` has a live subscription connection on ``topic`` (its getBusInfo says so)."""
-    try:
-        uri = rosgraph.Master(rospy.get_name()).lookupNode(node)
-        code, _, connections = ServerProxy(uri).getBusInfo(rospy.get_name())
-    except Exception:                # node not up yet, or its XML-RPC server still starting
-        return False
-    return code == 1 and any(c[2] == "i" and c[4] == topic and c[5] for c in connections)
-
-
 def wait_for_pipeline(ns: str, probe: "CmdVelProbe", timeout: float) -> None:
     """Block until joy -> quadrotor_teleop -> this test is connected in namespace ``ns``.
 
@@ -77,7 +66,7 @@ def wait_for_pipeline(ns: str, probe: "CmdVelProbe", timeout: float) -> None:
     """
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if probe.connected() and inbound_connected("/%s/quadrotor_teleop" % ns, "/%s/joy" % ns):
+        if probe.connected() and inbound_connected("/%s/quadrotor_teleop" % ns, "/%s/joy" % ns, rospy.get_name()):
             return
         time.sleep(0.05)
     raise AssertionError("%s: joy -> quadrotor_teleop -> test not connected after %.0f s" % (ns, timeout))

@@ -24,7 +24,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.fake_joystick import FakeJoystick
-from flight_support import WorldProbe, distance, wait_until
+from flight_support import WorldProbe, distance, inbound_connected, wait_until
 
 NAME = "crazyflie"
 START = (0.0, 0.0, 0.5)
@@ -71,6 +71,11 @@ class TeleopVicon(unittest.TestCase):
         cls.scaled = (DEFLECTION - deadzone) / (1.0 - deadzone)   # what the joy node reports
         cls.goal = Latest("/%s/goal" % NAME, PoseStamped)
         cls.joy = Latest("/%s/joy" % NAME, Joy)
+        # the joy node publishes the initial state once: plug in only when both readers are connected
+        joy_topic = "/%s/joy" % NAME
+        if not wait_until(lambda: cls.joy.sub.get_num_connections() > 0
+                          and inbound_connected("/%s/pose" % NAME, joy_topic, rospy.get_name()), 20.0):
+            raise AssertionError("%s: the joy node and publish_pose_teleop.py never connected" % joy_topic)
         cls.pad = FakeJoystick(rospy.get_param("~joy_dev"), axes=8, buttons=11)
         cls.pad.plug_in(timeout=20.0)        # joy_node retries every second until the FIFO exists
         if not wait_until(lambda: cls.joy.get() is not None, 10.0):
