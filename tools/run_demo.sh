@@ -12,8 +12,14 @@ export ROS_LOG_DIR="$OUT/ros_log"
 RESULT="$OUT/mission_result.txt"
 rm -f "$RESULT"
 start=$(date +%s)
+# roslaunch lists every parameter (about 200 lines) before it starts: drop that list from the
+# console, keep everything else as it comes (unbuffered, so progress lines appear at once).
+# The mission monitor is a required node: when it is done, roslaunch shuts the rest down and
+# says so in red ("REQUIRED process ... has died"); the last line below tells the outcome.
+export PYTHONUNBUFFERED=1
 roslaunch --screen -p "${ROS_PORT:-11411}" crazyflie_demo sim_mission.launch \
-  plot:="$OUT/crazyflie_mission.png" result_file:="$RESULT" "$@" || true
+  plot:="$OUT/crazyflie_mission.png" result_file:="$RESULT" "$@" 2>&1 \
+  | grep --line-buffered -v '^ \* /' || true
 result="$(cat "$RESULT" 2>/dev/null || echo "no result (the mission monitor did not finish)")"
 echo "mission: $result ($(( $(date +%s) - start )) s wall clock)"
 [ "$result" = ok ]
