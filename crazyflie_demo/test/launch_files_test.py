@@ -4,7 +4,10 @@
 For each launch file: ``roslaunch --nodes`` must list exactly the expected nodes (no rviz with
 gui:=false, no joystick driver where auto takes off by itself), then a real start on its own
 master port and world address must bring them up, with every Crazyflie added to the server (its
-``emergency`` service exists). Two launch files start at a time to keep the run short.
+``emergency`` service exists). Then Ctrl-C (SIGINT to roslaunch) must bring everything down
+within CTRL_C_S seconds, from that moment of start-up, when nodes are still registering with
+the master: roslaunch escalates to SIGTERM only after 15 s, so a node that ignores SIGINT
+shows up as a slow shutdown. Two launch files start at a time to keep the run short.
 """
 from __future__ import annotations
 
@@ -59,6 +62,11 @@ EXPECTED: Dict[str, Tuple[List[str], List[str], List[str]]] = {
 }
 # nodes that finish by design once their work is done
 EXITS = {"crazyflie_add"}
+# Ctrl-C must stop a launch within this many seconds (roslaunch sends SIGTERM after 15 s)
+CTRL_C_S = 10.0
+# after SIGINT, wait this long before killing roslaunch: past its own escalation (15 s SIGINT,
+# 2 s SIGTERM, then SIGKILL), so that roslaunch itself stops every node it started
+ESCALATION_S = 25.0
 
 
 def listed_nodes(launch: str, args: List[str]) -> Set[str]:
@@ -86,6 +94,7 @@ class LaunchFiles(unittest.TestCase):
         cls.tmp = tempfile.mkdtemp(prefix="cf_launch_")
         cls.failures: Dict[str, str] = {}
         cls.timings: Dict[str, float] = {}
+        cls.shutdowns: Dict[str, float] = {}
 
     def run_one(self, i: int, launch: str) -> None:
         expected, crazyflies, extra = EXPECTED[launch]
@@ -96,6 +105,10 @@ class LaunchFiles(unittest.TestCase):
                 raise AssertionError("roslaunch --nodes: missing %s, unexpected %s"
                                      % (sorted(set(expected) - listed), sorted(listed - set(expected))))
             self.start(i, launch, args, expected, crazyflies)
+            took = self.shutdowns.get(launch, 0.0)
+            if took > CTRL_C_S:
+                raise AssertionError("Ctrl-C took %.1f s to stop it (a node did not stop on SIGINT; "
+                                     "see %s.log)" % (took, launch))
         except Exception as e:     # collected and reported per launch file
             self.failures[launch] = "%s: %s" % (type(e).__name__, e)
 
@@ -130,11 +143,13 @@ class LaunchFiles(unittest.TestCase):
         finally:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGINT)
+                t_int = time.monotonic()
                 try:
-                    proc.wait(15.0)
+                    proc.wait(ESCALATION_S)
                 except subprocess.TimeoutExpired:
                     os.killpg(proc.pid, signal.SIGKILL)
                     proc.wait(5.0)
+                self.shutdowns[launch] = time.monotonic() - t_int
             log.close()
 
     def test_every_launch_file_starts_in_the_simulator(self):
@@ -158,7 +173,8 @@ class LaunchFiles(unittest.TestCase):
         for t in threads:
             t.join()
         for launch, took in sorted(self.timings.items()):
-            print("STARTED %-30s in %.1f s" % (launch, took))
+            print("STARTED %-30s in %.1f s, stopped by Ctrl-C in %.1f s"
+                  % (launch, took, self.shutdowns.get(launch, float("nan"))))
         self.assertEqual({}, self.failures, "\n".join("%s: %s" % kv for kv in sorted(self.failures.items())))
 
 

@@ -17,6 +17,8 @@ from geometry_msgs.msg import PoseStamped, Twist
 from std_msgs.msg import String
 from std_srvs.srv import Empty, EmptyResponse
 
+from crazyflie_driver.nodes.ros_signals import init_node
+
 from .pid import PidGains
 from .position_controller import ControllerConfig, PoseSample, PositionController, yaw_from_quaternion
 
@@ -134,7 +136,9 @@ class ControllerNode:
             self.cmd_pub.publish(msg)
             self._publish_status()
         except rospy.ROSException:
-            if not rospy.is_shutdown():   # a timer tick racing the node's shutdown is not an error
+            # a timer tick racing the node's shutdown is not an error: rospy closes the topics
+            # before is_shutdown() turns true, so ask whether a shutdown has begun
+            if not rospy.core.is_shutdown_requested():
                 raise
 
     def _publish_status(self) -> None:
@@ -169,7 +173,7 @@ class ControllerNode:
 
 
 def main() -> None:
-    rospy.init_node("controller")
+    init_node("controller")
     params = rospy.get_param("~", {})
     try:
         ControllerNode(params)

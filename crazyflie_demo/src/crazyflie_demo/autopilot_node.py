@@ -11,10 +11,11 @@ import rospy
 from std_srvs.srv import Empty
 
 from crazyflie_demo.rosutil import take_off_when_ready
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 def main() -> None:
-    rospy.init_node("autopilot")
+    init_node("autopilot")
     delay = float(rospy.get_param("~takeoff_delay", 0.0))
     hover_time = float(rospy.get_param("~hover_time", 0.0))
     rospy.sleep(delay)

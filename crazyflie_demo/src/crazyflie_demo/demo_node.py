@@ -20,6 +20,7 @@ from std_srvs.srv import Empty
 
 from crazyflie_demo.rosutil import make_goal, quaternion_to_yaw, take_off_when_ready, wait_for_service
 from crazyflie_demo.waypoints import WaypointFollower
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 def _lookup(buffer: tf2_ros.Buffer, world: str, frame: str, max_age: float):
@@ -36,7 +37,7 @@ def _lookup(buffer: tf2_ros.Buffer, world: str, frame: str, max_age: float):
 
 def run(waypoints: Optional[Sequence[Sequence[float]]] = None) -> None:
     """Start the node; ``waypoints`` None reads them from the private parameter ~waypoints."""
-    rospy.init_node("demo", anonymous=True)
+    init_node("demo", anonymous=True)
     if waypoints is None:
         waypoints = rospy.get_param("~waypoints", [[0.0, 0.0, 0.5, 0.0, 2.0]])
     # tf2 refuses frame ids with a leading '/', which the chapter's launch files use

@@ -12,6 +12,7 @@ import rospy
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.joystick import Joystick, JoyState
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 class _RospyLogHandler(logging.Handler):
@@ -37,7 +38,7 @@ def to_message(state: JoyState, frame_id: str) -> Joy:
 
 
 def main() -> None:
-    rospy.init_node("joy_node")
+    init_node("joy_node")
     logger = logging.getLogger("crazyflie_demo.joy_node")
     logger.propagate = False
     logger.addHandler(_RospyLogHandler())

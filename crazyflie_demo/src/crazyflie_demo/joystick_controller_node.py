@@ -16,6 +16,7 @@ from std_srvs.srv import Empty
 
 from crazyflie_demo.joystick_buttons import ButtonEdges, actions_for
 from crazyflie_demo.rosutil import wait_for_service
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 class JoystickController:
@@ -66,11 +67,13 @@ class JoystickController:
 
 
 def main() -> None:
-    rospy.init_node("joystick_controller")
+    init_node("joystick_controller")
     use_controller = bool(rospy.get_param("~use_crazyflie_controller", False))
     joy_topic = rospy.get_param("~joy_topic", "joy")
     wait_for_service("update_params", 30.0)
     if use_controller:
         wait_for_service("takeoff", 30.0)
+    if rospy.is_shutdown():
+        return
     JoystickController(use_controller, joy_topic)
     rospy.spin()

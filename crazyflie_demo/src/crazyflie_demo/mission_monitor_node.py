@@ -19,10 +19,11 @@ from geometry_msgs.msg import PoseStamped, Twist
 from std_msgs.msg import Bool, Float32, Int32
 
 from crazyflie_demo.mission_summary import VehicleTrack, plot_tracks, summary_lines
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 def main() -> None:
-    rospy.init_node("mission_monitor")
+    init_node("mission_monitor")
     names: List[str] = list(rospy.get_param("~vehicles", ["crazyflie1", "crazyflie2"]))
     frames: List[str] = list(rospy.get_param("~frames", [f"vicon/{n}/{n}" for n in names]))
     world = str(rospy.get_param("~worldFrame", "world")).strip("/")

@@ -5,10 +5,11 @@ import rospy
 from geometry_msgs.msg import PoseStamped
 
 from crazyflie_demo.rosutil import make_goal
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 def main() -> None:
-    rospy.init_node("publish_pose", anonymous=True)
+    init_node("publish_pose", anonymous=True)
     name = rospy.get_param("~name", "goal")
     rate = float(rospy.get_param("~rate", 30.0))
     x = float(rospy.get_param("~x", 0.0))

@@ -14,6 +14,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.rosutil import make_goal
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 class GoalTeleop:
@@ -39,7 +40,7 @@ class GoalTeleop:
 
 
 def main() -> None:
-    rospy.init_node("publish_pose_teleop", anonymous=True)
+    init_node("publish_pose_teleop", anonymous=True)
     name = rospy.get_param("~name", "goal")
     rate = float(rospy.get_param("~rate", 30.0))
     joy_topic = rospy.get_param("~joy_topic", "joy")

@@ -13,6 +13,7 @@ from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.teleop import TeleopConfig, TeleopConfigError, TwistCommand
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 def to_twist(cmd: TwistCommand) -> Twist:
@@ -23,7 +24,7 @@ def to_twist(cmd: TwistCommand) -> Twist:
 
 
 def main() -> None:
-    rospy.init_node("quadrotor_teleop")
+    init_node("quadrotor_teleop")
     try:
         config = TeleopConfig.from_params(lambda name, default: rospy.get_param("~" + name, default))
     except TeleopConfigError as exc:

@@ -32,12 +32,18 @@ def make_goal(frame_id: str, x: float, y: float, z: float, yaw_rad: float,
 
 
 def wait_for_service(name: str, timeout: float) -> bool:
-    """Wait for a service; False (and a log line) instead of an exception on timeout."""
+    """Wait for a service; False (and a log line) instead of an exception on timeout.
+
+    False without a log line when the node is shutting down (rospy interrupts the wait).
+    """
     try:
         rospy.wait_for_service(name, timeout=timeout)
         return True
+    except rospy.ROSInterruptException:
+        return False
     except rospy.ROSException:
-        rospy.logwarn("service %s not available after %.0f s", rospy.resolve_name(name), timeout)
+        if not rospy.is_shutdown():
+            rospy.logwarn("service %s not available after %.0f s", rospy.resolve_name(name), timeout)
         return False
 
 
@@ -76,5 +82,6 @@ def take_off_when_ready(timeout: float, state_topic: str = "controller/state") -
         return False
     finally:
         sub.unregister()
-    rospy.logerr("no take-off after %.0f s (controller state: %r)", timeout, status["text"])
+    if not rospy.is_shutdown():
+        rospy.logerr("no take-off after %.0f s (controller state: %r)", timeout, status["text"])
     return False

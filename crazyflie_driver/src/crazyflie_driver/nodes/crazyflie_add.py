@@ -18,6 +18,7 @@ from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
 
 from ..add_config import AddConfigError, config_from_params
 from ..worker import WorkerConfig
+from .ros_signals import init_node
 
 
 def private_params() -> Dict[str, Any]:
@@ -41,7 +42,7 @@ def request_from_config(config: WorkerConfig) -> AddCrazyflieRequest:
 
 
 def run() -> int:
-    rospy.init_node("crazyflie_add", anonymous=True)
+    init_node("crazyflie_add", anonymous=True)
     params = private_params()
     try:
         config = config_from_params(params)

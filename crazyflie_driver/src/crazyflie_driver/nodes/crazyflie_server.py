@@ -28,6 +28,7 @@ from ..log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE
                         TEMPERATURE_TOPIC, LogBlockSpec)
 from ..registry import CrazyflieRegistry
 from ..worker import CrazyflieWorker, WorkerConfig, WorkerListener
+from .ros_signals import init_node
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -291,7 +292,7 @@ def make_factory(timeout: float):
 
 
 def main() -> None:
-    rospy.init_node("crazyflie_server")
+    init_node("crazyflie_server")
     handler = RosLogHandler()
     lib_log = logging.getLogger("crazyflie_driver")
     lib_log.addHandler(handler)

@@ -270,8 +270,9 @@ def main() -> None:
     from ..sim.medium import parse_address
     from ..sim.server import WorldServer
     from ..sim.world import World
+    from .ros_signals import init_node
 
-    rospy.init_node("crazyflie_sim")
+    init_node("crazyflie_sim")
     params = _private_params()
     try:
         vehicles = vehicles_from_params(params)

@@ -29,6 +29,7 @@ from geometry_msgs.msg import PoseStamped, TransformStamped, TwistStamped
 
 from ..mocap.vrpn_bridge import VrpnBridge, VrpnConfigError, VrpnNodeConfig, config_from_params
 from ..mocap.vrpn_client import PoseReport, TwistReport, VrpnClient
+from .ros_signals import init_node
 
 DIAGNOSTICS_PERIOD = 1.0
 
@@ -181,7 +182,7 @@ class VrpnClientNode:
 
 
 def run() -> int:
-    rospy.init_node("vrpn_client_node")
+    init_node("vrpn_client_node")
     try:
         config = config_from_params(private_params())
     except VrpnConfigError as e:

@@ -1,0 +1,116 @@
+"""Ctrl-C stops a node even when it lands in the middle of a call to the ROS master.
+
+A child process initialised with ``ros_signals.init_node`` reads a parameter from a real
+rosmaster in a tight loop, so a SIGINT almost always arrives inside an XML-RPC call; it must
+shut down cleanly within a few seconds, every time. (With rospy's own handler the same loop
+hangs in most tries: the handler waits for the lock of the call it interrupted.)
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import xmlrpc.client
+
+import pytest
+
+pytest.importorskip("rospy")
+if shutil.which("rosmaster") is None:
+    pytest.skip("rosmaster is not installed", allow_module_level=True)
+
+SRC = pathlib.Path(__file__).resolve().parent.parent / "src"
+CHILD = r"""
+import rospy
+from crazyflie_driver.nodes.ros_signals import init_node
+init_node("signal_probe", anonymous=True)
+print("ready", flush=True)
+calls = 0
+while not rospy.is_shutdown():
+    try:
+        rospy.get_param("/signal_probe_value", 0)
+    except Exception:          # the master connection closing under us at shutdown
+        break
+    calls += 1
+print("clean exit after %d master calls" % calls, flush=True)
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def master_uri():
+    port = free_port()
+    uri = "http://127.0.0.1:%d" % port
+    proc = subprocess.Popen(["rosmaster", "--core", "-p", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 15.0
+    while True:
+        try:
+            xmlrpc.client.ServerProxy(uri).getSystemState("/test")
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                proc.kill()
+                pytest.fail("rosmaster did not come up on port %d" % port)
+            time.sleep(0.1)
+    yield uri
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(10.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_during_master_calls_shuts_the_node_down(master_uri, signum):
+    env = dict(os.environ, ROS_MASTER_URI=master_uri,
+               PYTHONPATH=os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")]),
+               ROS_LOG_DIR=os.environ.get("ROS_LOG_DIR", "/tmp"))
+    for attempt in range(5):
+        child = subprocess.Popen([sys.executable, "-c", CHILD], env=env, text=True,
+                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        try:
+            assert child.stdout.readline().strip() == "ready"
+            time.sleep(0.2)                   # well inside the loop of master calls
+            child.send_signal(signum)
+            out, _ = child.communicate(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            out, _ = child.communicate()
+            pytest.fail("attempt %d: the node hung after signal %d:\n%s" % (attempt, signum, out))
+        assert child.returncode == 0, out
+        assert "clean exit after" in out, out
+        calls = int(out.split("clean exit after ")[1].split()[0])
+        assert calls > 10, "the child barely called the master (%d calls): not a real check" % calls
+
+
+def test_a_second_signal_exits_at_once(master_uri):
+    """roslaunch escalates to SIGTERM when SIGINT did not stop a node: that must end it."""
+    child_code = CHILD.replace("calls = 0", "import time\ncalls = 0\nrospy.on_shutdown(lambda: time.sleep(60))")
+    env = dict(os.environ, ROS_MASTER_URI=master_uri,
+               PYTHONPATH=os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")]),
+               ROS_LOG_DIR=os.environ.get("ROS_LOG_DIR", "/tmp"))
+    child = subprocess.Popen([sys.executable, "-c", child_code], env=env, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        child.send_signal(signal.SIGINT)      # its shutdown hook now blocks for a minute
+        time.sleep(0.5)
+        assert child.poll() is None, "a shutdown hook of 60 s cannot have finished"
+        child.send_signal(signal.SIGTERM)
+        child.wait(5.0)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+    assert child.returncode == 128 + signal.SIGTERM
