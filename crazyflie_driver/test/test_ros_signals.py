@@ -40,6 +40,31 @@ print("clean exit after %d master calls" % calls, flush=True)
 """
 
 
+IN_WINDOW = r"""
+import rospy
+from std_msgs.msg import Int32
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
+init_node("window_probe", anonymous=True)
+pub = rospy.Publisher("window_probe", Int32, queue_size=10)
+seen = []
+
+def in_window(reason):
+    # added after init_node, so rospy runs it after closing every topic, before is_shutdown()
+    seen.append("is_shutdown=%s shutting_down=%s" % (rospy.is_shutdown(), shutting_down()))
+    seen.append("helper=%s" % publish_unless_shutting_down(pub, Int32(1)))
+    try:
+        pub.publish(Int32(2))
+        seen.append("plain=ok")
+    except rospy.ROSException as e:
+        seen.append("plain=%s" % e)
+
+rospy.core.add_preshutdown_hook(in_window)
+print("ready", flush=True)
+rospy.spin()
+print(" | ".join(seen), flush=True)
+"""
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -114,3 +139,25 @@ def test_a_second_signal_exits_at_once(master_uri):
             child.kill()
             child.wait()
     assert child.returncode == 128 + signal.SIGTERM
+
+
+def test_publishing_while_rospy_closes_the_topics_is_not_an_error(master_uri):
+    """Between closing the topics and is_shutdown() turning true, publish must stay quiet."""
+    env = dict(os.environ, ROS_MASTER_URI=master_uri,
+               PYTHONPATH=os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")]),
+               ROS_LOG_DIR=os.environ.get("ROS_LOG_DIR", "/tmp"))
+    child = subprocess.Popen([sys.executable, "-c", IN_WINDOW], env=env, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        child.send_signal(signal.SIGINT)
+        out, _ = child.communicate(timeout=5.0)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    assert child.returncode == 0, out
+    # the probe really ran inside the window: rospy itself refuses a plain publish there
+    assert "is_shutdown=False shutting_down=True" in out, out
+    assert "plain=publish() to a closed topic" in out, out
+    assert "helper=False" in out, out

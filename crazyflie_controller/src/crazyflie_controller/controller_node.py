@@ -17,7 +17,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from std_msgs.msg import String
 from std_srvs.srv import Empty, EmptyResponse
 
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 
 from .pid import PidGains
 from .position_controller import ControllerConfig, PoseSample, PositionController, yaw_from_quaternion
@@ -138,7 +138,7 @@ class ControllerNode:
         except rospy.ROSException:
             # a timer tick racing the node's shutdown is not an error: rospy closes the topics
             # before is_shutdown() turns true, so ask whether a shutdown has begun
-            if not rospy.core.is_shutdown_requested():
+            if not shutting_down():
                 raise
 
     def _publish_status(self) -> None:

@@ -20,7 +20,7 @@ from std_srvs.srv import Empty
 
 from crazyflie_demo.rosutil import make_goal, quaternion_to_yaw, take_off_when_ready, wait_for_service
 from crazyflie_demo.waypoints import WaypointFollower
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 
 def _lookup(buffer: tf2_ros.Buffer, world: str, frame: str, max_age: float):
@@ -67,15 +67,19 @@ def run(waypoints: Optional[Sequence[Sequence[float]]] = None) -> None:
             follower.update(rospy.get_time(), pose[0], pose[1])
         if follower.index != last_index:
             last_index = follower.index
-            index_pub.publish(Int32(last_index))
+            if not publish_unless_shutting_down(index_pub, Int32(last_index)):
+                break
             rospy.loginfo("waypoint %d/%d: %s", last_index + 1, len(follower.waypoints),
                           follower.current)
         w = follower.current
         seq += 1
-        goal_pub.publish(make_goal(world, w.x, w.y, w.z, math.radians(w.yaw_deg), seq))
+        if not publish_unless_shutting_down(goal_pub, make_goal(world, w.x, w.y, w.z,
+                                                                math.radians(w.yaw_deg), seq)):
+            break
         if follower.finished and not landed:
             landed = True
-            done_pub.publish(Bool(True))
+            if not publish_unless_shutting_down(done_pub, Bool(True)):
+                break
             rospy.loginfo("all %d waypoints reached", len(follower.waypoints))
             if land_when_done and wait_for_service("land", 5.0):
                 try:

@@ -12,7 +12,7 @@ import rospy
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.joystick import Joystick, JoyState
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 
 class _RospyLogHandler(logging.Handler):
@@ -57,7 +57,8 @@ def main() -> None:
     rospy.loginfo("joy_node: reading %s, publishing %s", dev, pub.resolved_name)
     try:
         for state in joystick.states(timeout=0.1, should_stop=rospy.is_shutdown):
-            pub.publish(to_message(state, dev))
+            if not publish_unless_shutting_down(pub, to_message(state, dev)):
+                break
     except rospy.ROSInterruptException:
         pass
     finally:

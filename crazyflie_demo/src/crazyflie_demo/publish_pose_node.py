@@ -5,7 +5,7 @@ import rospy
 from geometry_msgs.msg import PoseStamped
 
 from crazyflie_demo.rosutil import make_goal
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 
 def main() -> None:
@@ -21,7 +21,8 @@ def main() -> None:
     seq = 0
     while not rospy.is_shutdown():
         seq += 1
-        pub.publish(make_goal(world_frame, x, y, z, 0.0, seq))
+        if not publish_unless_shutting_down(pub, make_goal(world_frame, x, y, z, 0.0, seq)):
+            break
         try:
             r.sleep()
         except rospy.ROSInterruptException:

@@ -14,7 +14,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.rosutil import make_goal
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 
 class GoalTeleop:
@@ -65,7 +65,8 @@ def main() -> None:
             teleop.step(axes, 1.0 / rate)
         seq += 1
         x, y, z = teleop.position
-        pub.publish(make_goal(world_frame, x, y, z, teleop.yaw, seq))
+        if not publish_unless_shutting_down(pub, make_goal(world_frame, x, y, z, teleop.yaw, seq)):
+            break
         try:
             r.sleep()
         except rospy.ROSInterruptException:

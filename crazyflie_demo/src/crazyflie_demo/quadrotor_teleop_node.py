@@ -13,7 +13,7 @@ from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.teleop import TeleopConfig, TeleopConfigError, TwistCommand
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 
 def to_twist(cmd: TwistCommand) -> Twist:
@@ -33,7 +33,7 @@ def main() -> None:
     pub = rospy.Publisher("cmd_vel", Twist, queue_size=10)
 
     def on_joy(msg: Joy) -> None:
-        pub.publish(to_twist(config.command(msg.axes)))
+        publish_unless_shutting_down(pub, to_twist(config.command(msg.axes)))
 
     def stop() -> None:
         try:                             # best effort: the connections may be closing already

@@ -47,3 +47,23 @@ def init_node(name: str, **kwargs: Any) -> None:
         signal.signal(signum, shutdown.handle)
     rospy.init_node(name, disable_signals=True, **kwargs)
     threading.Thread(target=shutdown.watch, name="shutdown-on-signal", daemon=True).start()
+
+
+def shutting_down() -> bool:
+    """True from the moment a shutdown begins.
+
+    ``rospy.is_shutdown()`` turns true only after rospy has closed every topic, so a loop or
+    callback that publishes in between would hit "publish() to a closed topic"; this does not.
+    """
+    return bool(rospy.core.is_shutdown_requested())
+
+
+def publish_unless_shutting_down(publisher: "rospy.Publisher", msg: Any) -> bool:
+    """Publish ``msg``; False instead of an error when a shutdown has closed the topic."""
+    try:
+        publisher.publish(msg)
+        return True
+    except rospy.ROSException:
+        if shutting_down():
+            return False
+        raise

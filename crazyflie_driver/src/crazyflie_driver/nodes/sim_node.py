@@ -270,7 +270,7 @@ def main() -> None:
     from ..sim.medium import parse_address
     from ..sim.server import WorldServer
     from ..sim.world import World
-    from .ros_signals import init_node
+    from .ros_signals import init_node, shutting_down
 
     init_node("crazyflie_sim")
     params = _private_params()
@@ -326,7 +326,8 @@ def main() -> None:
                 if clock_pub is not None:
                     clock_pub.publish(Clock(clock=rospy.Time.from_sec(float(world.time))))
             except Exception as e:   # a publishing hiccup must not stop the world
-                rospy.logwarn_throttle(5.0, "crazyflie_sim: mocap frame failed: %s" % e)
+                if not shutting_down():   # (at shutdown the topics close under this thread)
+                    rospy.logwarn_throttle(5.0, "crazyflie_sim: mocap frame failed: %s" % e)
 
     thread = threading.Thread(target=mocap_loop, name="mocap", daemon=True)
     thread.start()

@@ -29,7 +29,7 @@ from geometry_msgs.msg import PoseStamped, TransformStamped, TwistStamped
 
 from ..mocap.vrpn_bridge import VrpnBridge, VrpnConfigError, VrpnNodeConfig, config_from_params
 from ..mocap.vrpn_client import PoseReport, TwistReport, VrpnClient
-from .ros_signals import init_node
+from .ros_signals import init_node, publish_unless_shutting_down, shutting_down
 
 DIAGNOSTICS_PERIOD = 1.0
 
@@ -96,8 +96,8 @@ class VrpnClientNode:
             p, q = msg.pose.position, msg.pose.orientation
             p.x, p.y, p.z = out.position
             q.x, q.y, q.z, q.w = out.orientation
-            pub.publish(msg)
-        if self._tf is not None:
+            publish_unless_shutting_down(pub, msg)
+        if self._tf is not None and not shutting_down():
             t = TransformStamped()
             t.header.stamp = stamp
             t.header.frame_id = self.config.frame_id
@@ -121,7 +121,7 @@ class VrpnClientNode:
             lin, ang = msg.twist.linear, msg.twist.angular
             lin.x, lin.y, lin.z = out.linear
             ang.x, ang.y, ang.z = out.angular
-            pub.publish(msg)
+            publish_unless_shutting_down(pub, msg)
 
     # -- staleness and diagnostics (own thread) ---------------------------------------------------
     def watch(self) -> None:
@@ -139,7 +139,7 @@ class VrpnClientNode:
                         rospy.loginfo("VRPN tracker %s: poses again", ev.name)
                 if now >= next_diag:
                     next_diag = now + DIAGNOSTICS_PERIOD
-                    self._diag_pub.publish(self.diagnostics(now))
+                    publish_unless_shutting_down(self._diag_pub, self.diagnostics(now))
             except Exception as e:  # never let bookkeeping end the node
                 rospy.logerr("vrpn_client_node: diagnostics failed: %r", e)
 
