@@ -20,7 +20,7 @@ from geometry_msgs.msg import Twist
 
 from crazyflie_demo.fake_joystick import FakeJoystick
 from crazyflie_demo.joystick import scale_axis
-from flight_support import inbound_connected
+from flight_support import inbound_connected, wait_until
 
 UP, DOWN, LEFT, RIGHT = -32767, 32767, -32767, 32767
 Fields = Tuple[float, float, float, float]    # linear.x, linear.y, linear.z, angular.z
@@ -64,12 +64,9 @@ def wait_for_pipeline(ns: str, probe: "CmdVelProbe", timeout: float) -> None:
     joy_node publishes the initial stick state once, when it opens the device; a connection still
     being set up would lose it, so the fake joystick is plugged in only after both hops are live.
     """
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if probe.connected() and inbound_connected("/%s/quadrotor_teleop" % ns, "/%s/joy" % ns, rospy.get_name()):
-            return
-        time.sleep(0.05)
-    raise AssertionError("%s: joy -> quadrotor_teleop -> test not connected after %.0f s" % (ns, timeout))
+    if not wait_until(lambda: probe.connected() and inbound_connected(
+            "/%s/quadrotor_teleop" % ns, "/%s/joy" % ns, rospy.get_name()), timeout):
+        raise AssertionError("%s: joy -> quadrotor_teleop -> test not connected after %.0f s" % (ns, timeout))
 
 
 class JoyTeleop(unittest.TestCase):

@@ -16,7 +16,7 @@ from std_srvs.srv import Empty
 
 from crazyflie_demo.joystick_buttons import ButtonEdges, actions_for
 from crazyflie_demo.rosutil import wait_for_service
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 
 
 class JoystickController:
@@ -73,7 +73,7 @@ def main() -> None:
     wait_for_service("update_params", 30.0)
     if use_controller:
         wait_for_service("takeoff", 30.0)
-    if rospy.is_shutdown():
+    if shutting_down():
         return
     JoystickController(use_controller, joy_topic)
     rospy.spin()

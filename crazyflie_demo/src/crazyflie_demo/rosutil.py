@@ -7,6 +7,8 @@ from typing import Optional, Tuple
 import rospy
 from geometry_msgs.msg import PoseStamped
 
+from crazyflie_driver.nodes.ros_signals import shutting_down
+
 
 def yaw_to_quaternion(yaw_rad: float) -> Tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation about z."""
@@ -42,8 +44,7 @@ def wait_for_service(name: str, timeout: float) -> bool:
     except rospy.ROSInterruptException:
         return False
     except rospy.ROSException:
-        if not rospy.is_shutdown():
-            rospy.logwarn("service %s not available after %.0f s", rospy.resolve_name(name), timeout)
+        rospy.logwarn("service %s not available after %.0f s", rospy.resolve_name(name), timeout)
         return False
 
 
@@ -82,6 +83,6 @@ def take_off_when_ready(timeout: float, state_topic: str = "controller/state") -
         return False
     finally:
         sub.unregister()
-    if not rospy.is_shutdown():
+    if not shutting_down():
         rospy.logerr("no take-off after %.0f s (controller state: %r)", timeout, status["text"])
     return False
