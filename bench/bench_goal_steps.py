@@ -139,7 +139,7 @@ def main() -> int:
                     help="results file ('' to only print)")
     args = ap.parse_args()
     try:
-        import crazyflie_driver.sim.world  # noqa: F401
+        import crazyflie_driver.sim.world.world  # noqa: F401
     except ImportError as e:
         print("sim.world is not available (%s): benchmark pending" % e)
         return 1

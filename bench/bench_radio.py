@@ -36,10 +36,10 @@ from typing import Dict, List
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
 
-from crazyflie_driver.link import RadioLink, RadioManager              # noqa: E402
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend  # noqa: E402
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie            # noqa: E402
-from crazyflie_driver.sim.medium import LocalMedium                     # noqa: E402
+from crazyflie_driver.radio.link import RadioLink, RadioManager              # noqa: E402
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend  # noqa: E402
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie            # noqa: E402
+from crazyflie_driver.sim.air.medium import LocalMedium                     # noqa: E402
 
 SETPOINT = bytes([0x30]) + struct.pack("<fffH", 0.0, 0.0, 0.0, 0)   # port 3 ch 0 RPYT, thrust 0
 WARMUP_S = 0.2

@@ -23,13 +23,13 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
 
-from crazyflie_driver.crazyflie import Crazyflie                     # noqa: E402
-from crazyflie_driver.link import RadioManager                       # noqa: E402
-from crazyflie_driver.registry import CrazyflieRegistry              # noqa: E402
-from crazyflie_driver.sim.fake_usb import FakeUsbBackend             # noqa: E402
-from crazyflie_driver.sim.server import WorldServer                  # noqa: E402
-from crazyflie_driver.sim.world import World                         # noqa: E402
-from crazyflie_driver.worker import WorkerConfig, WorkerListener     # noqa: E402
+from crazyflie_driver.protocol.crazyflie import Crazyflie                     # noqa: E402
+from crazyflie_driver.radio.link import RadioManager                       # noqa: E402
+from crazyflie_driver.server.registry import CrazyflieRegistry              # noqa: E402
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend             # noqa: E402
+from crazyflie_driver.sim.air.server import WorldServer                  # noqa: E402
+from crazyflie_driver.sim.world.world import World                         # noqa: E402
+from crazyflie_driver.server.worker import WorkerConfig, WorkerListener     # noqa: E402
 
 CMD_RATE_HZ = 100.0
 

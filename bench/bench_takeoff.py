@@ -64,7 +64,7 @@ def main() -> int:
     ap.add_argument("--out", default=os.path.join(HERE, "results", "takeoff.txt"))
     args = ap.parse_args()
     try:
-        import crazyflie_driver.sim.world  # noqa: F401
+        import crazyflie_driver.sim.world.world  # noqa: F401
     except ImportError as e:
         print("sim.world is not available (%s): benchmark pending" % e)
         return 1

@@ -12,11 +12,11 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
-from crazyflie_driver.crazyflie import Crazyflie  # noqa: E402
-from crazyflie_driver.link import RadioManager  # noqa: E402
-from crazyflie_driver.sim.fake_usb import FakeUsbBackend  # noqa: E402
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie  # noqa: E402
-from crazyflie_driver.sim.medium import LocalMedium  # noqa: E402
+from crazyflie_driver.protocol.crazyflie import Crazyflie  # noqa: E402
+from crazyflie_driver.radio.link import RadioManager  # noqa: E402
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie  # noqa: E402
+from crazyflie_driver.sim.air.medium import LocalMedium  # noqa: E402
 
 URI = "radio://0/80/2M/E7E7E7E701"
 

@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
 from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, config_from_params  # noqa: E402
 from crazyflie_driver.mocap.vrpn_client import VrpnClient, VrpnSession  # noqa: E402
-from crazyflie_driver.mocap.vrpn_test_server import VrpnTestServer, circle_pose  # noqa: E402
+from crazyflie_driver.mocap.vrpn_server import VrpnTestServer, circle_pose  # noqa: E402
 
 try:
     from geometry_msgs.msg import PoseStamped, TransformStamped

@@ -15,8 +15,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
-from crazyflie_driver.sim.physics import VehicleParams  # noqa: E402
-from crazyflie_driver.sim.world import World  # noqa: E402
+from crazyflie_driver.sim.world.physics import VehicleParams  # noqa: E402
+from crazyflie_driver.sim.world.world import World  # noqa: E402
 
 FLEETS = (1, 10, 49, 100)
 SIM_SECONDS = 3.0

@@ -45,8 +45,8 @@ class _World:
 
 
 def main() -> None:
-    from crazyflie_driver.sim.medium import LocalMedium, RemoteMedium
-    from crazyflie_driver.sim.server import WorldServer
+    from crazyflie_driver.sim.air.medium import LocalMedium, RemoteMedium
+    from crazyflie_driver.sim.air.server import WorldServer
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
     server = WorldServer(_World(), port=0)
     server.add_crazyflie("radio://0/80/2M/E7E7E7E701")
@@ -62,7 +62,7 @@ def main() -> None:
         samples.append(time.perf_counter() - t0)
     samples.sort()
     local = LocalMedium()
-    from crazyflie_driver.sim.firmware import SimulatedCrazyflie
+    from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
     local.add_crazyflie(SimulatedCrazyflie(addr, _Vehicle()), 80, 2)
     t0 = time.perf_counter()
     for _ in range(n):

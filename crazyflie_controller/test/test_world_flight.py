@@ -11,7 +11,7 @@ from crazyflie_controller.pid import PidGains
 from crazyflie_controller.position_controller import (Command, ControllerConfig, PositionController, State)
 
 world_flight = pytest.importorskip("crazyflie_controller.world_flight")
-pytest.importorskip("crazyflie_driver.sim.world")
+pytest.importorskip("crazyflie_driver.sim.world.world")
 
 X = PidGains(40, 20, 2, -10, 10, -0.1, 0.1)
 Y = PidGains(-40, -20, -2, -10, 10, -0.1, 0.1)

@@ -56,7 +56,7 @@ class WorldProbe:
     """Reads the simulated vehicles' true state from the world server (``sim_address`` host:port)."""
 
     def __init__(self, address: str) -> None:
-        from crazyflie_driver.sim.medium import RemoteMedium
+        from crazyflie_driver.sim.air.medium import RemoteMedium
 
         host, _, port = address.rpartition(":")
         self.medium = RemoteMedium(host, int(port))

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Callable, Deque, List, NamedTuple, Optional
 
 try:  # the real contract type when the simulated medium is there
-    from crazyflie_driver.sim.medium import AirReply  # type: ignore
+    from crazyflie_driver.sim.air.medium import AirReply  # type: ignore
 except Exception:  # pragma: no cover - until sim.medium lands
     @dataclass
     class AirReply:  # type: ignore[no-redef]

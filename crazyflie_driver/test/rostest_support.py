@@ -8,7 +8,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 import rospy
 from rosgraph_msgs.msg import Log
 
-from crazyflie_driver.sim.medium import RemoteMedium
+from crazyflie_driver.sim.air.medium import RemoteMedium
 
 
 def wait_until(cond: Callable[[], Any], timeout: float, period: float = 0.02) -> Any:

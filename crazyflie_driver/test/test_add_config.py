@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.add_config import AddConfigError, config_from_params
-from crazyflie_driver.log_plan import LogBlockSpec
+from crazyflie_driver.server.add_config import AddConfigError, config_from_params
+from crazyflie_driver.server.log_plan import LogBlockSpec
 
 
 def test_defaults_like_the_original():

@@ -18,7 +18,7 @@ import sys
 
 import pytest
 
-from crazyflie_driver.sim.server import WorldServer
+from crazyflie_driver.sim.air.server import WorldServer
 
 HERE = pathlib.Path(__file__).resolve().parent
 REPO = HERE.parent.parent
@@ -49,7 +49,7 @@ def cflib_python() -> str:
 
 
 def make_world():
-    from crazyflie_driver.sim.world import World
+    from crazyflie_driver.sim.world.world import World
     return World(speed=1.0, seed=7)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import struct
 
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 
 from sim_doubles import FakeVehicle
 
@@ -65,7 +65,7 @@ def test_radio_host_gets_its_replies_after_a_udp_host_left():
     import socket
     import time as _time
 
-    from crazyflie_driver.sim.udp import UdpEndpoint
+    from crazyflie_driver.sim.air.udp import UdpEndpoint
 
     v = FakeVehicle()
     cf = SimulatedCrazyflie(ADDRESS, v, firmware="current")

@@ -8,10 +8,10 @@ import types
 import pytest
 import usb.core
 
-from crazyflie_driver import usb_backend
-from crazyflie_driver.crazyradio import Crazyradio, RadioAck, list_radios
+from crazyflie_driver import usb_choice as usb_backend
+from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, list_radios
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 
 from radio_doubles import AirReply, FakeClock, ScriptedMedium
 
@@ -215,9 +215,9 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
             super().__init__(dongles=2)
             created.append((host, port))
 
-    module = types.ModuleType("crazyflie_driver.sim.medium")
+    module = types.ModuleType("crazyflie_driver.sim.air.medium")
     module.RemoteMedium = RemoteMedium
-    monkeypatch.setitem(sys.modules, "crazyflie_driver.sim.medium", module)
+    monkeypatch.setitem(sys.modules, "crazyflie_driver.sim.air.medium", module)
     monkeypatch.setattr(usb_backend, "_sim_backends", {})
     monkeypatch.setenv("CRAZYFLIE_BACKEND", "sim")
     monkeypatch.setenv("CRAZYFLIE_SIM_ADDRESS", "127.0.0.1:19999")

@@ -7,8 +7,8 @@ import pytest
 import usb.core
 import usb.util
 
-from crazyflie_driver.sim import fake_usb
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air import fake_usb
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 
 from radio_doubles import AirReply, FakeClock, ScriptedMedium
 

@@ -6,10 +6,10 @@ import time
 
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, LinkTimeout, RadioUnplugged
-from crazyflie_driver.link import FairLock, LinkStatistics, RadioLink, RadioManager
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.radio.link import FairLock, LinkStatistics, RadioLink, RadioManager
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 
 from radio_doubles import AirReply, NrfPeer, ScriptedMedium
 

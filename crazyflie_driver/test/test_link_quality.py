@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.link_quality import LinkQuality
+from crazyflie_driver.radio.quality import LinkQuality
 
 
 def test_link_quality_window():

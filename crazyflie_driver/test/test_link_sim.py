@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
-from crazyflie_driver.link import RadioManager
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie
-from crazyflie_driver.sim.medium import LocalMedium
-from crazyflie_driver.uri import parse_uri
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.radio.link import RadioManager
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.air.medium import LocalMedium
+from crazyflie_driver.crtp.uri import parse_uri
 
 from sim_doubles import FakeVehicle
 

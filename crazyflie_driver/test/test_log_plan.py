@@ -4,7 +4,7 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.errors import LogConfigError, UnknownName
-from crazyflie_driver.log_plan import (LogBlockSpec, PlannedBlock, log_packet_rate, plan_log_blocks,
+from crazyflie_driver.server.log_plan import (LogBlockSpec, PlannedBlock, log_packet_rate, plan_log_blocks,
                                        validate_log_block_specs)
 
 from worker_doubles import LOG_VARS

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.param_values import coerce_param_value
+from crazyflie_driver.server.param_values import coerce_param_value
 
 
 def test_param_coercion():

@@ -1,8 +1,8 @@
 """PollPacer: polls paced to the log packets due, so a shared dongle is not spent on empty acks."""
 from __future__ import annotations
 
-from crazyflie_driver.log_plan import PlannedBlock, log_packet_rate
-from crazyflie_driver.poll_pacer import PollPacer
+from crazyflie_driver.server.log_plan import PlannedBlock, log_packet_rate
+from crazyflie_driver.server.poll_pacer import PollPacer
 
 
 def fly(pacer: PollPacer, periods, seconds: float, round_trip: float = 0.0023, phase: float = 0.0):

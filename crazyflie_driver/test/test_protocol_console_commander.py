@@ -6,7 +6,7 @@ import struct
 import numpy as np
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
 
 from scripted_link import make_crazyflie

@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.crazyflie import Crazyflie
+from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.errors import LinkTimeout, LogConfigError, ReadOnlyParam, UnknownName
-from crazyflie_driver.link import RadioManager
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie
-from crazyflie_driver.sim.medium import LocalMedium
+from crazyflie_driver.radio.link import RadioManager
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.air.medium import LocalMedium
 
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"
@@ -58,7 +58,7 @@ class Air:
         self.firmwares = {}
 
     def add(self, uri: str, firmware: str = "current", vbat: float = 3.9):
-        from crazyflie_driver.uri import parse_uri
+        from crazyflie_driver.crtp.uri import parse_uri
         u = parse_uri(uri)
         vehicle = StubVehicle(uri, vbat)
         fw = SimulatedCrazyflie(u.address, vehicle, firmware=firmware)

@@ -5,7 +5,7 @@ import struct
 
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LogConfigError, ProtocolError, UnknownName
 
 from scripted_link import make_crazyflie

@@ -5,10 +5,10 @@ import struct
 
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam, UnknownName
-from crazyflie_driver.param import ParamClient, convert_value
-from crazyflie_driver.toc import Toc, TocEntry
+from crazyflie_driver.protocol.param import ParamClient, convert_value
+from crazyflie_driver.protocol.toc import Toc, TocEntry
 
 from scripted_link import ScriptedLink, make_crazyflie
 

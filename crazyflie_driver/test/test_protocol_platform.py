@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.crazyflie import Crazyflie
-from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.protocol.crazyflie import Crazyflie
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
-from crazyflie_driver.platform import Platform, toc_version
+from crazyflie_driver.protocol.platform import Platform, toc_version
 
 from scripted_link import ScriptedFirmware, ScriptedLink
 

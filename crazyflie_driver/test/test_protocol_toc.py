@@ -7,10 +7,10 @@ import struct
 
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ProtocolError, UnknownName
-from crazyflie_driver.toc import TocEntry, TocFetcher, parse_item
-from crazyflie_driver.toccache import TocCache, default_cache_dir
+from crazyflie_driver.protocol.toc import TocEntry, TocFetcher, parse_item
+from crazyflie_driver.protocol.toccache import TocCache, default_cache_dir
 
 from scripted_link import ScriptedLink, make_crazyflie
 

@@ -7,8 +7,8 @@ from typing import Dict
 import pytest
 
 from crazyflie_driver.errors import LinkTimeout
-from crazyflie_driver.registry import CrazyflieRegistry, DuplicateCrazyflie
-from crazyflie_driver.worker import WorkerConfig, WorkerState
+from crazyflie_driver.server.registry import CrazyflieRegistry, DuplicateCrazyflie
+from crazyflie_driver.server.worker import WorkerConfig, WorkerState
 
 from worker_doubles import FakeCrazyflie
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.setpoint import Setpoint, setpoint_from_twist
+from crazyflie_driver.server.setpoint import Setpoint, setpoint_from_twist
 
 
 def test_cmd_vel_mapping_with_trims_and_pitch_sign():

@@ -15,8 +15,8 @@ import struct
 import numpy as np
 import pytest
 
-from crazyflie_driver.crtp import CRTPPacket
-from crazyflie_driver.sim.physics import VehicleParams
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.sim.world.physics import VehicleParams
 from crazyflie_driver.sim.radio_rig import RadioRig
 
 MASS = 0.030

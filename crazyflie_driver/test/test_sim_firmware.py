@@ -7,9 +7,9 @@ import zlib
 
 import pytest
 
-from crazyflie_driver.sim import fw_tables as T
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie
-from crazyflie_driver.sim.fw_ports import boot_text
+from crazyflie_driver.sim.firmware import tables as T
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.firmware.ports import boot_text
 
 from sim_doubles import FakeVehicle
 

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie
-from crazyflie_driver.sim.medium import LocalMedium, RemoteMedium, WorldNotRunning, parse_address
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.air.medium import LocalMedium, RemoteMedium, WorldNotRunning, parse_address
 
 from sim_doubles import FakeVehicle
 

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from crazyflie_driver.sim.onboard import default_params
-from crazyflie_driver.sim.physics import VehicleParams, euler_from_quat
-from crazyflie_driver.sim.world import World
+from crazyflie_driver.sim.world.stabilizer import default_params
+from crazyflie_driver.sim.world.physics import VehicleParams, euler_from_quat
+from crazyflie_driver.sim.world.world import World
 
 HOVER = int(round(VehicleParams().hover_command()))
 GENERATIONS = ("current", "2016.02")

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from crazyflie_driver.sim.physics import (BodyStates, RigidBodyBackend, VehicleParams, euler_from_quat,
+from crazyflie_driver.sim.world.physics import (BodyStates, RigidBodyBackend, VehicleParams, euler_from_quat,
                                           quat_from_euler, quat_to_matrix)
 
 

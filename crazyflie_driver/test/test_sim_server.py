@@ -13,8 +13,8 @@ import time
 import pytest
 
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.sim.medium import RemoteMedium, WorldNotRunning
-from crazyflie_driver.sim.server import WorldServer, load_vehicle_config, main
+from crazyflie_driver.sim.air.medium import RemoteMedium, WorldNotRunning
+from crazyflie_driver.sim.air.server import WorldServer, load_vehicle_config, main
 
 from sim_doubles import FakeWorld
 
@@ -181,13 +181,13 @@ _LAUNCHER = """
 import sys, types
 sys.path[:0] = [{src!r}, {test!r}]
 import sim_doubles
-mod = types.ModuleType("crazyflie_driver.sim.world")
+mod = types.ModuleType("crazyflie_driver.sim.world.world")
 class World(sim_doubles.FakeWorld):
     def __init__(self, speed=1.0, seed=None):
         super().__init__()
 mod.World = World
-sys.modules["crazyflie_driver.sim.world"] = mod
-from crazyflie_driver.sim.server import main
+sys.modules["crazyflie_driver.sim.world.world"] = mod
+from crazyflie_driver.sim.air.server import main
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -224,8 +224,8 @@ def test_cli_serves_and_stops_cleanly_on_signals(sig):
 def test_shipped_example_vehicle_config_loads():
     """The example file in crazyflie_driver/config is valid: URIs parse, positions are 3-vectors."""
     import os
-    from crazyflie_driver.sim.server import load_vehicle_config
-    from crazyflie_driver.uri import parse_uri
+    from crazyflie_driver.sim.air.server import load_vehicle_config
+    from crazyflie_driver.crtp.uri import parse_uri
     path = os.path.join(os.path.dirname(__file__), "..", "config", "sim_vehicles.yaml")
     vehicles = load_vehicle_config(path)
     assert [v["name"] for v in vehicles] == ["crazyflie1", "crazyflie2", "crazyflie3"]

@@ -4,9 +4,9 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.sim.medium import RemoteMedium
-from crazyflie_driver.sim.server import WorldServer
-from crazyflie_driver.sim.world import World
+from crazyflie_driver.sim.air.medium import RemoteMedium
+from crazyflie_driver.sim.air.server import WorldServer
+from crazyflie_driver.sim.world.world import World
 
 
 def test_vehicle_state_by_uri_and_name():

@@ -6,8 +6,8 @@ import struct
 
 import pytest
 
-from crazyflie_driver.sim.server import WorldServer
-from crazyflie_driver.sim.udp import UdpEndpoint
+from crazyflie_driver.sim.air.server import WorldServer
+from crazyflie_driver.sim.air.udp import UdpEndpoint
 
 from sim_doubles import FakeWorld
 

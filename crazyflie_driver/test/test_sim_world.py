@@ -8,10 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from crazyflie_driver.sim import battery
-from crazyflie_driver.sim.mocap import MocapModel
-from crazyflie_driver.sim.physics import VehicleParams
-from crazyflie_driver.sim.world import World
+from crazyflie_driver.sim.world import battery
+from crazyflie_driver.sim.world.mocap import MocapModel
+from crazyflie_driver.sim.world.physics import VehicleParams
+from crazyflie_driver.sim.world.world import World
 
 HOVER = int(round(VehicleParams().hover_command()))
 

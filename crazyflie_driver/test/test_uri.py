@@ -5,7 +5,7 @@ import dataclasses
 import pytest
 
 from crazyflie_driver.errors import UriError
-from crazyflie_driver.uri import DEFAULT_ADDRESS, RadioUri, parse_uri
+from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri, parse_uri
 
 
 def test_full_uri():

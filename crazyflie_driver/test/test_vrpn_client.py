@@ -13,7 +13,7 @@ import pytest
 from crazyflie_driver.mocap import vrpn_protocol as vp
 from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, config_from_params
 from crazyflie_driver.mocap.vrpn_client import VrpnClient
-from crazyflie_driver.mocap.vrpn_test_server import GARBAGE_KINDS, VrpnTestServer
+from crazyflie_driver.mocap.vrpn_server import GARBAGE_KINDS, VrpnTestServer
 
 
 def wait_until(cond, timeout=5.0, period=0.01):

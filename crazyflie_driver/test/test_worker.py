@@ -7,8 +7,8 @@ import time
 import pytest
 
 from crazyflie_driver.errors import RadioNotFound, UnknownName
-from crazyflie_driver.log_plan import LogBlockSpec
-from crazyflie_driver.worker import CrazyflieWorker, WorkerConfig, WorkerState
+from crazyflie_driver.server.log_plan import LogBlockSpec
+from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerState
 
 from worker_doubles import LOG_VARS, FakeCrazyflie, Recorder, started, wait_for
 

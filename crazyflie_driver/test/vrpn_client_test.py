@@ -14,7 +14,7 @@ import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped
 
-from crazyflie_driver.mocap.vrpn_test_server import VrpnTestServer
+from crazyflie_driver.mocap.vrpn_server import VrpnTestServer
 
 from rostest_support import TopicRecorder, wait_until
 

@@ -11,8 +11,8 @@ import time
 from typing import Any, Dict, List
 
 from crazyflie_driver.errors import RadioNotFound, RadioUnplugged, UnknownName
-from crazyflie_driver.toc import TocEntry
-from crazyflie_driver.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+from crazyflie_driver.protocol.toc import TocEntry
+from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 
 
 LOG_VARS = {"acc.x": "float", "acc.y": "float", "acc.z": "float", "gyro.x": "float",

@@ -9,11 +9,11 @@ import time
 import pytest
 import usb.core
 
-from crazyflie_driver import usb_backend
-from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend
-from crazyflie_driver.sim.firmware import SimulatedCrazyflie
-from crazyflie_driver.sim.medium import LocalMedium
-from crazyflie_driver.uri import parse_uri
+from crazyflie_driver import usb_choice as usb_backend
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.air.medium import LocalMedium
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_tools import (battery, console, get_param, list_log_variables, list_params, scan,
                              set_param, version)
 

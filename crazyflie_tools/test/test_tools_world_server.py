@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from crazyflie_driver.sim.server import WorldServer
+from crazyflie_driver.sim.air.server import WorldServer
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
@@ -84,7 +84,7 @@ class StandInWorld:
 
 def make_world():
     try:
-        from crazyflie_driver.sim.world import World
+        from crazyflie_driver.sim.world.world import World
     except ImportError:
         return StandInWorld()
     return World(speed=1.0, seed=3)

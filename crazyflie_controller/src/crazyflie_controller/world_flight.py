@@ -39,7 +39,7 @@ class WorldFlight:
     def __init__(self, controller: PositionController, world=None, name: str = "cf1", mass: float = 0.032,
                  position=(0.0, 0.0, 0.0), yaw: float = 0.0, rate: float = 50.0, mocap_rate: float = 100.0,
                  mocap_latency: float = 0.01, mocap_noise: float = 0.0005, seed: int = 1) -> None:
-        from crazyflie_driver.sim.world import World  # the simulator is optional for this package
+        from crazyflie_driver.sim.world.world import World  # the simulator is optional for this package
 
         self.world = world if world is not None else World(speed=0.0, seed=seed)
         self.vehicle = self.world.add_vehicle(name, position=position, yaw=yaw, mass=mass)

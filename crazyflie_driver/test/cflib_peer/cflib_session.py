@@ -71,8 +71,8 @@ def start_watchdog(seconds: float) -> None:
 
 def install_fake_dongle(dongles: int):
     """Make every usb.core.find (cflib passes its own backend=) see our fake Crazyradios."""
-    from crazyflie_driver.sim.fake_usb import DongleTiming, FakeUsbBackend, install_find_patch
-    from crazyflie_driver.sim.medium import RemoteMedium
+    from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend, install_find_patch
+    from crazyflie_driver.sim.air.medium import RemoteMedium
     timing = DongleTiming.instant() if os.environ.get("CFLIB_PEER_TIMING") == "instant" else DongleTiming()
     backend = FakeUsbBackend(RemoteMedium(), dongles=dongles, timing=timing)
     install_find_patch(backend)
@@ -86,7 +86,7 @@ def wait_for(event: threading.Event, seconds: float, what: str) -> None:
 
 def world_time() -> float:
     """The world server's clock (world time may run in bursts when the world catches up on lag)."""
-    from crazyflie_driver.sim.medium import RemoteMedium
+    from crazyflie_driver.sim.air.medium import RemoteMedium
     control = RemoteMedium()
     try:
         return control.ping()
@@ -168,7 +168,7 @@ def session(uri: str, param: str, sim_name: str, args: argparse.Namespace, out: 
     out["setpoints_sent"] = args.setpoints + 1
     if sim_name:
         # What the simulated Crazyflie holds now, through the world server's control API.
-        from crazyflie_driver.sim.medium import RemoteMedium
+        from crazyflie_driver.sim.air.medium import RemoteMedium
         control = RemoteMedium()
         time.sleep(0.05)   # cflib sends asynchronously: let the last setpoint leave its queue
         state = control.crazyflie_state(sim_name)

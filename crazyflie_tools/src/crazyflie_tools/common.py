@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Callable, List, Optional
 
-from crazyflie_driver.crazyflie import Crazyflie
+from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.errors import (CrazyflieError, LinkTimeout, RadioAccessDenied,
                                      RadioNotFound, UnknownName, UriError)
 

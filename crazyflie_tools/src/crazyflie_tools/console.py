@@ -5,7 +5,7 @@ import sys
 import time
 from typing import List, Optional
 
-from crazyflie_driver.crazyflie import Crazyflie
+from crazyflie_driver.protocol.crazyflie import Crazyflie
 
 from .common import parser, run
 

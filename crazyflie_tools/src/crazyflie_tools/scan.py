@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 from typing import List, Optional
 
-from crazyflie_driver.scan import parse_address, scan
+from crazyflie_driver.radio.scan import parse_address, scan
 
 from .common import parser, run
 

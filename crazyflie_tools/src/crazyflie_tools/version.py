@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 from typing import List, Optional
 
-from crazyflie_driver.crazyradio import list_radios
+from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.errors import RadioAccessDenied, RadioNotFound
 
 from .common import UDEV_HINT, open_crazyflie, parser, run

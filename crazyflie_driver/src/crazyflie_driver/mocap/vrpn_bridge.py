@@ -12,11 +12,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional
 
-from . import vrpn_protocol as vp
-from .frames import (quaternion_to_rotation_vector, y_up_to_z_up_quaternion, y_up_to_z_up_vector)
-from .names import clean_tracker_name, frame_name
-from .staleness import StalenessMonitor
-from .vrpn_client import PoseReport, TwistReport, parse_server
+from crazyflie_driver.mocap import vrpn_protocol as vp
+from crazyflie_driver.mocap.frames import (quaternion_to_rotation_vector, y_up_to_z_up_quaternion, y_up_to_z_up_vector)
+from crazyflie_driver.mocap.names import clean_tracker_name, frame_name
+from crazyflie_driver.mocap.staleness import StalenessMonitor
+from crazyflie_driver.mocap.vrpn_client import PoseReport, TwistReport, parse_server
 
 LogFn = Callable[[int, str], None]
 

@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Dict, Iterable, List, Optional, Tuple
 
-from . import vrpn_protocol as vp
+from crazyflie_driver.mocap import vrpn_protocol as vp
 
 LogFn = Callable[[int, str], None]
 _logger = logging.getLogger("crazyflie_driver.mocap.vrpn")

@@ -16,9 +16,9 @@ import rospy
 from crazyflie_driver.msg import LogBlock
 from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
 
-from ..add_config import AddConfigError, config_from_params
-from ..worker import WorkerConfig
-from .ros_signals import init_node
+from crazyflie_driver.server.add_config import AddConfigError, config_from_params
+from crazyflie_driver.server.worker import WorkerConfig
+from crazyflie_driver.nodes.ros_signals import init_node
 
 
 def private_params() -> Dict[str, Any]:

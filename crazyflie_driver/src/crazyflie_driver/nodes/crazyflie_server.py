@@ -24,11 +24,11 @@ from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCrazyflie,
                                   RemoveCrazyflieResponse, UpdateParams, UpdateParamsResponse)
 
-from ..log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
+from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
-from ..registry import CrazyflieRegistry
-from ..worker import CrazyflieWorker, WorkerConfig, WorkerListener
-from .ros_signals import init_node
+from crazyflie_driver.server.registry import CrazyflieRegistry
+from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+from crazyflie_driver.nodes.ros_signals import init_node
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -280,8 +280,8 @@ class CrazyflieServer:
 
 def make_factory(timeout: float):
     """Crazyflies sharing one RadioManager (one SharedRadio per dongle)."""
-    from ..crazyflie import Crazyflie
-    from ..link import RadioManager
+    from crazyflie_driver.protocol.crazyflie import Crazyflie
+    from crazyflie_driver.radio.link import RadioManager
 
     manager = RadioManager()
     cache_dir = os.environ.get("CRAZYFLIE_TOC_CACHE") or None

@@ -34,8 +34,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional, Sequence
 
-from ..uri import parse_uri
-from ..errors import UriError
+from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.errors import UriError
 
 MOCAP_STYLES = ("vicon", "vrpn", "both", "none")
 
@@ -161,7 +161,7 @@ def dongles_needed(vehicles: Sequence[VehicleSpec], requested: Optional[int]) ->
 def mocap_model(world: Any, config: MocapConfig, seed: Optional[int] = None):
     """The world's motion-capture model (``sim.mocap.MocapModel``) with the node's settings:
     position noise ``config.noise`` (m), no orientation noise, ``latency`` (s), ``dropout``."""
-    from ..sim.mocap import MocapModel
+    from crazyflie_driver.sim.world.mocap import MocapModel
 
     return MocapModel(world, rate=config.rate, position_noise=config.noise, orientation_noise=0.0,
                       latency=config.latency, dropout=config.dropout, seed=seed)
@@ -266,11 +266,11 @@ def main() -> None:
     import rospy
     from rosgraph_msgs.msg import Clock
 
-    from ..errors import CrazyflieError
-    from ..sim.medium import parse_address
-    from ..sim.server import WorldServer
-    from ..sim.world import World
-    from .ros_signals import init_node, shutting_down
+    from crazyflie_driver.errors import CrazyflieError
+    from crazyflie_driver.sim.air.medium import parse_address
+    from crazyflie_driver.sim.air.server import WorldServer
+    from crazyflie_driver.sim.world.world import World
+    from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 
     init_node("crazyflie_sim")
     params = _private_params()

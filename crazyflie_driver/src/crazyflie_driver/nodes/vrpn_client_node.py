@@ -27,9 +27,9 @@ import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped, TwistStamped
 
-from ..mocap.vrpn_bridge import VrpnBridge, VrpnConfigError, VrpnNodeConfig, config_from_params
-from ..mocap.vrpn_client import PoseReport, TwistReport, VrpnClient
-from .ros_signals import init_node, publish_unless_shutting_down, shutting_down
+from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, VrpnConfigError, VrpnNodeConfig, config_from_params
+from crazyflie_driver.mocap.vrpn_client import PoseReport, TwistReport, VrpnClient
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 
 DIAGNOSTICS_PERIOD = 1.0
 

@@ -13,14 +13,14 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..crazyflie import Crazyflie
-from ..link import RadioManager
-from ..uri import parse_uri
-from .fake_usb import DongleTiming, FakeUsbBackend
-from .firmware import SimulatedCrazyflie
-from .medium import LocalMedium
-from .mocap import MocapModel
-from .world import TICK_S, World
+from crazyflie_driver.protocol.crazyflie import Crazyflie
+from crazyflie_driver.radio.link import RadioManager
+from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.air.medium import LocalMedium
+from crazyflie_driver.sim.world.mocap import MocapModel
+from crazyflie_driver.sim.world.world import TICK_S, World
 
 DEFAULT_URI = "radio://0/80/2M/E7E7E7E701"
 FIRMWARE_TICK_S = 0.001            # the firmware's timers (log blocks, watchdogs) run every world tick

@@ -1,0 +1,103 @@
+"""Crazyflie radio URIs: ``radio://<dongle>/<channel>/<rate>[/<address>]``.
+
+Parsing is strict on purpose: a typo in a launch file should be refused with a
+message that names the bad part, not turned into a silent default that makes
+the Crazyflie "not answer".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from crazyflie_driver.errors import UriError
+
+DATARATE_250K = 0
+DATARATE_1M = 1
+DATARATE_2M = 2
+DATARATE_NAMES = ("250K", "1M", "2M")
+_DATARATE_BY_NAME = {name: i for i, name in enumerate(DATARATE_NAMES)}
+
+MAX_CHANNEL = 125
+DEFAULT_ADDRESS = b"\xe7\xe7\xe7\xe7\xe7"
+_HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
+_FORMAT = "radio://<dongle>/<channel 0-125>/<250K|1M|2M>[/<address, up to 10 hex digits>]"
+
+
+@dataclass(frozen=True)
+class RadioUri:
+    """Where a Crazyflie is: which dongle, and the channel, rate and address it listens on."""
+
+    index: int
+    channel: int
+    datarate: int
+    address: bytes = DEFAULT_ADDRESS
+
+    @property
+    def datarate_name(self) -> str:
+        return DATARATE_NAMES[self.datarate]
+
+    def __str__(self) -> str:
+        return "radio://%d/%d/%s/%s" % (
+            self.index, self.channel, DATARATE_NAMES[self.datarate], self.address.hex().upper())
+
+
+def parse_uri(text: str) -> RadioUri:
+    """Parse a radio URI; raises UriError naming the malformed part."""
+    if not isinstance(text, str):
+        raise UriError("Crazyflie URI must be a string, got %r" % (text,))
+    uri = text.strip()
+    scheme, sep, rest = uri.partition("://")
+    if not sep:
+        raise UriError("malformed Crazyflie URI %r: expected %s" % (text, _FORMAT))
+    scheme = scheme.lower()
+    if scheme == "usb":
+        raise UriError("URI %r: usb:// (a Crazyflie on a USB cable) is not supported by this driver; "
+                       "use a Crazyradio URI like radio://0/80/2M/E7E7E7E7E7" % (text,))
+    if scheme != "radio":
+        raise UriError("URI %r: unknown scheme %r, expected 'radio' (%s)" % (text, scheme, _FORMAT))
+    if "?" in rest or "#" in rest:
+        raise UriError("URI %r: query options are not supported (%s)" % (text, _FORMAT))
+    if rest.endswith("/"):
+        rest = rest[:-1]  # a trailing slash is harmless
+    parts = rest.split("/")
+    if len(parts) > 4:
+        raise UriError("URI %r: unexpected extra part %r after the address (%s)"
+                       % (text, "/".join(parts[4:]), _FORMAT))
+    if len(parts) < 2 or parts[1] == "":
+        raise UriError("URI %r: missing channel (%s)" % (text, _FORMAT))
+    if len(parts) < 3 or parts[2] == "":
+        raise UriError("URI %r: missing data rate, one of 250K, 1M, 2M (%s)" % (text, _FORMAT))
+
+    index_text, channel_text, rate_text = parts[0], parts[1], parts[2]
+    if not index_text.isdigit() or not index_text.isascii():
+        raise UriError("URI %r: dongle index %r is not a number (the n-th Crazyradio, from 0)"
+                       % (text, index_text))
+    index = int(index_text)
+
+    if not channel_text.isdigit() or not channel_text.isascii():
+        raise UriError("URI %r: channel %r is not a number (0-125)" % (text, channel_text))
+    channel = int(channel_text)
+    if channel > MAX_CHANNEL:
+        raise UriError("URI %r: channel %d is out of range 0-125" % (text, channel))
+
+    datarate = _DATARATE_BY_NAME.get(rate_text.upper())
+    if datarate is None:
+        raise UriError("URI %r: data rate %r is not one of 250K, 1M, 2M" % (text, rate_text))
+
+    address = DEFAULT_ADDRESS
+    if len(parts) == 4:
+        address = _parse_address(text, parts[3])
+    return RadioUri(index, channel, datarate, address)
+
+
+def _parse_address(text: str, digits: str) -> bytes:
+    """Up to 10 hex digits, left-padded with zeros, bytes in string order (E7E7E7E701 -> E7 .. 01)."""
+    if digits[:2] in ("0x", "0X"):
+        digits = digits[2:]
+    if not digits:
+        raise UriError("URI %r: empty address (up to 10 hex digits, e.g. E7E7E7E7E7)" % (text,))
+    if len(digits) > 10:
+        raise UriError("URI %r: address %r has %d hex digits, at most 10 (5 bytes) are allowed"
+                       % (text, digits, len(digits)))
+    if not all(c in _HEX_DIGITS for c in digits):
+        raise UriError("URI %r: address %r is not hexadecimal" % (text, digits))
+    return bytes.fromhex(digits.rjust(10, "0"))

@@ -1,0 +1,1 @@
+"""The Crazyflie object and one module per CRTP port."""

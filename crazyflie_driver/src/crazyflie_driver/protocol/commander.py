@@ -1,0 +1,64 @@
+"""Port 3 (RPYT setpoints) plus the stop and emergency-stop packets.
+
+RPYT is ``[roll f32, pitch f32, yaw f32, thrust u16]`` on 3:0, raw wire values:
+sign conventions (the firmware's inverted pitch and yaw rate) belong to the
+caller. Thrust is clamped to 0..60000, as the firmware does.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import struct
+
+from crazyflie_driver.crtp.packet import (PORT_COMMANDER, PORT_GENERIC_SETPOINT, PORT_LOCALIZATION, PORT_SUPERVISOR,
+                   CRTPPacket)
+
+MAX_THRUST = 60000
+#: Protocol version from which the emergency stop lives on the supervisor port (9:1).
+SUPERVISOR_FROM = 12
+#: Protocol version from which port 7 (generic setpoints, with its "stop" type) exists.
+GENERIC_SETPOINT_FROM = 3
+ESTOP_COMMAND = 3
+GENERIC_STOP = 0
+
+
+def rpyt_packet(roll: float, pitch: float, yawrate: float, thrust: float) -> CRTPPacket:
+    """The 14-byte RPYT setpoint; ValueError for a value that is not a finite number."""
+    for name, value in (("roll", roll), ("pitch", pitch), ("yaw rate", yawrate),
+                        ("thrust", thrust)):
+        if not isinstance(value, numbers.Real) or not math.isfinite(value):
+            raise ValueError("setpoint %s must be a finite number, got %r" % (name, value))
+    thrust_u16 = int(min(max(thrust, 0), MAX_THRUST))
+    return CRTPPacket(PORT_COMMANDER, 0, struct.pack("<fffH", float(roll), float(pitch), float(yawrate),
+                                                   thrust_u16))
+
+
+def stop_packet(protocol_version: int) -> CRTPPacket:
+    """Motors off: generic setpoint "stop" where port 7 exists, else an all-zero RPYT."""
+    if protocol_version >= GENERIC_SETPOINT_FROM:
+        return CRTPPacket(PORT_GENERIC_SETPOINT, 0, bytes([GENERIC_STOP]))
+    return rpyt_packet(0.0, 0.0, 0.0, 0)
+
+
+def emergency_stop_packet(protocol_version: int) -> CRTPPacket:
+    """Supervisor 9:1 [3] on protocol 12 and later, else localization 6:1 [3]."""
+    if protocol_version >= SUPERVISOR_FROM:
+        return CRTPPacket(PORT_SUPERVISOR, 1, bytes([ESTOP_COMMAND]))
+    return CRTPPacket(PORT_LOCALIZATION, 1, bytes([ESTOP_COMMAND]))
+
+
+class Commander:
+    """Sends setpoints over a link; each call is one radio round trip, True when acked."""
+
+    def __init__(self, link) -> None:
+        self.link = link
+        self.protocol_version = -1
+
+    def send_setpoint(self, roll: float, pitch: float, yawrate: float, thrust: float) -> bool:
+        return self.link.send(rpyt_packet(roll, pitch, yawrate, thrust))
+
+    def send_stop_setpoint(self) -> bool:
+        return self.link.send(stop_packet(self.protocol_version))
+
+    def send_emergency_stop(self) -> bool:
+        return self.link.send(emergency_stop_packet(self.protocol_version))

@@ -1,0 +1,95 @@
+"""One Crazyflie: the link plus one client per CRTP port (contract in docs/architecture.md).
+
+``connect()`` opens the link and asks which protocol the firmware speaks; the
+TOCs are fetched on demand (``params.fetch_toc()``, ``log.fetch_toc()``), so a
+tool that only sends setpoints does not pay for them. Every wait has a
+timeout; a silent Crazyflie raises ``LinkTimeout`` naming the URI and the step.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Optional, Union
+
+from crazyflie_driver.protocol.commander import Commander
+from crazyflie_driver.protocol.console import Console
+from crazyflie_driver.radio.link import RadioLink, RadioManager
+from crazyflie_driver.protocol.log import LogClient
+from crazyflie_driver.protocol.param import ParamClient
+from crazyflie_driver.protocol.platform import Platform, toc_version
+from crazyflie_driver.protocol.toccache import TocCache
+from crazyflie_driver.crtp.uri import RadioUri, parse_uri
+
+_LOG = logging.getLogger(__name__)
+
+
+class Crazyflie:
+    """Facade composing link, platform, params, log, console and commander."""
+
+    def __init__(self, uri: Union[str, RadioUri], radio_manager: Optional[RadioManager] = None,
+                 cache_dir: Optional[str] = None, timeout: float = 1.0, link=None) -> None:
+        """``link`` replaces the radio link altogether (tests, other transports)."""
+        if timeout <= 0:
+            raise ValueError("timeout must be > 0, got %r" % (timeout,))
+        self.uri: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
+        self.timeout = timeout
+        self.link = link if link is not None else RadioLink(self.uri, radio_manager)
+        self.cache = TocCache(cache_dir)
+        self.protocol_version = -1
+        self.connected = False
+        self.platform = Platform(self.link, timeout)
+        self.params = ParamClient(self.link, self.cache, timeout)
+        self.log = LogClient(self.link, self.cache, timeout)
+        self.console = Console(self.link)
+        self.commander = Commander(self.link)
+
+    @property
+    def toc_version(self) -> int:
+        """1 (8-bit TOC ids, firmware before protocol 4) or 2."""
+        return toc_version(self.protocol_version)
+
+    def connect(self) -> None:
+        """Open the link and detect the protocol version; LinkTimeout if nobody answers."""
+        self.link.open()
+        try:
+            version = self.platform.detect_protocol_version()
+        except BaseException:
+            self.link.close()
+            raise
+        self.protocol_version = version
+        for client in (self.params, self.log, self.commander):
+            client.protocol_version = version
+        self.connected = True
+        _LOG.debug("%s: protocol version %d", self.uri, version)
+
+    def close(self) -> None:
+        """Give the dongle back. Idempotent; ``connect()`` may be called again. Log blocks keep
+        running onboard until the firmware notices the silence (current firmware) or a reset."""
+        self.connected = False
+        self.link.close()
+
+    def __enter__(self) -> "Crazyflie":
+        self.connect()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- setpoints -------------------------------------------------------------------------------
+    def send_setpoint(self, roll: float, pitch: float, yawrate: float, thrust: int) -> bool:
+        """Raw RPYT setpoint (wire signs); thrust clamped to 0..60000. True when acked."""
+        return self.commander.send_setpoint(roll, pitch, yawrate, thrust)
+
+    def send_stop_setpoint(self) -> bool:
+        return self.commander.send_stop_setpoint()
+
+    def emergency_stop(self) -> None:
+        """The e-stop packet (9:1 on protocol 12+, else 6:1), then a stop setpoint."""
+        self.commander.send_emergency_stop()
+        self.commander.send_stop_setpoint()
+
+    def send_keepalive(self) -> bool:
+        """A null packet: keeps the link alive and fetches downlink (console, log data)."""
+        return self.link.poll()
+
+    def __repr__(self) -> str:
+        return "<Crazyflie %s protocol %d>" % (self.uri, self.protocol_version)

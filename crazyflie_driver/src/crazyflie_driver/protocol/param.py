@@ -1,0 +1,217 @@
+"""Port 2 (parameters): TOC, reads and writes in both protocol generations.
+
+V1 (protocol version < 4): read ``[id]`` -> ``[id, value]``, write ``[id, value]``
+-> echo, unknown id -> ``[0xFF, id, 2]``. V2: 16-bit ids, read ``[id u16]`` ->
+``[id u16, status, value]``, write echoed, unknown id -> ``[id u16, 2]``. A
+read-only parameter gets no reply to a write, so it is refused before sending.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import struct
+from typing import Callable, Dict, List, Union
+
+from crazyflie_driver.crtp.packet import PORT_PARAM, CRTPPacket
+from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam
+from crazyflie_driver.protocol.toc import STRUCT_FORMATS, TocEntry, TocPortClient, type_size
+
+_LOG = logging.getLogger(__name__)
+
+CH_TOC = 0
+CH_READ = 1
+CH_WRITE = 2
+CH_MISC = 3
+MISC_VALUE_UPDATED = 1
+ENOENT = 2
+
+Value = Union[int, float]
+
+
+def convert_value(entry: TocEntry, value) -> Value:
+    """``value`` (number, bool or text) as the parameter's type; ParamValueError if it does not fit."""
+    fmt = STRUCT_FORMATS[entry.ctype]
+    if entry.ctype in ("FP16", "float", "double"):
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise ParamValueError("parameter %s (%s): %r is not a number"
+                                  % (entry.full_name, entry.ctype, value))
+        try:
+            struct.pack(fmt, number)
+        except (OverflowError, struct.error):
+            raise ParamValueError("parameter %s (%s): %r is out of range"
+                                  % (entry.full_name, entry.ctype, value))
+        return number
+    number = _as_integer(entry, value)
+    bits = 8 * type_size(entry.ctype)
+    if entry.ctype.startswith("u"):
+        low, high = 0, (1 << bits) - 1
+    else:
+        low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    if not low <= number <= high:
+        raise ParamValueError("parameter %s (%s): %d is out of range %d..%d"
+                              % (entry.full_name, entry.ctype, number, low, high))
+    return number
+
+
+def _as_integer(entry: TocEntry, value) -> int:
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, int):
+        return value
+    if isinstance(value, str):
+        text = value.strip()
+        if text.lower() in ("true", "false"):
+            return int(text.lower() == "true")
+        try:
+            return int(text, 0)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                raise ParamValueError("parameter %s (%s): %r is not an integer"
+                                      % (entry.full_name, entry.ctype, value))
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParamValueError("parameter %s (%s): %r is not an integer"
+                              % (entry.full_name, entry.ctype, value))
+    if not math.isfinite(number) or number != int(number):
+        raise ParamValueError("parameter %s (%s): %r is not an integer"
+                              % (entry.full_name, entry.ctype, value))
+    return int(number)
+
+
+def pack_value(entry: TocEntry, value: Value) -> bytes:
+    return struct.pack(STRUCT_FORMATS[entry.ctype], value)
+
+
+def unpack_value(entry: TocEntry, data: bytes) -> Value:
+    return struct.unpack(STRUCT_FORMATS[entry.ctype], data)[0]
+
+
+class ParamClient(TocPortClient):
+    """Parameters of one Crazyflie: TOC, reads, writes. One request in flight at a time.
+
+    ``fetch_toc`` in V2 also sends GET_INFO_V2, which firmware 2018.10-2021.06 needs before it
+    answers V2 reads.
+    """
+
+    def __init__(self, link, cache=None, timeout: float = 1.0) -> None:
+        super().__init__(link, PORT_PARAM, "param", cache, timeout)
+        self.values: Dict[str, Value] = {}
+        self._update_callbacks: List[Callable[[str, Value], None]] = []
+        self._unsubscribe = link.subscribe(PORT_PARAM, CH_MISC, self._on_misc)
+
+    def read_all(self) -> Dict[str, Value]:
+        """Read every parameter, one request at a time; ``group.name`` -> value."""
+        with self._lock:
+            toc = self._ensure_toc()
+            return {entry.full_name: self._read(entry) for entry in toc}
+
+    def get(self, name: str) -> Value:
+        """Read one parameter from the Crazyflie now."""
+        with self._lock:
+            entry = self._ensure_toc().lookup(name, "parameter")
+            return self._read(entry)
+
+    def set(self, name: str, value) -> Value:
+        """Convert ``value`` to the parameter's type and write it; returns the value written."""
+        with self._lock:
+            entry = self._ensure_toc().lookup(name, "parameter")
+            if entry.readonly:
+                raise ReadOnlyParam("parameter %s is read-only on the Crazyflie" % entry.full_name)
+            converted = convert_value(entry, value)
+            self._write(entry, converted)
+            return converted
+
+    def on_update(self, callback: Callable[[str, Value], None]) -> None:
+        """callback(name, value) when the firmware reports a changed value on its own (2:3)."""
+        self._update_callbacks.append(callback)
+
+    def close(self) -> None:
+        self._unsubscribe()
+
+    # -- wire formats -------------------------------------------------------------------------
+
+    def _id_bytes(self, ident: int) -> bytes:
+        if self.version >= 2:
+            return struct.pack("<H", ident)
+        return bytes([ident])
+
+    def _read(self, entry: TocEntry) -> Value:
+        id_bytes = self._id_bytes(entry.ident)
+        size = type_size(entry.ctype)
+        v2 = self.version >= 2
+
+        def match(p: CRTPPacket) -> bool:
+            if p.port != PORT_PARAM or p.channel != CH_READ:
+                return False
+            if p.data[:len(id_bytes)] == id_bytes:
+                return True
+            return not v2 and len(p.data) == 3 and p.data[0] == 0xFF and p.data[1] == entry.ident
+
+        reply = self.link.request(CRTPPacket(PORT_PARAM, CH_READ, id_bytes), match=match,
+                                  timeout=self.timeout,
+                                  what="parameter read of %s" % entry.full_name)
+        data = reply.data
+        if v2:
+            if len(data) == 3 + size and data[2] == 0:
+                raw = data[3:]
+            elif len(data) >= 3:
+                raise ProtocolError("%s: reading parameter %s failed: firmware error %d%s"
+                                    % (self.link.uri, entry.full_name, data[2],
+                                       " (no such id)" if data[2] == ENOENT else ""))
+            else:
+                raise ProtocolError("%s: short reply to parameter read of %s: %s"
+                                    % (self.link.uri, entry.full_name, data.hex(" ")))
+        else:
+            if len(data) == 1 + size and data[0] == entry.ident:
+                raw = data[1:]
+            elif len(data) == 3 and data[0] == 0xFF:
+                raise ProtocolError("%s: reading parameter %s failed: firmware error %d"
+                                    % (self.link.uri, entry.full_name, data[2]))
+            else:
+                raise ProtocolError("%s: reply to parameter read of %s has %d value bytes, "
+                                    "expected %d: %s" % (self.link.uri, entry.full_name,
+                                                         len(data) - 1, size, data.hex(" ")))
+        value = unpack_value(entry, raw)
+        self.values[entry.full_name] = value
+        return value
+
+    def _write(self, entry: TocEntry, value: Value) -> None:
+        id_bytes = self._id_bytes(entry.ident)
+        request = id_bytes + pack_value(entry, value)
+        v2 = self.version >= 2
+
+        def match(p: CRTPPacket) -> bool:
+            if p.port != PORT_PARAM or p.channel != CH_WRITE:
+                return False
+            if p.data[:len(id_bytes)] == id_bytes:
+                return True
+            return not v2 and len(p.data) == 3 and p.data[0] == 0xFF and p.data[1] == entry.ident
+
+        reply = self.link.request(CRTPPacket(PORT_PARAM, CH_WRITE, request), match=match,
+                                  timeout=self.timeout,
+                                  what="parameter write of %s" % entry.full_name)
+        if reply.data != request:
+            code = reply.data[-1] if reply.data else -1
+            raise ProtocolError("%s: writing parameter %s failed: firmware error %d"
+                                % (self.link.uri, entry.full_name, code))
+        self.values[entry.full_name] = value
+
+    def _on_misc(self, packet: CRTPPacket) -> None:
+        data = packet.data
+        if len(data) < 3 or data[0] != MISC_VALUE_UPDATED or self.toc is None:
+            return
+        entry = self.toc.by_id(data[1] | (data[2] << 8))
+        if entry is None or len(data) != 3 + type_size(entry.ctype):
+            return
+        value = unpack_value(entry, data[3:])
+        self.values[entry.full_name] = value
+        for callback in list(self._update_callbacks):
+            try:
+                callback(entry.full_name, value)
+            except Exception:  # a user callback must not kill the link thread
+                _LOG.exception("parameter update callback failed")

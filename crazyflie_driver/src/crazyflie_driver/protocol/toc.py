@@ -1,0 +1,290 @@
+"""Table of contents (TOC) download for the parameter and log ports.
+
+Both ports describe their variables the same way: an info request gives the
+item count and a CRC, then each item is asked for by id, one request in
+flight. Protocol V1 (firmware before protocol version 4) uses 8-bit ids and
+commands 0/1; V2 uses 16-bit ids and commands 2/3. :class:`TocPortClient` is
+the part the parameter and log clients share: a port's TOC, fetched on demand.
+"""
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+from dataclasses import dataclass
+from typing import Any, Dict, Iterator, List, Optional
+
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.errors import ProtocolError, UnknownName
+from crazyflie_driver.protocol.platform import toc_version
+
+_LOG = logging.getLogger(__name__)
+
+CMD_GET_ITEM_V1 = 0
+CMD_GET_INFO_V1 = 1
+CMD_GET_ITEM_V2 = 2
+CMD_GET_INFO_V2 = 3
+
+#: Parameter TOC type byte: low nibble (size, float, unsigned bits) -> C type.
+PARAM_TYPES = {
+    0x08: "uint8_t", 0x09: "uint16_t", 0x0A: "uint32_t", 0x0B: "uint64_t",
+    0x00: "int8_t", 0x01: "int16_t", 0x02: "int32_t", 0x03: "int64_t",
+    0x05: "FP16", 0x06: "float", 0x07: "double",
+}
+PARAM_READONLY = 0x40
+
+#: Log TOC type codes -> C type.
+LOG_TYPES = {
+    1: "uint8_t", 2: "uint16_t", 3: "uint32_t", 4: "int8_t",
+    5: "int16_t", 6: "int32_t", 7: "float", 8: "FP16",
+}
+LOG_TYPE_CODES = {v: k for k, v in LOG_TYPES.items()}
+
+#: struct format (little-endian) of every C type a TOC can name.
+STRUCT_FORMATS = {
+    "uint8_t": "<B", "uint16_t": "<H", "uint32_t": "<I", "uint64_t": "<Q",
+    "int8_t": "<b", "int16_t": "<h", "int32_t": "<i", "int64_t": "<q",
+    "FP16": "<e", "float": "<f", "double": "<d",
+}
+
+
+def type_size(ctype: str) -> int:
+    """Bytes a value of this C type takes on the wire."""
+    return struct.calcsize(STRUCT_FORMATS[ctype])
+
+
+@dataclass(frozen=True)
+class TocEntry:
+    """One parameter or log variable. ``readonly`` is meaningful for parameters only."""
+
+    ident: int
+    group: str
+    name: str
+    ctype: str
+    readonly: bool = False
+
+    @property
+    def full_name(self) -> str:
+        return "%s.%s" % (self.group, self.name)
+
+
+@dataclass(frozen=True)
+class TocInfo:
+    """Answer to a TOC info request. ``max_blocks``/``max_ops`` come with the log TOC only."""
+
+    count: int
+    crc: int
+    max_blocks: Optional[int] = None
+    max_ops: Optional[int] = None
+
+
+class Toc:
+    """The downloaded table: entries by id and by ``group.name``."""
+
+    def __init__(self, entries: List[TocEntry], crc: int = 0) -> None:
+        self.entries = sorted(entries, key=lambda e: e.ident)
+        self.crc = crc
+        self._by_name: Dict[str, TocEntry] = {e.full_name: e for e in self.entries}
+        self._by_id: Dict[int, TocEntry] = {e.ident: e for e in self.entries}
+
+    def __iter__(self) -> Iterator[TocEntry]:
+        return iter(self.entries)
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._by_name
+
+    def find(self, name: str) -> Optional[TocEntry]:
+        return self._by_name.get(name)
+
+    def by_id(self, ident: int) -> Optional[TocEntry]:
+        return self._by_id.get(ident)
+
+    def lookup(self, name: str, kind: str = "variable") -> TocEntry:
+        """The entry called ``group.name``; UnknownName (naming it) when absent."""
+        entry = self._by_name.get(name)
+        if entry is None:
+            hint = ""
+            if "." not in str(name):
+                hint = " (names are written group.name)"
+            raise UnknownName("unknown %s %r: not in the Crazyflie's TOC%s" % (kind, name, hint))
+        return entry
+
+
+def toc_entries(toc: Any) -> List[Any]:
+    """The entries of a TOC whether the client exposes a list, a dict or an object with entries."""
+    if toc is None:
+        return []
+    if isinstance(toc, dict):
+        return list(toc.values())
+    entries = getattr(toc, "entries", None)
+    if entries is not None:
+        return list(entries.values()) if isinstance(entries, dict) else list(entries)
+    return list(toc)
+
+
+def toc_types(toc: Any) -> Dict[str, str]:
+    """``{"group.name": ctype}`` of a TOC."""
+    out = {}
+    for e in toc_entries(toc):
+        full = getattr(e, "full_name", None) or "%s.%s" % (e.group, e.name)
+        out[full] = e.ctype
+    return out
+
+
+def parse_item(kind: str, version: int, data: bytes) -> TocEntry:
+    """Decode a GET_ITEM reply payload (command byte included)."""
+    if version >= 2:
+        if len(data) < 4:
+            raise ProtocolError("%s TOC item reply too short: %s" % (kind, data.hex(" ")))
+        ident = data[1] | (data[2] << 8)
+        type_byte = data[3]
+        rest = data[4:]
+    else:
+        if len(data) < 3:
+            raise ProtocolError("%s TOC item reply too short: %s" % (kind, data.hex(" ")))
+        ident = data[1]
+        type_byte = data[2]
+        rest = data[3:]
+    parts = rest.split(b"\x00")
+    if len(parts) < 3:
+        raise ProtocolError("%s TOC item %d: group and name are not NUL-terminated: %s"
+                            % (kind, ident, data.hex(" ")))
+    try:
+        group = parts[0].decode("ascii")
+        name = parts[1].decode("ascii")
+    except UnicodeDecodeError:
+        raise ProtocolError("%s TOC item %d: name is not ASCII: %s" % (kind, ident, data.hex(" ")))
+    if kind == "param":
+        ctype = PARAM_TYPES.get(type_byte & 0x0F)
+        readonly = bool(type_byte & PARAM_READONLY)
+    else:
+        ctype = LOG_TYPES.get(type_byte & 0x0F)
+        readonly = False
+    if ctype is None:
+        raise ProtocolError("%s TOC item %d (%s.%s): unknown type byte 0x%02X"
+                            % (kind, ident, group, name, type_byte))
+    return TocEntry(ident, group, name, ctype, readonly)
+
+
+class TocFetcher:
+    """Downloads one port's TOC over a link, using an optional cache keyed by CRC.
+
+    ``kind`` is "param" or "log"; ``version`` is the TOC generation (1 or 2).
+    """
+
+    def __init__(self, link, port: int, kind: str, version: int, timeout: float = 1.0,
+                 cache=None) -> None:
+        self.link = link
+        self.port = port
+        self.kind = kind
+        self.version = version
+        self.timeout = timeout
+        self.cache = cache
+        self._label = "parameter" if kind == "param" else "log"
+
+    def fetch_info(self) -> TocInfo:
+        """Ask for the item count and CRC (and, for the log TOC, the block/op limits)."""
+        cmd = CMD_GET_INFO_V2 if self.version >= 2 else CMD_GET_INFO_V1
+        reply = self.link.request(
+            CRTPPacket(self.port, 0, bytes([cmd])),
+            match=lambda p: p.port == self.port and p.channel == 0 and p.data[:1] == bytes([cmd]),
+            timeout=self.timeout, what="%s TOC info" % self._label)
+        data = reply.data
+        try:
+            if self.version >= 2:
+                count, crc = struct.unpack_from("<HI", data, 1)
+                extra = data[7:9]
+            else:
+                count, crc = struct.unpack_from("<BI", data, 1)
+                extra = data[6:8]
+        except struct.error:
+            raise ProtocolError("%s: %s TOC info reply too short: %s"
+                                % (self.link.uri, self._label, data.hex(" ")))
+        if len(extra) == 2:
+            return TocInfo(count, crc, extra[0], extra[1])
+        return TocInfo(count, crc)
+
+    def fetch_item(self, ident: int) -> TocEntry:
+        """Ask for one item by id."""
+        if self.version >= 2:
+            cmd = CMD_GET_ITEM_V2
+            request = bytes([cmd, ident & 0xFF, ident >> 8])
+            id_bytes = request[1:3]
+        else:
+            cmd = CMD_GET_ITEM_V1
+            request = bytes([cmd, ident])
+            id_bytes = request[1:2]
+        n = len(id_bytes)
+
+        def match(p: CRTPPacket) -> bool:
+            if p.port != self.port or p.channel != 0 or p.data[:1] != bytes([cmd]):
+                return False
+            return len(p.data) == 1 or p.data[1:1 + n] == id_bytes
+
+        reply = self.link.request(CRTPPacket(self.port, 0, request), match=match,
+                                  timeout=self.timeout,
+                                  what="%s TOC item %d" % (self._label, ident))
+        if len(reply.data) == 1:
+            raise ProtocolError("%s: %s TOC item %d is out of range although the TOC info "
+                                "announced it" % (self.link.uri, self._label, ident))
+        return parse_item(self.kind, self.version, reply.data)
+
+    def fetch(self) -> "tuple[Toc, TocInfo]":
+        """The whole TOC: from the cache when its CRC is known, else item by item."""
+        info = self.fetch_info()
+        if self.cache is not None:
+            entries = self.cache.load(self.kind, info.crc, info.count)
+            if entries is not None:
+                _LOG.debug("%s: %s TOC 0x%08X from cache", self.link.uri, self.kind, info.crc)
+                return Toc(entries, info.crc), info
+        entries = [self.fetch_item(i) for i in range(info.count)]
+        if self.cache is not None:
+            self.cache.store(self.kind, info.crc, entries)
+        return Toc(entries, info.crc), info
+
+
+class TocPortClient:
+    """Base of the parameter and log clients: the link, the port's TOC and the request lock.
+
+    The Crazyflie facade sets ``protocol_version`` once it knows it; ``version`` (1 or 2) is
+    the TOC generation that follows from it. The TOC is fetched on first use.
+    """
+
+    def __init__(self, link, port: int, kind: str, cache=None, timeout: float = 1.0) -> None:
+        self.link = link
+        self.cache = cache
+        self.timeout = timeout
+        self.protocol_version = -1
+        self.toc: Optional[Toc] = None
+        self._toc_port = port
+        self._toc_kind = kind
+        self._lock = threading.RLock()
+
+    @property
+    def version(self) -> int:
+        """TOC and value format generation in use (1 or 2)."""
+        return toc_version(self.protocol_version)
+
+    def _download_toc(self) -> TocInfo:
+        """Fetch the TOC (or take it from the cache) into ``self.toc``; returns the TOC info."""
+        with self._lock:
+            fetcher = TocFetcher(self.link, self._toc_port, self._toc_kind, self.version,
+                                 self.timeout, self.cache)
+            self.toc, info = fetcher.fetch()
+            return info
+
+    def _ensure_toc(self) -> Toc:
+        if self.toc is None:
+            self.fetch_toc()
+        assert self.toc is not None
+        return self.toc
+
+    def fetch_toc(self) -> List[TocEntry]:
+        """Download the TOC (or take it from the cache)."""
+        with self._lock:
+            self._download_toc()
+            assert self.toc is not None
+            return list(self.toc)

@@ -1,0 +1,1 @@
+"""The Crazyradio and the links over it; never imports the simulator."""

@@ -1,0 +1,325 @@
+"""The Crazyradio dongle over pyusb: vendor requests and bulk transfers, nothing else.
+
+Facts in CRTP.md §R1-§R3. Channel, address and data rate are cached so that a caller may set them
+before every packet and only pay for a control transfer (about 1-2.5 ms) when one changes.
+"""
+from __future__ import annotations
+
+import array
+import errno
+from typing import List, NamedTuple, Optional
+
+import usb.core
+import usb.util
+
+from crazyflie_driver import usb_choice as usb_backend
+from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
+
+VENDOR_ID = 0x1915
+PRODUCT_ID = 0x7777
+
+SET_RADIO_CHANNEL = 0x01
+SET_RADIO_ADDRESS = 0x02
+SET_DATA_RATE = 0x03
+SET_RADIO_POWER = 0x04
+SET_RADIO_ARD = 0x05
+SET_RADIO_ARC = 0x06
+ACK_ENABLE = 0x10
+SET_CONT_CARRIER = 0x20
+SCAN_CHANNELS = 0x21
+
+DR_250KPS, DR_1MPS, DR_2MPS = 0, 1, 2
+P_M18DBM, P_M12DBM, P_M6DBM, P_0DBM = 0, 1, 2, 3
+
+DEFAULT_ADDRESS = b"\xe7\xe7\xe7\xe7\xe7"
+UDEV_RULES_FILE = "99-crazyradio.rules"
+_TYPE_VENDOR_OUT = 0x40
+_TYPE_VENDOR_IN = 0xC0
+_EP_OUT = 0x01
+_EP_IN = 0x81
+_NOT_FOUND = ("no Crazyradio found (is it plugged in, and are the udev rules for group plugdev "
+              "installed? see crazyflie_driver/udev/README.md)")
+_GONE_ERRNOS = (errno.ENODEV, errno.EIO, errno.ENOENT, errno.ESHUTDOWN)
+
+
+class RadioAck(NamedTuple):
+    """What came back for one radio packet (CRTP.md §R3)."""
+
+    ack: bool
+    power_detector: bool
+    retries: int
+    data: bytes
+
+
+class RadioInfo(NamedTuple):
+    """A Crazyradio on the bus, as ``list_radios`` reports it."""
+
+    index: int
+    serial: Optional[str]   # None when the dongle could not be opened (permissions)
+    version: float
+
+
+def _version_of(bcd: int) -> float:
+    """bcdDevice as the float drivers use: 0x0053 -> 0.53, 0x0504 -> 5.4, 0x9955 -> 99.55."""
+    return float("%x.%x" % (bcd >> 8, bcd & 0xFF))
+
+
+def _find(backend) -> list:
+    try:
+        return list(usb.core.find(idVendor=VENDOR_ID, idProduct=PRODUCT_ID, find_all=True,
+                                  backend=backend))
+    except usb.core.NoBackendError as exc:
+        raise RadioNotFound("no Crazyradio found: pyusb has no USB backend (install libusb-1.0, "
+                            "e.g. the libusb-1.0-0 package)") from exc
+
+
+def _is_access_error(exc: usb.core.USBError) -> bool:
+    return exc.errno == errno.EACCES or getattr(exc, "backend_error_code", None) == -3
+
+
+def _access_denied(index: int, exc: usb.core.USBError) -> RadioAccessDenied:
+    return RadioAccessDenied(
+        "Crazyradio %d: permission denied opening the USB device (%s). Install the udev rules "
+        "shipped in crazyflie_driver/udev/%s into /etc/udev/rules.d/, add yourself to group "
+        "plugdev, then re-plug the dongle" % (index, exc.strerror or exc, UDEV_RULES_FILE))
+
+
+def list_radios(backend=None) -> List[RadioInfo]:
+    """Every Crazyradio on the bus, in the order ``Crazyradio(index)`` numbers them."""
+    if backend is None:
+        backend = usb_backend.get_backend()
+    radios = []
+    for i, dev in enumerate(_find(backend)):
+        try:
+            serial = dev.serial_number
+        except (usb.core.USBError, ValueError):
+            serial = None
+        finally:
+            usb.util.dispose_resources(dev)
+        radios.append(RadioInfo(i, serial, _version_of(dev.bcdDevice)))
+    return radios
+
+
+class Crazyradio:
+    """The ``index``-th Crazyradio (PA or 2.0) on the bus, configured to the firmware defaults.
+
+    Not thread-safe by itself: ``link.SharedRadio`` serialises access.
+    """
+
+    def __init__(self, index: int = 0, backend=None, usb_timeout_ms: int = 1000):
+        if backend is None:
+            backend = usb_backend.get_backend()
+        self.index = index
+        self.usb_timeout_ms = usb_timeout_ms
+        self.control_transfers = 0
+        devices = _find(backend)
+        if not devices:
+            raise RadioNotFound(_NOT_FOUND)
+        if index < 0 or index >= len(devices):
+            raise RadioNotFound("no Crazyradio with index %d: %d Crazyradio%s plugged in (indexes start at 0)"
+                                % (index, len(devices), " is" if len(devices) == 1 else "s are"))
+        self._dev = devices[index]
+        for other in devices:
+            if other is not self._dev:
+                usb.util.dispose_resources(other)
+        self.version = _version_of(self._dev.bcdDevice)
+        if self.version < 0.4:
+            raise CrazyflieError("Crazyradio %d has firmware %.2f; at least 0.4 is needed, please update it"
+                                 % (index, self.version))
+        self._buffer = array.array("B", bytes(64))
+        self._channel = -1
+        self._address = b""
+        self._datarate = -1
+        self.arc = 3
+        self.ack_enabled = True
+        try:
+            self._dev.set_configuration(1)
+            usb.util.claim_interface(self._dev, 0)
+        except usb.core.USBError as exc:
+            usb.util.dispose_resources(self._dev)
+            if _is_access_error(exc):
+                raise _access_denied(index, exc) from exc
+            if exc.errno == errno.EBUSY:
+                raise RadioAccessDenied("Crazyradio %d is in use by another program (%s)" % (index, exc)) from exc
+            raise self._usb_error(exc, "opening") from exc
+        # Known state whatever the last user left behind (cflib's order, CRTP.md §R4.1).
+        self.set_data_rate(DR_2MPS)
+        self.set_channel(2)
+        self.set_cont_carrier(False)
+        self.set_address(DEFAULT_ADDRESS)
+        self.set_power(P_0DBM)
+        self.set_arc(3)
+        self.set_ard_bytes(32)
+        self.set_ack_enable(True)
+
+    # -- identity --------------------------------------------------------------------------------
+    @property
+    def serial(self) -> str:
+        """The dongle's serial number string (10 hex digits on a PA)."""
+        try:
+            return self._dev.serial_number
+        except usb.core.USBError as exc:
+            raise self._usb_error(exc, "reading the serial number") from exc
+
+    @property
+    def device(self):
+        """The pyusb Device (for diagnostics)."""
+        return self._dev
+
+    # -- vendor requests ---------------------------------------------------------------------------
+    def _control(self, request: int, value: int, index: int = 0, data: bytes = b"") -> None:
+        self.control_transfers += 1
+        try:
+            self._dev.ctrl_transfer(_TYPE_VENDOR_OUT, request, value, index, data, self.usb_timeout_ms)
+        except usb.core.USBError as exc:
+            raise self._usb_error(exc, "vendor request 0x%02X" % request) from exc
+
+    def set_channel(self, channel: int) -> None:
+        """Radio channel 0-125 (2400 + channel MHz). Skipped when unchanged."""
+        if channel != self._channel:
+            if not 0 <= channel <= 125:
+                raise ValueError("channel %r out of range 0-125" % (channel,))
+            self._control(SET_RADIO_CHANNEL, channel)
+            self._channel = channel
+
+    def set_address(self, address: bytes) -> None:
+        """5-byte radio address, in URI order. Skipped when unchanged."""
+        if address != self._address:
+            address = bytes(address)
+            if len(address) != 5:
+                raise ValueError("radio address must be 5 bytes, got %d" % len(address))
+            self._control(SET_RADIO_ADDRESS, 0, 0, address)
+            self._address = address
+
+    def set_data_rate(self, datarate: int) -> None:
+        """0 = 250 kbit/s, 1 = 1 Mbit/s, 2 = 2 Mbit/s. Skipped when unchanged."""
+        if datarate != self._datarate:
+            if datarate not in (0, 1, 2):
+                raise ValueError("data rate must be 0 (250K), 1 (1M) or 2 (2M), got %r" % (datarate,))
+            self._control(SET_DATA_RATE, datarate)
+            self._datarate = datarate
+
+    def configure(self, channel: int, datarate: int, address: bytes) -> None:
+        """Channel, rate and address for the next packet; control transfers only for what changed."""
+        if channel != self._channel:
+            self.set_channel(channel)
+        if datarate != self._datarate:
+            self.set_data_rate(datarate)
+        if address != self._address:
+            self.set_address(address)
+
+    @property
+    def channel(self) -> int:
+        return self._channel
+
+    @property
+    def address(self) -> bytes:
+        return self._address
+
+    @property
+    def datarate(self) -> int:
+        return self._datarate
+
+    def set_power(self, power: int) -> None:
+        """Transmit power 0..3 = -18, -12, -6, 0 dBm."""
+        if power not in (0, 1, 2, 3):
+            raise ValueError("power must be 0..3 (-18, -12, -6, 0 dBm), got %r" % (power,))
+        self._control(SET_RADIO_POWER, power)
+
+    def set_arc(self, arc: int) -> None:
+        """Automatic retransmissions (0-15) before a packet counts as unacked."""
+        if not 0 <= arc <= 15:
+            raise ValueError("ARC must be 0..15, got %r" % (arc,))
+        self._control(SET_RADIO_ARC, arc)
+        self.arc = arc
+
+    def set_ard_time(self, microseconds: int) -> None:
+        """Delay before a retransmission: 250..4000 us in steps of 250 us."""
+        n = microseconds // 250 - 1
+        if microseconds % 250 or not 0 <= n <= 15:
+            raise ValueError("ARD time must be 250..4000 us in steps of 250, got %r" % (microseconds,))
+        self._control(SET_RADIO_ARD, n)
+
+    def set_ard_bytes(self, nbytes: int) -> None:
+        """Delay before a retransmission, chosen by the firmware for an ack payload of nbytes (0-32)."""
+        if not 0 <= nbytes <= 32:
+            raise ValueError("ARD ack payload length must be 0..32 bytes, got %r" % (nbytes,))
+        self._control(SET_RADIO_ARD, 0x80 | nbytes)
+
+    def set_ack_enable(self, enable: bool) -> None:
+        """With acks off, packets go out once as no-ack (broadcast) and nothing comes back."""
+        self._control(ACK_ENABLE, 1 if enable else 0)
+        self.ack_enabled = bool(enable)
+
+    def set_cont_carrier(self, active: bool) -> None:
+        """Continuous carrier test (no packets are sent while it is on)."""
+        self._control(SET_CONT_CARRIER, 1 if active else 0)
+
+    def scan_channels(self, start: int, stop: int, packet: bytes = b"\xff") -> List[int]:
+        """Firmware scan: channels in start..stop that ack ``packet`` (every 2nd channel at 2M on a PA).
+
+        Leaves the radio on the last scanned channel, so the channel cache is invalidated.
+        """
+        if not 0 <= start <= 125 or not 0 <= stop <= 125:
+            raise ValueError("scan range %r..%r outside 0-125" % (start, stop))
+        if not packet:
+            raise ValueError("scan packet must not be empty")
+        self._control(SCAN_CHANNELS, start, stop, bytes(packet))
+        self._channel = -1
+        self.control_transfers += 1
+        try:
+            hits = self._dev.ctrl_transfer(_TYPE_VENDOR_IN, SCAN_CHANNELS, 0, 0, 64, self.usb_timeout_ms)
+        except usb.core.USBError as exc:
+            raise self._usb_error(exc, "reading scan results") from exc
+        # Some hosts see 64 bytes for an empty scan (RF issue #9): keep only plausible channels.
+        return [c for c in bytes(hits) if start <= c <= stop]
+
+    # -- packets ---------------------------------------------------------------------------------
+    def send_packet(self, data: bytes) -> RadioAck:
+        """One radio packet (1-32 bytes) and its ack. A USB timeout counts as an unacked packet."""
+        dev = self._dev
+        if dev is None:
+            raise RadioUnplugged("Crazyradio %d is closed" % self.index)
+        if not 0 < len(data) <= 32:
+            raise ValueError("a radio packet has 1-32 bytes, got %d" % len(data))
+        try:
+            dev.write(_EP_OUT, data, self.usb_timeout_ms)
+            if not self.ack_enabled:
+                return _NO_ACK
+            buf = self._buffer
+            n = dev.read(_EP_IN, buf, self.usb_timeout_ms)
+        except usb.core.USBTimeoutError:
+            return RadioAck(False, False, self.arc, b"")
+        except usb.core.USBError as exc:
+            raise self._usb_error(exc, "sending a packet") from exc
+        status = buf[0] if n else 0
+        if status & 1:
+            return RadioAck(True, bool(status & 2), status >> 4, buf[1:n].tobytes())
+        return RadioAck(False, False, self.arc, b"")
+
+    def close(self) -> None:
+        """Release the interface and the handle; the dongle can then be opened again."""
+        dev, self._dev = self._dev, None
+        if dev is not None:
+            try:
+                usb.util.dispose_resources(dev)
+            except usb.core.USBError:
+                pass
+
+    def __enter__(self) -> "Crazyradio":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _usb_error(self, exc: usb.core.USBError, what: str) -> CrazyflieError:
+        if self._dev is None:
+            return RadioUnplugged("Crazyradio %d is closed (%s)" % (self.index, what))
+        if exc.errno in _GONE_ERRNOS or getattr(exc, "backend_error_code", None) == -4:
+            return RadioUnplugged("Crazyradio %d was unplugged (%s: %s)" % (self.index, what, exc.strerror or exc))
+        if _is_access_error(exc):
+            return _access_denied(self.index, exc)
+        return CrazyflieError("Crazyradio %d: USB error while %s: %s" % (self.index, what, exc))
+
+
+_NO_ACK = RadioAck(False, False, 0, b"")

@@ -1,0 +1,533 @@
+"""The radio link to one Crazyflie, and the sharing of one Crazyradio between several of them.
+
+* ``RadioManager`` keeps one ``SharedRadio`` per dongle index, opened by the first link that needs
+  it and closed when the last one leaves.
+* ``SharedRadio`` time-slices round trips of several Crazyflies with a FIFO lock, and reconfigures
+  channel, data rate and address only when they differ from the previous packet's.
+* ``RadioLink`` is one Crazyflie: safelink (CRTP.md §R4.5, §P2) with a fallback to plain acks,
+  downlink dispatch from the ack payloads, request/reply with timeouts, ``LinkStatistics``.
+
+No thread of its own: a round trip happens in the thread that calls ``send``/``poll``/``request``,
+and downlink callbacks run there.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from typing import Callable, Dict, Optional, Tuple, Union
+
+from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.errors import CrazyflieError, LinkTimeout, RadioUnplugged
+from crazyflie_driver.crtp.uri import RadioUri, parse_uri
+
+_log = logging.getLogger(__name__)
+
+SAFELINK_ON = b"\xff\x05\x01"
+NULL_PACKET = b"\xff"
+DEFAULT_LOST_THRESHOLD = 100
+STATS_WINDOW = 100
+# Every one-byte packet (a header alone, e.g. a null packet with safelink bits) preallocated.
+_ONE_BYTE = tuple(bytes((h,)) for h in range(256))
+
+Callback = Callable[[CRTPPacket], None]
+
+
+class FairLock:
+    """A FIFO lock: waiting threads get it in arrival order, so N Crazyflies polling flat out on
+    one dongle each get 1/N of its round trips (``threading.Lock`` lets the releasing thread win)."""
+
+    __slots__ = ("_mutex", "_held", "_waiters")
+
+    def __init__(self) -> None:
+        self._mutex = threading.Lock()
+        self._held = False
+        self._waiters: deque = deque()
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        with self._mutex:
+            if not self._held:
+                self._held = True
+                return True
+            if not blocking:
+                return False
+            waiter = threading.Lock()
+            waiter.acquire()
+            self._waiters.append(waiter)
+        if waiter.acquire(True, timeout):
+            return True
+        with self._mutex:
+            try:
+                self._waiters.remove(waiter)
+            except ValueError:
+                return True   # handed over to us while timing out
+            return False
+
+    def release(self) -> None:
+        with self._mutex:
+            if self._waiters:
+                self._waiters.popleft().release()   # ownership passes directly
+            elif self._held:
+                self._held = False
+            else:
+                raise RuntimeError("release of an unlocked FairLock")
+
+    def locked(self) -> bool:
+        return self._held
+
+    __enter__ = acquire
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+class LinkStatistics:
+    """Per-Crazyflie counters, updated on every round trip.
+
+    ``ack_ratio`` and ``retries`` (mean retransmissions of acked packets) cover the last ``window``
+    round trips; ``rssi`` is the latest value carried by an empty ack (raw, i.e. -dBm), None until
+    one arrives; ``link_lost`` is true after ``lost_threshold`` unacked round trips in a row.
+    """
+
+    def __init__(self, lost_threshold: int = DEFAULT_LOST_THRESHOLD, window: int = STATS_WINDOW):
+        if window < 1 or lost_threshold < 1:
+            raise ValueError("window and lost_threshold must be >= 1")
+        self.lost_threshold = lost_threshold
+        self.window = window
+        self.sent = 0
+        self.acked = 0
+        self.consecutive_failures = 0
+        self.rssi: Optional[int] = None
+        self._acks = [0] * window
+        self._retries = [0] * window
+        self._pos = 0
+        self._filled = 0
+        self._ack_sum = 0
+        self._retry_sum = 0
+
+    def record(self, acked: bool, retries: int) -> None:
+        pos = self._pos
+        a = 1 if acked else 0
+        r = retries if acked else 0
+        self._ack_sum += a - self._acks[pos]
+        self._retry_sum += r - self._retries[pos]
+        self._acks[pos] = a
+        self._retries[pos] = r
+        pos += 1
+        self._pos = 0 if pos == self.window else pos
+        if self._filled < self.window:
+            self._filled += 1
+        self.sent += 1
+        if acked:
+            self.acked += 1
+            self.consecutive_failures = 0
+        else:
+            self.consecutive_failures += 1
+
+    @property
+    def ack_ratio(self) -> float:
+        """Acked fraction of the last ``window`` round trips (0.0 before the first one)."""
+        return self._ack_sum / self._filled if self._filled else 0.0
+
+    @property
+    def retries(self) -> float:
+        """Mean retransmissions per acked packet over the window."""
+        return self._retry_sum / self._ack_sum if self._ack_sum else 0.0
+
+    @property
+    def link_lost(self) -> bool:
+        return self.consecutive_failures >= self.lost_threshold
+
+    def as_dict(self) -> dict:
+        return {"sent": self.sent, "acked": self.acked, "ack_ratio": self.ack_ratio,
+                "retries": self.retries, "rssi": self.rssi,
+                "consecutive_failures": self.consecutive_failures, "link_lost": self.link_lost}
+
+    def __repr__(self) -> str:
+        return ("LinkStatistics(sent=%d, acked=%d, ack_ratio=%.2f, retries=%.2f, rssi=%s, "
+                "consecutive_failures=%d)" % (self.sent, self.acked, self.ack_ratio, self.retries,
+                                              self.rssi, self.consecutive_failures))
+
+
+class SharedRadio:
+    """One Crazyradio shared by every link on it; ``round_trip`` is the only way to use it.
+
+    When the dongle disappears (``RadioUnplugged``) the dead handle is dropped; later round trips
+    try to open the dongle again through ``opener`` (at most every ``reopen_interval`` seconds),
+    so a dongle that is plugged back in carries on without restarting anything.
+    """
+
+    def __init__(self, index: int, radio: Crazyradio,
+                 opener: Optional[Callable[[int], Crazyradio]] = None, reopen_interval: float = 0.5):
+        self.index = index
+        self.radio: Optional[Crazyradio] = radio
+        self.lock = FairLock()
+        self.users = 0
+        self._opener = opener
+        self._reopen_interval = reopen_interval
+        self._next_reopen = 0.0
+
+    def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
+        """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack."""
+        lock = self.lock
+        lock.acquire()
+        try:
+            radio = self.radio
+            if radio is None:
+                radio = self._reopen()
+            try:
+                if channel != radio._channel or datarate != radio._datarate or address != radio._address:
+                    radio.configure(channel, datarate, address)
+                return radio.send_packet(data)
+            except RadioUnplugged:
+                self._drop()
+                raise
+        finally:
+            lock.release()
+
+    def _drop(self) -> None:
+        radio, self.radio = self.radio, None
+        self._next_reopen = time.monotonic() + self._reopen_interval
+        if radio is not None:
+            try:
+                radio.close()
+            except Exception:  # the handle is dead anyway
+                pass
+
+    def _reopen(self) -> Crazyradio:
+        if self._opener is None or time.monotonic() < self._next_reopen:
+            raise RadioUnplugged("Crazyradio %d is unplugged" % self.index)
+        try:
+            self.radio = self._opener(self.index)
+        except CrazyflieError as exc:
+            self._next_reopen = time.monotonic() + self._reopen_interval
+            raise RadioUnplugged("Crazyradio %d is unplugged (%s)" % (self.index, exc)) from exc
+        _log.info("Crazyradio %d is back", self.index)
+        return self.radio
+
+    def close(self) -> None:
+        with self.lock:
+            if self.radio is not None:
+                self.radio.close()
+                self.radio = None
+
+
+class RadioManager:
+    """One ``SharedRadio`` per dongle index, reference counted.
+
+    ``backend`` is the pyusb backend for the dongles (None: ``usb_backend.get_backend()``);
+    ``radio_factory(index)`` replaces how a dongle is opened altogether.
+    """
+
+    def __init__(self, backend=None, radio_factory: Optional[Callable[[int], Crazyradio]] = None):
+        self.backend = backend
+        self._factory = radio_factory
+        self._lock = threading.Lock()
+        self._radios: Dict[int, SharedRadio] = {}
+
+    def acquire(self, index: int) -> SharedRadio:
+        """The shared radio for dongle ``index``, opened if nobody uses it yet."""
+        with self._lock:
+            shared = self._radios.get(index)
+            if shared is None:
+                shared = SharedRadio(index, self._open(index), opener=self._open)
+                self._radios[index] = shared
+            shared.users += 1
+            return shared
+
+    def _open(self, index: int) -> Crazyradio:
+        return self._factory(index) if self._factory else Crazyradio(index, backend=self.backend)
+
+    def release(self, shared: SharedRadio) -> None:
+        """One user fewer; the dongle is closed when the last one leaves."""
+        with self._lock:
+            shared.users -= 1
+            if shared.users > 0:
+                return
+            if self._radios.get(shared.index) is shared:
+                del self._radios[shared.index]
+        shared.close()
+
+    def users(self, index: int) -> int:
+        with self._lock:
+            shared = self._radios.get(index)
+            return shared.users if shared else 0
+
+    def open_link(self, uri: Union[str, RadioUri], **options) -> "RadioLink":
+        """A new ``RadioLink`` on this manager, already opened."""
+        link = RadioLink(uri, self, **options)
+        link.open()
+        return link
+
+
+_default_manager: Optional[RadioManager] = None
+_default_lock = threading.Lock()
+
+
+def default_manager() -> RadioManager:
+    """The process-wide manager, so every Crazyflie of a process shares its dongles."""
+    global _default_manager
+    with _default_lock:
+        if _default_manager is None:
+            _default_manager = RadioManager()
+        return _default_manager
+
+
+class _Waiter:
+    __slots__ = ("match", "result", "error")
+
+    def __init__(self, match: Callable[[CRTPPacket], bool]):
+        self.match = match
+        self.result: Optional[CRTPPacket] = None
+        self.error: Optional[BaseException] = None
+
+
+class RadioLink:
+    """The link to one Crazyflie (contract in docs/architecture.md).
+
+    ``safelink``: try the safelink handshake on open (``safelink_attempts`` tries). In safelink
+    mode an unacked packet is re-sent with the same sequence bit up to ``safelink_resends`` times;
+    if it still fails, the next packet first redoes the handshake so both sides agree again.
+    Thread-safe: round trips of one link are serialised, so its downlink is dispatched in order.
+    """
+
+    def __init__(self, uri: Union[str, RadioUri], manager: Optional[RadioManager] = None,
+                 safelink: bool = True, safelink_attempts: int = 10, safelink_resends: int = 10,
+                 lost_threshold: int = DEFAULT_LOST_THRESHOLD):
+        self.uri: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
+        self.manager = manager if manager is not None else default_manager()
+        self.stats = LinkStatistics(lost_threshold)
+        self.use_safelink = safelink
+        self.safelink_attempts = safelink_attempts
+        self.safelink_resends = safelink_resends
+        self.safelink = False          # True once the Crazyflie echoed the handshake
+        self._up = 0
+        self._down = 0
+        self._resync = False
+        self._shared: Optional[SharedRadio] = None
+        self._send_lock = threading.RLock()
+        self._request_lock = threading.Lock()
+        self._subs_lock = threading.Lock()
+        self._subs: Dict[int, Tuple[Tuple[Optional[int], Callback], ...]] = {}
+        self._waiter: Optional[_Waiter] = None
+
+    @property
+    def needs_resending(self) -> bool:
+        """True without safelink: replies may be lost, so requests are re-sent."""
+        return not self.safelink
+
+    @property
+    def is_open(self) -> bool:
+        return self._shared is not None
+
+    # -- open / close -------------------------------------------------------------------------------
+    def open(self) -> None:
+        """Take the dongle and greet the Crazyflie: safelink if it echoes, else plain acks.
+
+        Raises LinkTimeout when not one greeting packet is acked (no Crazyflie there).
+        """
+        with self._send_lock:
+            if self._shared is not None:
+                return
+            self._shared = self.manager.acquire(self.uri.index)
+            try:
+                self._greet()
+            except BaseException:
+                shared, self._shared = self._shared, None
+                self.manager.release(shared)
+                raise
+
+    def _greet(self) -> None:
+        attempts = max(1, self.safelink_attempts)
+        packet = SAFELINK_ON if self.use_safelink else NULL_PACKET
+        any_ack = False
+        for _ in range(attempts):
+            ack = self._round_trip(packet)
+            if not ack.ack:
+                continue
+            any_ack = True
+            if not self.use_safelink:
+                if ack.data:
+                    self._dispatch(ack.data)
+                return
+            if ack.data == SAFELINK_ON:
+                self.safelink = True
+                self._up = self._down = 0
+                return
+            if ack.data:
+                self._dispatch(ack.data)   # no safelink there: a plain downlink packet
+        if not any_ack:
+            raise LinkTimeout("%s: no answer from the Crazyflie (%d packets unacknowledged); is it "
+                              "switched on, and on this channel, data rate and address?"
+                              % (self.uri, attempts))
+        self.safelink = False
+
+    def close(self) -> None:
+        """Give the dongle back (closed when no other link uses it). Idempotent."""
+        with self._send_lock:
+            shared, self._shared = self._shared, None
+            self.safelink = False
+        if shared is not None:
+            self.manager.release(shared)
+
+    def __enter__(self) -> "RadioLink":
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- round trips ------------------------------------------------------------------------------
+    def _round_trip(self, data: bytes) -> RadioAck:
+        shared = self._shared
+        if shared is None:
+            raise CrazyflieError("%s: link is not open" % (self.uri,))
+        uri = self.uri
+        ack = shared.round_trip(uri.channel, uri.datarate, uri.address, data)
+        self.stats.record(ack.ack, ack.retries)
+        return ack
+
+    def send(self, packet: CRTPPacket) -> bool:
+        """One packet to the Crazyflie (re-sent on loss with safelink); True when acked.
+
+        Downlink packets carried by the ack are dispatched before it returns. Raises RadioUnplugged.
+        """
+        return self.send_bytes(packet.to_bytes())
+
+    def poll(self) -> bool:
+        """A null packet round trip: fetches downlink and keeps the link alive."""
+        return self.send_bytes(NULL_PACKET)
+
+    def send_bytes(self, data: bytes) -> bool:
+        """``send`` for a raw packet (header byte + payload); safelink bits are set here."""
+        with self._send_lock:
+            if not self.safelink:
+                ack = self._round_trip(data)
+                if ack.ack and ack.data:
+                    self._dispatch(ack.data)
+                return ack.ack
+            if self._resync and not self._resync_safelink():
+                return False
+            header = (data[0] & 0xF3) | (self._up << 3) | (self._down << 2)
+            out = _ONE_BYTE[header] if len(data) == 1 else _ONE_BYTE[header] + data[1:]
+            for _ in range(self.safelink_resends + 1):
+                ack = self._round_trip(out)
+                if ack.ack:
+                    self._up ^= 1
+                    payload = ack.data
+                    if payload and (payload[0] & 0x04) == (self._down << 2):
+                        self._down ^= 1
+                        self._dispatch(payload)
+                    # else: a repeat of the last downlink packet (our ack of it was lost): drop it
+                    return True
+            self._resync = True
+            return False
+
+    def _resync_safelink(self) -> bool:
+        ack = self._round_trip(SAFELINK_ON)
+        if ack.ack and ack.data == SAFELINK_ON:
+            self._up = self._down = 0
+            self._resync = False
+            return True
+        return False
+
+    # -- downlink ---------------------------------------------------------------------------------
+    def _dispatch(self, payload: bytes) -> None:
+        header = payload[0]
+        if (header & 0xF3) == 0xF3:
+            # Empty ack; the 2016-era nRF firmware appends [0x01, RSSI].
+            if len(payload) >= 3 and payload[1] == 0x01:
+                self.stats.rssi = payload[2]
+            return
+        port = header >> 4
+        subs = self._subs.get(port)
+        waiter = self._waiter
+        if subs is None and waiter is None:
+            return
+        channel = header & 0x03
+        packet = CRTPPacket(port, channel, payload[1:])
+        if waiter is not None and waiter.result is None:
+            try:
+                if waiter.match(packet):
+                    waiter.result = packet
+            except Exception as exc:   # the requester's bug: re-raised in its own thread
+                waiter.error = exc
+        if subs:
+            for want, callback in subs:
+                if want is None or want == channel:
+                    try:
+                        callback(packet)
+                    except Exception:
+                        _log.exception("%s: downlink callback %r failed on %r", self.uri, callback, packet)
+
+    def subscribe(self, port: int, channel: Optional[int], callback: Callback) -> Callable[[], None]:
+        """Call ``callback(packet)`` for each downlink packet on ``port`` (any channel if None).
+
+        Callbacks run in the thread that made the round trip; they may ``send`` but must not
+        ``request``. Returns the unsubscribe function.
+        """
+        if not 0 <= port <= 15:
+            raise ValueError("port must be 0..15, got %r" % (port,))
+        if channel is not None and not 0 <= channel <= 3:
+            raise ValueError("channel must be 0..3 or None, got %r" % (channel,))
+        entry = (channel, callback)
+        with self._subs_lock:
+            self._subs[port] = self._subs.get(port, ()) + (entry,)
+
+        def unsubscribe() -> None:
+            with self._subs_lock:
+                current = self._subs.get(port, ())
+                remaining = tuple(e for e in current if e is not entry)
+                if remaining:
+                    self._subs[port] = remaining
+                else:
+                    self._subs.pop(port, None)
+
+        return unsubscribe
+
+    def request(self, packet: CRTPPacket, match: Callable[[CRTPPacket], bool], timeout: float = 1.0,
+                resend_interval: float = 0.2, what: str = "") -> CRTPPacket:
+        """Send ``packet``, then poll until a downlink packet satisfies ``match``; return it.
+
+        Without safelink the packet is re-sent every ``resend_interval`` s (the reply may have been
+        lost); with safelink only while it is unacked. The matching packet also reaches subscribers.
+        Raises LinkTimeout naming the URI and ``what``.
+        """
+        if timeout <= 0:
+            raise ValueError("timeout must be > 0, got %r" % (timeout,))
+        with self._request_lock:
+            waiter = _Waiter(match)
+            self._waiter = waiter
+            try:
+                start = time.monotonic()
+                deadline = start + timeout
+                acked = self.send(packet)
+                next_resend = start + resend_interval
+                while waiter.result is None:
+                    if waiter.error is not None:
+                        raise waiter.error
+                    now = time.monotonic()
+                    if now >= deadline:
+                        raise LinkTimeout("%s: no answer to %s within %.2f s (ack ratio %.0f %%)"
+                                          % (self.uri, what or repr(packet), timeout,
+                                             100.0 * self.stats.ack_ratio))
+                    if self.safelink:
+                        resend = not acked
+                    else:
+                        resend = now >= next_resend
+                    if resend:
+                        acked = self.send(packet)
+                        next_resend = now + resend_interval
+                    else:
+                        self.poll()
+                if waiter.error is not None:
+                    raise waiter.error
+                return waiter.result
+            finally:
+                self._waiter = None
+
+    def __repr__(self) -> str:
+        return "<RadioLink %s %s>" % (self.uri, "safelink" if self.safelink else
+                                       ("plain" if self.is_open else "closed"))

@@ -1,0 +1,101 @@
+"""``crazyflie_add``'s private parameters turned into a checked request, without ROS.
+
+Parameter names and defaults are the original driver's, including the custom log blocks:
+``genericLogTopics`` (topic names), ``genericLogTopicFrequencies`` (one per topic; despite the
+name each value is a PERIOD in milliseconds: 10 means every 10 ms, 100 means 10 Hz) and
+``genericLogTopic_<name>_Variables`` (``group.name`` log variables of that topic).
+Whether a variable exists and whether a block fits in 26 bytes can only be checked against the
+Crazyflie's log TOC, so the server checks those and its error comes back through the service.
+"""
+from __future__ import annotations
+
+from typing import Any, List, Mapping, Tuple
+
+from crazyflie_driver.errors import UriError
+from crazyflie_driver.server.log_plan import LogBlockSpec, validate_log_block_specs
+from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.server.worker import WorkerConfig
+
+
+class AddConfigError(ValueError):
+    """A crazyflie_add parameter that is missing or wrong; the message names it."""
+
+
+def _as_bool(name: str, value: Any) -> bool:
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    if isinstance(value, str) and value.strip().lower() in ("true", "false", "1", "0"):
+        return value.strip().lower() in ("true", "1")
+    raise AddConfigError("parameter ~%s must be true or false, got %r" % (name, value))
+
+
+def _as_float(name: str, value: Any) -> float:
+    if isinstance(value, bool):
+        raise AddConfigError("parameter ~%s must be a number (degrees), got %r" % (name, value))
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise AddConfigError("parameter ~%s must be a number (degrees), got %r" % (name, value)) from None
+
+
+def _as_list(name: str, value: Any) -> List[Any]:
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    raise AddConfigError("parameter ~%s must be a list, got %r" % (name, value))
+
+
+def log_blocks_from_params(params: Mapping[str, Any]) -> Tuple[LogBlockSpec, ...]:
+    """The custom log blocks; raises AddConfigError naming the faulty parameter."""
+    topics = _as_list("genericLogTopics", params.get("genericLogTopics", []))
+    periods = _as_list("genericLogTopicFrequencies", params.get("genericLogTopicFrequencies", []))
+    if len(topics) != len(periods):
+        raise AddConfigError(
+            "~genericLogTopics has %d entries but ~genericLogTopicFrequencies has %d: give one period "
+            "(in milliseconds, despite the name) per topic" % (len(topics), len(periods)))
+    blocks = []
+    for topic, period in zip(topics, periods):
+        if not isinstance(topic, str) or not topic:
+            raise AddConfigError("~genericLogTopics: entry %r is not a topic name" % (topic,))
+        if isinstance(period, bool) or not isinstance(period, (int, float)) or period != int(period):
+            raise AddConfigError("~genericLogTopicFrequencies: entry %r for topic %r is not a whole "
+                                 "number of milliseconds" % (period, topic))
+        key = "genericLogTopic_%s_Variables" % topic
+        if key not in params:
+            raise AddConfigError("topic %r is listed in ~genericLogTopics but ~%s is not set" % (topic, key))
+        variables = _as_list(key, params[key])
+        if not all(isinstance(v, str) for v in variables):
+            raise AddConfigError("~%s must be a list of group.name strings, got %r" % (key, variables))
+        blocks.append(LogBlockSpec(topic, int(period), tuple(v.strip() for v in variables)))
+    try:
+        validate_log_block_specs(blocks)
+    except ValueError as e:
+        raise AddConfigError(str(e)) from None
+    return tuple(blocks)
+
+
+def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
+    """A full add request from crazyflie_add's private parameters (names without the ``~``)."""
+    if "uri" not in params or params["uri"] in ("", None):
+        raise AddConfigError("parameter ~uri is required (e.g. radio://0/80/2M/E7E7E7E7E7)")
+    uri = params["uri"]
+    try:
+        parse_uri(uri)
+    except UriError as e:
+        raise AddConfigError("parameter ~uri: %s" % e) from None
+    tf_prefix = params.get("tf_prefix", "")
+    if not isinstance(tf_prefix, str):
+        raise AddConfigError("parameter ~tf_prefix must be a string, got %r" % (tf_prefix,))
+    tf_prefix = tf_prefix.strip().strip("/")
+    if tf_prefix and not all(c.isalnum() or c in "_/" for c in tf_prefix):
+        raise AddConfigError("parameter ~tf_prefix %r is not a valid ROS name" % (tf_prefix,))
+    return WorkerConfig(
+        uri=uri,
+        tf_prefix=tf_prefix,
+        roll_trim=_as_float("roll_trim", params.get("roll_trim", 0.0)),
+        pitch_trim=_as_float("pitch_trim", params.get("pitch_trim", 0.0)),
+        enable_logging=_as_bool("enable_logging", params.get("enable_logging", True)),
+        enable_parameters=_as_bool("enable_parameters", params.get("enable_parameters", True)),
+        log_blocks=log_blocks_from_params(params),
+    )

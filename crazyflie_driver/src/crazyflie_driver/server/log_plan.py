@@ -1,0 +1,138 @@
+"""Which log blocks to ask a Crazyflie for: the driver's topics, custom topics, and their packing.
+
+The server publishes each topic from one log packet, so a topic's variables must fit one
+firmware log block (26 bytes of values). This module holds the fixed sensor topics, checks the
+custom ones a user asks for (before any radio traffic), and packs topics into as few blocks as
+fit: the fewer blocks, the fewer packets share the radio. Pure functions, no link.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Sequence, Tuple
+
+from crazyflie_driver.errors import LogConfigError, UnknownName
+
+LOG_BLOCK_MAX_BYTES = 26            # values per log packet the current firmware accepts
+LOG_PERIOD_MIN_MS = 10              # the firmware's log timer counts in 10 ms units, 1..254
+LOG_PERIOD_MAX_MS = 2540
+
+# Size in bytes of one value of each TOC type (log packets carry values in the TOC type).
+CTYPE_SIZES = {
+    "uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "uint32_t": 4, "int32_t": 4,
+    "uint64_t": 8, "int64_t": 8, "FP16": 2, "float": 4, "double": 8,
+}
+
+IMU_TOPIC = "imu"
+TEMPERATURE_TOPIC = "temperature"
+MAGNETIC_FIELD_TOPIC = "magnetic_field"
+PRESSURE_TOPIC = "pressure"
+BATTERY_TOPIC = "battery"
+RADIO_RSSI_TOPIC = "rssi"
+
+# The fixed sensor topics: (topic, period ms, log variables). A topic is delivered whole (all
+# its values from one log packet); topics of the same period share blocks as they fit.
+FIXED_LOG_TOPICS: Tuple[Tuple[str, int, Tuple[str, ...]], ...] = (
+    (IMU_TOPIC, 10, ("acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z")),
+    (TEMPERATURE_TOPIC, 100, ("baro.temp",)),
+    (MAGNETIC_FIELD_TOPIC, 100, ("mag.x", "mag.y", "mag.z")),
+    (PRESSURE_TOPIC, 100, ("baro.pressure",)),
+    (BATTERY_TOPIC, 100, ("pm.vbat",)),
+)
+RSSI_LOG_VARIABLE = "radio.rssi"    # current firmware: RSSI is a log variable, not in the acks
+RESERVED_TOPIC_NAMES = frozenset(t for t, _, _ in FIXED_LOG_TOPICS) | {
+    RADIO_RSSI_TOPIC, "cmd_vel", "emergency", "update_params"}
+
+
+@dataclass(frozen=True)
+class LogBlockSpec:
+    """A custom log block: published as GenericLogData on ``topic_name`` every ``period_ms``."""
+
+    topic_name: str
+    period_ms: int
+    variables: Tuple[str, ...]
+
+
+def validate_log_block_specs(blocks: Sequence[LogBlockSpec]) -> None:
+    """Checks that need no Crazyflie: names, periods, duplicates. Raises ValueError naming the fault."""
+    seen = set()
+    for b in blocks:
+        name = b.topic_name
+        if not name or not all(c.isalnum() or c in "_/" for c in name) or not (name[0].isalpha()
+                                                                                or name[0] == "/"):
+            raise ValueError("custom log topic %r is not a valid ROS name (letters, digits, '_', '/', "
+                             "starting with a letter)" % (name,))
+        if name in RESERVED_TOPIC_NAMES:
+            raise ValueError("custom log topic %r clashes with the driver's own topic of that name"
+                             % (name,))
+        if name in seen:
+            raise ValueError("custom log topic %r is given twice" % (name,))
+        seen.add(name)
+        if not LOG_PERIOD_MIN_MS <= int(b.period_ms) <= LOG_PERIOD_MAX_MS:
+            raise ValueError("custom log topic %r: period %r ms is outside %d..%d ms (the value of "
+                             "genericLogTopicFrequencies is a period in milliseconds)"
+                             % (name, b.period_ms, LOG_PERIOD_MIN_MS, LOG_PERIOD_MAX_MS))
+        if not b.variables:
+            raise ValueError("custom log topic %r has no variables" % (name,))
+        for v in b.variables:
+            group, dot, var = v.partition(".")
+            if not dot or not group or not var:
+                raise ValueError("custom log topic %r: variable %r is not of the form group.name"
+                                 % (name, v))
+
+
+@dataclass
+class PlannedBlock:
+    """One firmware log block: its period, its variables, and which topic owns which slice."""
+
+    period_ms: int
+    variables: List[str] = field(default_factory=list)
+    size: int = 0
+    topics: List[Tuple[str, int, int]] = field(default_factory=list)   # (topic, start, stop)
+
+
+def topic_size(topic: str, variables: Sequence[str], types: Dict[str, str]) -> int:
+    """Bytes one packet of ``variables`` needs. Raises UnknownName / LogConfigError naming the fault."""
+    unknown = [v for v in variables if v not in types]
+    if unknown:
+        raise UnknownName("log topic %r: unknown log variable(s) %s (not in the Crazyflie's log TOC)"
+                          % (topic, ", ".join(unknown)))
+    size = sum(CTYPE_SIZES.get(types[v], 4) for v in variables)
+    if size > LOG_BLOCK_MAX_BYTES:
+        raise LogConfigError("log topic %r needs %d bytes per packet (%s); a log block holds at most "
+                             "%d bytes: split it into several topics"
+                             % (topic, size, ", ".join("%s %s" % (v, types[v]) for v in variables),
+                                LOG_BLOCK_MAX_BYTES))
+    return size
+
+
+def plan_log_blocks(topics: Sequence[Tuple[str, int, Sequence[str]]], types: Dict[str, str],
+                    share: bool = True) -> List[PlannedBlock]:
+    """Pack topics into firmware log blocks of at most 26 bytes.
+
+    Each topic stays whole in one block, so one packet carries all of a message's values.
+    With ``share`` topics of the same period are packed together (first fit, largest first);
+    without it every topic gets its own block.
+    """
+    sized = [(name, int(period), list(vs), topic_size(name, vs, types)) for name, period, vs in topics]
+    blocks: List[PlannedBlock] = []
+    order = sorted(sized, key=lambda t: -t[3]) if share else sized
+    for name, period, vs, size in order:
+        target = None
+        if share:
+            for b in blocks:
+                if b.period_ms == period and b.size + size <= LOG_BLOCK_MAX_BYTES:
+                    target = b
+                    break
+        if target is None:
+            target = PlannedBlock(period_ms=period)
+            blocks.append(target)
+        start = len(target.variables)
+        target.variables.extend(vs)
+        target.size += size
+        target.topics.append((name, start, start + len(vs)))
+    return blocks
+
+
+def log_packet_rate(plan: Sequence[PlannedBlock]) -> float:
+    """Log packets per second the planned blocks produce."""
+    return sum(1000.0 / b.period_ms for b in plan if b.period_ms > 0)

@@ -1,0 +1,478 @@
+"""One Crazyflie served by one thread: the work behind ``crazyflie_server``, without ROS.
+
+A :class:`CrazyflieWorker` owns one :class:`~crazyflie_driver.protocol.crazyflie.Crazyflie` (or any
+object with the same methods) and is the only thread that streams to it:
+
+* a new setpoint wakes the thread at once and is sent in the next radio round trip; only the
+  latest setpoint counts (there is no queue that could add delay);
+* when no setpoint comes, null packets keep the link alive (at least every ``keepalive_period``)
+  and fetch the log data the Crazyflie has queued, one packet per poll, paced by
+  :class:`~crazyflie_driver.server.poll_pacer.PollPacer`;
+* link quality (acked / sent over a window) is tracked per Crazyflie, a listener is told when it
+  drops below ``LINK_QUALITY_WARNING``;
+* a Crazyflie that stops answering is reported as lost and retried slowly, without holding the
+  dongle for the others; when it answers again its log blocks are set up again;
+* :meth:`CrazyflieWorker.emergency` works from any thread, at once, and is idempotent: no
+  setpoint is sent after it returns, the e-stop packet goes out, then only zero-thrust
+  setpoints, until the worker is removed.
+
+The ROS side (``nodes/crazyflie_server.py``) subclasses :class:`WorkerListener` to turn the
+callbacks into messages; everything here is testable with a fake Crazyflie object.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
+from crazyflie_driver.radio.quality import (LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING,
+                           LINK_QUALITY_WINDOW, LinkQuality)
+from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
+                       PlannedBlock, log_packet_rate, plan_log_blocks)
+from crazyflie_driver.server.param_values import coerce_param_value
+from crazyflie_driver.server.poll_pacer import PollPacer
+from crazyflie_driver.server.setpoint import Setpoint, setpoint_from_twist
+from crazyflie_driver.protocol.toc import toc_types
+
+LOG = logging.getLogger("crazyflie_driver.server")
+
+
+@dataclass(frozen=True)
+class WorkerConfig:
+    """What ``/add_crazyflie`` asks for."""
+
+    uri: str
+    tf_prefix: str = ""
+    roll_trim: float = 0.0
+    pitch_trim: float = 0.0
+    enable_logging: bool = True
+    enable_parameters: bool = True
+    log_blocks: Tuple[LogBlockSpec, ...] = ()
+
+
+class WorkerListener:
+    """Callbacks of a worker; all run in the worker's thread except where noted. Default: nothing."""
+
+    def on_params(self, values: Dict[str, Any]) -> None:
+        """All parameter values after connecting, ``{"group.name": value}`` (for mirroring)."""
+
+    def on_log(self, topic: str, onboard_timestamp_ms: int, values: List[float]) -> None:
+        """One packet's values for a fixed topic (``imu``, ``battery``...) or a custom topic."""
+
+    def on_rssi(self, rssi: float) -> None:
+        """Radio signal strength, -dBm, from the acks or the ``radio.rssi`` log variable."""
+
+    def on_link_quality(self, quality: float, low: bool) -> None:
+        """Called when link quality crosses ``LINK_QUALITY_WARNING`` (and every few s while low)."""
+
+    def on_link_lost(self, reason: str) -> None:
+        """The Crazyflie stopped answering (or the dongle went away); the worker keeps retrying."""
+
+    def on_link_restored(self) -> None:
+        """The Crazyflie answers again after ``on_link_lost``."""
+
+    def on_emergency(self) -> None:
+        """Emergency was triggered (runs in the caller's thread)."""
+
+
+class WorkerState:
+    CONNECTING = "connecting"
+    RUNNING = "running"
+    LOST = "lost"
+    FAILED = "failed"
+    STOPPED = "stopped"
+
+
+class CrazyflieWorker:
+    """One Crazyflie, one thread: connect sequence, then setpoints / keep-alives until stopped."""
+
+    def __init__(self, config: WorkerConfig, crazyflie: Any, listener: Optional[WorkerListener] = None,
+                 keepalive_period: float = 0.010, link_lost_timeout: float = 1.0,
+                 lost_retry_period: float = 0.25, quality_warning_interval: float = 5.0,
+                 rssi_period: float = 0.1, device_retry_window: float = 10.0, clock: Callable[[], float] = time.monotonic) -> None:
+        self.config = config
+        self.cf = crazyflie
+        self.listener = listener or WorkerListener()
+        self.keepalive_period = keepalive_period
+        self.link_lost_timeout = link_lost_timeout
+        self.lost_retry_period = lost_retry_period
+        self.quality_warning_interval = quality_warning_interval
+        self.rssi_period = rssi_period
+        self.device_retry_window = device_retry_window
+        self._clock = clock
+
+        self.state = WorkerState.CONNECTING
+        self.error: Optional[BaseException] = None
+        self.quality = LinkQuality()
+        self.setpoints_sent = 0
+        self.keepalives_sent = 0
+        self.log_topics: List[str] = []          # topics whose blocks were started
+        self.missing_fixed_topics: List[str] = []
+        self.param_types: Dict[str, str] = {}
+
+        self._cond = threading.Condition()
+        self._pending: Optional[Setpoint] = None
+        self._pending_since = 0.0
+        self._send_lock = threading.Lock()       # a setpoint check-and-send vs. emergency
+        self._emergency = False
+        self._stopping = False
+        self._ready = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self._last_ack = 0.0
+        self._quality_low = False
+        self._quality_warned_at = -1e9
+        self._rssi_from_log = False
+        self._rssi_sent_at = -1e9
+        self._blocks: List[Any] = []
+        self._downlink_packets = 0
+        self._pacer = PollPacer(keepalive_period, now=clock())
+        self._log_plan: List[PlannedBlock] = []
+        self.latency_listener: Optional[Callable[[float], None]] = None   # bench hook
+
+    # ------------------------------------------------------------------ lifecycle
+
+    @property
+    def uri(self) -> str:
+        return self.config.uri
+
+    @property
+    def emergency_active(self) -> bool:
+        return self._emergency
+
+    def start(self) -> None:
+        """Start the thread; the connect sequence runs in it. See :meth:`wait_ready`."""
+        if self._thread is not None:
+            raise RuntimeError("worker for %s already started" % self.uri)
+        self._thread = threading.Thread(target=self._run, name="crazyflie %s" % self.uri, daemon=True)
+        self._thread.start()
+
+    def wait_ready(self, timeout: float) -> None:
+        """Block until the connect sequence finished. Raises its error, or TimeoutError."""
+        if not self._ready.wait(timeout):
+            raise TimeoutError("Crazyflie %s did not finish connecting within %.1f s (is it switched on, "
+                               "on this channel and address, and in range?)" % (self.uri, timeout))
+        if self.error is not None:
+            raise self.error
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the thread and close the link. Safe to call twice and from any thread."""
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        t = self._thread
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout)
+            if t.is_alive():
+                # it closes the link itself when its current radio exchange ends
+                if timeout > 0:
+                    LOG.warning("%s: worker thread still busy after %.1f s; leaving it to finish", self.uri, timeout)
+                return
+        self._close()
+
+    def _close(self) -> None:
+        try:
+            self.cf.close()
+        except Exception as e:          # closing a dead link must not raise into the caller
+            LOG.debug("%s: close: %s", self.uri, e)
+        if self.state != WorkerState.FAILED:
+            self.state = WorkerState.STOPPED
+
+    # ------------------------------------------------------------------ commands (any thread)
+
+    def set_setpoint(self, setpoint: Setpoint) -> bool:
+        """Latest setpoint wins; wakes the worker at once. False (ignored) after emergency."""
+        if self._emergency:
+            return False
+        with self._cond:
+            self._pending = setpoint
+            self._pending_since = self._clock()
+            self._cond.notify_all()
+        return True
+
+    def cmd_vel(self, linear_x: float, linear_y: float, linear_z: float, angular_z: float) -> bool:
+        """A cmd_vel message mapped with this Crazyflie's trims (see :func:`setpoint_from_twist`)."""
+        sp = setpoint_from_twist(linear_x, linear_y, linear_z, angular_z,
+                                 self.config.roll_trim, self.config.pitch_trim)
+        return self.set_setpoint(sp)
+
+    def emergency(self) -> None:
+        """Stop flying now: no setpoint after this returns; e-stop packet; then zero thrust only."""
+        with self._send_lock:
+            first = not self._emergency
+            self._emergency = True
+            with self._cond:
+                self._pending = None
+                self._cond.notify_all()
+            try:
+                self.cf.emergency_stop()
+            except Exception as e:      # the worker keeps sending zero-thrust setpoints anyway
+                LOG.error("%s: emergency stop packet failed: %s (zero-thrust setpoints follow)", self.uri, e)
+        if first:
+            LOG.warning("%s: EMERGENCY: motors stopped; this Crazyflie will not fly again until it is "
+                        "removed and added again", self.uri)
+            try:
+                self.listener.on_emergency()
+            except Exception:
+                LOG.exception("%s: emergency listener failed", self.uri)
+
+    def update_params(self, values: Dict[str, Any]) -> Tuple[List[str], List[str]]:
+        """Write parameters (``{"group.name": value}``). Runs in the caller's thread.
+
+        Returns (written names, error messages); unknown names and bad values are errors, the
+        others are still written.
+        """
+        written, errors = [], []
+        for name, value in values.items():
+            ctype = self.param_types.get(name)
+            if ctype is None and self.param_types:
+                errors.append("%s: no such parameter on %s" % (name, self.uri))
+                continue
+            try:
+                v = coerce_param_value(name, ctype, value) if ctype else value
+                self.cf.params.set(name, v)
+                written.append(name)
+            except UnknownName:
+                errors.append("%s: no such parameter on %s" % (name, self.uri))
+            except (ValueError, CrazyflieError) as e:
+                errors.append("%s: %s" % (name, e))
+        return written, errors
+
+    # ------------------------------------------------------------------ thread
+
+    def _run(self) -> None:
+        try:
+            self._connect_sequence()
+        except BaseException as e:
+            self.error = e if isinstance(e, Exception) else RuntimeError(str(e))
+            self.state = WorkerState.FAILED
+            self._ready.set()
+            self._close()
+            return
+        self.state = WorkerState.RUNNING
+        self._last_ack = self._clock()
+        self._ready.set()
+        try:
+            self._loop()
+        except Exception:               # never let the thread die silently
+            LOG.exception("%s: worker stopped by an unexpected error", self.uri)
+            self.state = WorkerState.FAILED
+        finally:
+            if self._stopping:
+                self._close()
+
+    def _connect_sequence(self) -> None:
+        cfg, cf = self.config, self.cf
+        self._connect_link()
+        if self._stopping:
+            return
+        if cfg.enable_logging or cfg.log_blocks:
+            cf.log.reset()
+        if cfg.enable_parameters:
+            cf.params.fetch_toc()
+            self.param_types = toc_types(cf.params.toc)
+            values = cf.params.read_all()
+            self.listener.on_params(dict(values))
+        if cfg.enable_logging or cfg.log_blocks:
+            cf.log.fetch_toc()
+            self._log_plan = self._plan_logging(toc_types(cf.log.toc))
+            self._start_log_blocks()
+        self._release_thrust_lock()
+
+    def _connect_link(self) -> None:
+        """``cf.connect()``; a radio that is not there yet (dongle, or the simulated world still
+        starting) is retried for ``device_retry_window`` s. A silent Crazyflie fails at once."""
+        deadline = self._clock() + self.device_retry_window
+        while True:
+            try:
+                self.cf.connect()
+                return
+            except (RadioNotFound, ConnectionError) as e:
+                if self._stopping or self._clock() >= deadline:
+                    raise
+                LOG.info("%s: radio not available yet (%s); retrying", self.uri, e)
+                with self._cond:
+                    self._cond.wait(0.5)
+
+    def _plan_logging(self, types: Dict[str, str]) -> List[PlannedBlock]:
+        """Fixed topics (skipping those this Crazyflie lacks) + custom ones; errors for custom ones."""
+        cfg = self.config
+        topics: List[Tuple[str, int, Sequence[str]]] = []
+        plan: List[PlannedBlock] = []
+        self.missing_fixed_topics = []
+        if cfg.enable_logging:
+            fixed = list(FIXED_LOG_TOPICS)
+            rssi = getattr(getattr(getattr(self.cf, "link", None), "stats", None), "rssi", None)
+            if rssi is None and RSSI_LOG_VARIABLE in types:
+                fixed.append((RADIO_RSSI_TOPIC, 100, (RSSI_LOG_VARIABLE,)))
+                self._rssi_from_log = True
+            for name, period, variables in fixed:
+                missing = [v for v in variables if v not in types]
+                if missing:
+                    self.missing_fixed_topics.append(name)
+                    LOG.warning("%s: no %s topic: this Crazyflie has no log variable(s) %s",
+                                self.uri, name, ", ".join(missing))
+                    continue
+                topics.append((name, period, variables))
+            plan.extend(plan_log_blocks(topics, types, share=True))
+        custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
+        plan.extend(plan_log_blocks(custom, types, share=False))
+        return plan
+
+    def _start_log_blocks(self) -> None:
+        self._blocks = []
+        self.log_topics = []
+        for planned in self._log_plan:
+            callback = self._make_log_callback(planned)
+            try:
+                block = self.cf.log.create_block(list(planned.variables), planned.period_ms, callback)
+            except LogConfigError as e:
+                raise LogConfigError("%s: log block for %s: %s" % (
+                    self.uri, ", ".join(t for t, _, _ in planned.topics), e)) from e
+            self._blocks.append(block)
+            self.log_topics.extend(t for t, _, _ in planned.topics)
+        self._pacer.reset(log_packet_rate(self._log_plan), self._clock())
+
+    def _make_log_callback(self, planned: PlannedBlock) -> Callable[[int, List[float]], None]:
+        slices = list(planned.topics)
+        listener = self.listener
+
+        def on_packet(onboard_timestamp_ms: int, values: List[float]) -> None:
+            self._downlink_packets += 1
+            for topic, start, stop in slices:
+                part = list(values[start:stop])
+                if len(part) != stop - start:
+                    continue        # a truncated packet: never publish a partial message
+                if topic == RADIO_RSSI_TOPIC:
+                    listener.on_rssi(float(part[0]))
+                else:
+                    listener.on_log(topic, onboard_timestamp_ms, part)
+        return on_packet
+
+    def _release_thrust_lock(self) -> None:
+        """Zero setpoints until one is acked (the firmware unlocks thrust on a zero-thrust packet)."""
+        for _ in range(10):
+            if self._stopping:
+                return
+            if self.cf.send_setpoint(0.0, 0.0, 0.0, 0):
+                return
+        LOG.warning("%s: no ack for 10 zero setpoints after connecting (poor link?)", self.uri)
+
+    def _loop(self) -> None:
+        next_due = self._clock()
+        while True:
+            with self._cond:
+                while not self._stopping:
+                    now = self._clock()
+                    lost = self.state == WorkerState.LOST
+                    if self._pending is not None and not lost:
+                        break
+                    wait = next_due - now
+                    if wait <= 0:
+                        break
+                    self._cond.wait(wait)
+                if self._stopping:
+                    return
+                setpoint, since = self._pending, self._pending_since
+                self._pending = None
+            downlink_before = self._downlink_packets
+            acked = self._round_trip(setpoint, since)
+            now = self._clock()
+            if self.state == WorkerState.LOST:
+                next_due = now + self.lost_retry_period
+            else:
+                next_due = now + self._pacer.after_round_trip(self._downlink_packets - downlink_before, now)
+            if acked is not None:
+                self._after_round_trip(acked, now)
+
+    def _round_trip(self, setpoint: Optional[Setpoint], since: float) -> Optional[bool]:
+        """One packet to the Crazyflie. Returns acked, or None when the dongle failed."""
+        try:
+            with self._send_lock:
+                if self._emergency:
+                    return bool(self.cf.send_setpoint(0.0, 0.0, 0.0, 0))
+                if setpoint is not None:
+                    acked = bool(self.cf.send_setpoint(setpoint.roll, setpoint.pitch,
+                                                       setpoint.yawrate, setpoint.thrust))
+                    self.setpoints_sent += 1
+                    if self.latency_listener is not None:
+                        self.latency_listener(self._clock() - since)
+                    return acked
+                acked = bool(self.cf.send_keepalive())
+                self.keepalives_sent += 1
+                return acked
+        except RadioUnplugged as e:
+            self._mark_lost("the Crazyradio was unplugged (%s)" % e)
+            return None
+        except CrazyflieError as e:
+            self.quality.record(False)
+            self._check_lost(self._clock(), str(e))
+            return None
+
+    def _after_round_trip(self, acked: bool, now: float) -> None:
+        self.quality.record(acked)
+        if acked:
+            self._last_ack = now
+            if self.state == WorkerState.LOST:
+                self._restore()
+        else:
+            self._check_lost(now, "no ack for %.1f s" % (now - self._last_ack))
+        self._check_quality(now)
+        if acked and not self._rssi_from_log and now - self._rssi_sent_at >= self.rssi_period:
+            rssi = getattr(getattr(getattr(self.cf, "link", None), "stats", None), "rssi", None)
+            if rssi is not None:
+                self._rssi_sent_at = now
+                self.listener.on_rssi(float(rssi))
+
+    def _check_lost(self, now: float, reason: str) -> None:
+        if self.state == WorkerState.RUNNING and now - self._last_ack >= self.link_lost_timeout:
+            self._mark_lost(reason)
+
+    def _mark_lost(self, reason: str) -> None:
+        if self.state == WorkerState.LOST:
+            return
+        self.state = WorkerState.LOST
+        with self._cond:
+            self._pending = None      # never replay an old setpoint after the link comes back
+        LOG.error("%s: link lost: %s; retrying every %.2f s", self.uri, reason, self.lost_retry_period)
+        self.listener.on_link_lost(reason)
+
+    def _restore(self) -> None:
+        self.state = WorkerState.RUNNING
+        LOG.warning("%s: link restored", self.uri)
+        if self._log_plan:
+            # The firmware deletes all log blocks after 1 s without radio traffic: set them up again.
+            try:
+                self.cf.log.reset()
+                self._start_log_blocks()
+            except Exception as e:
+                LOG.error("%s: could not restart logging after the link came back: %s", self.uri, e)
+        self.listener.on_link_restored()
+
+    def link_quality(self) -> Tuple[float, int]:
+        """(acked / sent, samples) over the recent window: per radio packet from the link's own
+        statistics when it keeps them (safelink re-sends hide losses from ``send``'s result),
+        else over this worker's round trips."""
+        stats = getattr(getattr(self.cf, "link", None), "stats", None)
+        ratio = getattr(stats, "ack_ratio", None)
+        sent = getattr(stats, "sent", None)
+        if isinstance(ratio, float) and isinstance(sent, int):
+            return ratio, min(sent, LINK_QUALITY_WINDOW)
+        return self.quality.value, self.quality.samples
+
+    def _check_quality(self, now: float) -> None:
+        q, samples = self.link_quality()
+        if samples < LINK_QUALITY_MIN_SAMPLES:
+            return
+        if q < LINK_QUALITY_WARNING:
+            if not self._quality_low or now - self._quality_warned_at >= self.quality_warning_interval:
+                self._quality_low = True
+                self._quality_warned_at = now
+                LOG.warning("%s: link quality %.2f (below %.2f)", self.uri, q, LINK_QUALITY_WARNING)
+                self.listener.on_link_quality(q, True)
+        elif self._quality_low and q >= LINK_QUALITY_RECOVERED:
+            self._quality_low = False
+            LOG.info("%s: link quality back to %.2f", self.uri, q)
+            self.listener.on_link_quality(q, False)

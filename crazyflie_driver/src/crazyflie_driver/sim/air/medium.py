@@ -1,0 +1,305 @@
+"""The air between Crazyradio dongles and simulated Crazyflies.
+
+`LocalMedium` lives in the process that owns the world: a registry of `SimulatedCrazyflie` by
+(channel, datarate, address), per-dongle fault injection (packet loss and ack loss in percent of
+round trips, added latency, unplug) and a per-Crazyflie RSSI model. `RemoteMedium` is the same
+interface for another process: it forwards every call to a world server (`sim.server`) over a
+loopback TCP connection with a small binary framing (see `sim.wire`).
+"""
+from __future__ import annotations
+
+import json
+import os
+import random
+import socket
+import threading
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple
+
+from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.sim.air import wire
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 19840
+ENV_ADDRESS = "CRAZYFLIE_SIM_ADDRESS"
+POWER_DETECTOR_DBM = -64.0
+
+Key = Tuple[int, int, bytes]
+
+
+@dataclass
+class AirReply:
+    acked: bool
+    payload: bytes = b""
+    retries: int = 0
+    power_detector: bool = True
+    unplugged: bool = False
+    latency_s: float = 0.0
+
+
+@dataclass
+class DongleFaults:
+    packet_loss: float = 0.0     # percent of round trips where the Crazyflie never hears the packet
+    ack_loss: float = 0.0        # percent where it hears (and acts on) it but the ack is lost
+    latency_s: float = 0.0
+    unplugged: bool = False
+
+
+@dataclass
+class RssiModel:
+    mean_dbm: float = -40.0
+    noise_db: float = 2.0
+
+
+class WorldNotRunning(CrazyflieError, ConnectionError):
+    """No world server answers at the configured address."""
+
+
+def parse_address(text: Optional[str] = None) -> Tuple[str, int]:
+    """`host:port` (default from CRAZYFLIE_SIM_ADDRESS, else 127.0.0.1:19840); loopback only."""
+    if text is None:
+        text = os.environ.get(ENV_ADDRESS, "") or "%s:%d" % (DEFAULT_HOST, DEFAULT_PORT)
+    host, sep, port_text = str(text).strip().rpartition(":")
+    if not sep:
+        host, port_text = port_text, str(DEFAULT_PORT)
+    host = host or DEFAULT_HOST
+    if host == "localhost":
+        host = DEFAULT_HOST
+    if not host.startswith("127."):
+        raise ValueError("simulated world address %r: only loopback (127.x.x.x) is allowed" % (text,))
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise ValueError("simulated world address %r: port %r is not a number" % (text, port_text)) from None
+    if not 0 <= port <= 65535:
+        raise ValueError("simulated world address %r: port out of range" % (text,))
+    return host, port
+
+
+def key_of(uri: str) -> Key:
+    """(channel, datarate, address) of a radio URI string."""
+    from crazyflie_driver.crtp.uri import parse_uri
+    u = parse_uri(uri)
+    return (u.channel, u.datarate, bytes(u.address))
+
+
+class LocalMedium:
+    """The air in this process. Thread safe: every dongle may transmit from its own thread."""
+
+    def __init__(self, dongles: int = 1, seed: Optional[int] = None) -> None:
+        if dongles < 0:
+            raise ValueError("dongles must be >= 0, got %d" % dongles)
+        self._lock = threading.Lock()
+        self._rng = random.Random(seed)
+        self._faults: List[DongleFaults] = [DongleFaults() for _ in range(dongles)]
+        self._crazyflies: Dict[Key, Any] = {}
+        self._rssi: Dict[Key, RssiModel] = {}
+        self.round_trips = 0
+
+    # --- registry --------------------------------------------------------------------------
+    def add_crazyflie(self, crazyflie, channel: int, datarate: int, rssi: Optional[RssiModel] = None) -> Key:
+        key = (int(channel), int(datarate), bytes(crazyflie.address))
+        with self._lock:
+            if key in self._crazyflies:
+                raise ValueError("a simulated Crazyflie already listens on channel %d, rate %d, address %s"
+                                 % (key[0], key[1], key[2].hex().upper()))
+            self._crazyflies[key] = crazyflie
+            self._rssi[key] = rssi or RssiModel(mean_dbm=crazyflie.rssi_dbm)
+        return key
+
+    def remove_crazyflie(self, channel: int, datarate: int, address: bytes):
+        key = (int(channel), int(datarate), bytes(address))
+        with self._lock:
+            self._rssi.pop(key, None)
+            return self._crazyflies.pop(key, None)
+
+    def crazyflie(self, channel: int, datarate: int, address: bytes):
+        return self._crazyflies.get((int(channel), int(datarate), bytes(address)))
+
+    def crazyflies(self) -> Dict[Key, Any]:
+        with self._lock:
+            return dict(self._crazyflies)
+
+    def set_rssi(self, channel: int, datarate: int, address: bytes, mean_dbm: float,
+                 noise_db: Optional[float] = None) -> None:
+        key = (int(channel), int(datarate), bytes(address))
+        with self._lock:
+            if key not in self._crazyflies:
+                raise KeyError("no simulated Crazyflie on %r" % (key,))
+            model = self._rssi[key]
+            model.mean_dbm = float(mean_dbm)
+            if noise_db is not None:
+                model.noise_db = float(noise_db)
+
+    # --- dongles -----------------------------------------------------------------------------
+    def dongle_count(self) -> int:
+        return len(self._faults)
+
+    def set_dongle_count(self, n: int) -> None:
+        with self._lock:
+            while len(self._faults) < n:
+                self._faults.append(DongleFaults())
+            del self._faults[n:]
+
+    def set_dongle_faults(self, dongle: int, packet_loss: Optional[float] = None,
+                          ack_loss: Optional[float] = None, latency_s: Optional[float] = None,
+                          unplugged: Optional[bool] = None) -> None:
+        with self._lock:
+            if not 0 <= dongle < len(self._faults):
+                raise ValueError("no simulated dongle %d (there are %d)" % (dongle, len(self._faults)))
+            f = self._faults[dongle]
+            if packet_loss is not None:
+                f.packet_loss = _percent("packet_loss", packet_loss)
+            if ack_loss is not None:
+                f.ack_loss = _percent("ack_loss", ack_loss)
+            if latency_s is not None:
+                if latency_s < 0:
+                    raise ValueError("latency_s must be >= 0, got %r" % (latency_s,))
+                f.latency_s = float(latency_s)
+            if unplugged is not None:
+                f.unplugged = bool(unplugged)
+
+    def dongle_faults(self, dongle: int) -> DongleFaults:
+        with self._lock:
+            f = self._faults[dongle]
+            return DongleFaults(f.packet_loss, f.ack_loss, f.latency_s, f.unplugged)
+
+    # --- the air -----------------------------------------------------------------------------
+    def transmit(self, dongle: int, channel: int, datarate: int, address: bytes,
+                 data: bytes, ack_enabled: bool = True, arc: int = 3) -> AirReply:
+        key = (channel, datarate, bytes(address))
+        with self._lock:
+            self.round_trips += 1
+            if not 0 <= dongle < len(self._faults):
+                return AirReply(acked=False, power_detector=False, unplugged=True)
+            f = self._faults[dongle]
+            if f.unplugged:
+                return AirReply(acked=False, power_detector=False, unplugged=True, latency_s=f.latency_s)
+            cf = self._crazyflies.get(key)
+            lost = f.packet_loss > 0 and self._rng.random() * 100.0 < f.packet_loss
+            ack_lost = f.ack_loss > 0 and self._rng.random() * 100.0 < f.ack_loss
+            rssi_dbm = 0.0
+            if cf is not None:
+                model = self._rssi[key]
+                rssi_dbm = round(model.mean_dbm + (self._rng.gauss(0.0, model.noise_db) if model.noise_db else 0.0))
+                rssi_dbm = min(0.0, max(-127.0, rssi_dbm))
+            latency = f.latency_s
+        miss = AirReply(acked=False, retries=arc & 0x0F, power_detector=False, latency_s=latency)
+        if cf is None or lost or not cf.powered:
+            return miss
+        cf.rssi_dbm = rssi_dbm
+        payload = cf.handle_radio_packet(data, ack_enabled)
+        if not ack_enabled or ack_lost:
+            return miss
+        return AirReply(acked=True, payload=payload, retries=0,
+                        power_detector=rssi_dbm > POWER_DETECTOR_DBM, latency_s=latency)
+
+
+def _percent(name: str, value: float) -> float:
+    v = float(value)
+    if not 0.0 <= v <= 100.0:
+        raise ValueError("%s must be a percentage 0..100, got %r" % (name, value))
+    return v
+
+
+class RemoteMedium:
+    """The `Medium` of a world server in another process (loopback TCP, one request at a time)."""
+
+    def __init__(self, host: Optional[str] = None, port: Optional[int] = None, timeout: float = 5.0) -> None:
+        if host is not None and port is None and ":" in host:
+            self.host, self.port = parse_address(host)
+        elif host is None and port is None:
+            self.host, self.port = parse_address(None)
+        else:
+            self.host, self.port = parse_address("%s:%d" % (host or DEFAULT_HOST, DEFAULT_PORT if port is None else port))
+        self.timeout = float(timeout)
+        self._lock = threading.Lock()
+        self._conn: Optional[wire.Connection] = None
+
+    @property
+    def address(self) -> str:
+        return "%s:%d" % (self.host, self.port)
+
+    def _connect(self) -> wire.Connection:
+        try:
+            sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
+        except OSError as e:
+            raise WorldNotRunning("no simulated world at %s (start one with: rosrun crazyflie_driver "
+                                  "crazyflie_sim --uri radio://0/80/2M/E7E7E7E7E7): %s"
+                                  % (self.address, e.strerror or e)) from None
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return wire.Connection(sock)
+
+    def _request(self, op: int, body: bytes) -> Tuple[int, bytes]:
+        """One request/response; reconnects once if the connection dropped since the last call."""
+        with self._lock:
+            for attempt in (0, 1):
+                fresh = self._conn is None
+                if fresh:
+                    self._conn = self._connect()
+                try:
+                    self._conn.send(op, body)
+                    return self._conn.receive()
+                except (OSError, EOFError) as e:
+                    self._conn.close()
+                    self._conn = None
+                    if fresh or attempt:
+                        raise WorldNotRunning("simulated world at %s went away (%s)" % (self.address, e)) from None
+            raise AssertionError("unreachable")
+
+    def close(self) -> None:
+        with self._lock:
+            if self._conn is not None:
+                self._conn.close()
+                self._conn = None
+
+    # --- Medium ------------------------------------------------------------------------------
+    def transmit(self, dongle: int, channel: int, datarate: int, address: bytes,
+                 data: bytes, ack_enabled: bool = True, arc: int = 3) -> AirReply:
+        status, body = self._request(wire.OP_TRANSMIT,
+                                     wire.encode_transmit(dongle, channel, datarate, address, data, ack_enabled, arc))
+        if status != wire.STATUS_OK:
+            raise CrazyflieError("world server refused a radio packet: %s" % body.decode("utf-8", "replace"))
+        return wire.decode_air_reply(body, AirReply)
+
+    def control(self, op: str, **args) -> Any:
+        """A control call on the world server (see `WorldServer.control`); raises its error text."""
+        status, body = self._request(wire.OP_CONTROL, json.dumps({"op": op, "args": args}).encode("utf-8"))
+        result = json.loads(body.decode("utf-8")) if body else None
+        if status != wire.STATUS_OK:
+            raise CrazyflieError("simulated world: %s" % (result,))
+        return result
+
+    def set_dongle_faults(self, dongle: int, packet_loss: Optional[float] = None,
+                          ack_loss: Optional[float] = None, latency_s: Optional[float] = None,
+                          unplugged: Optional[bool] = None) -> None:
+        self.control("set_dongle_faults", dongle=dongle, packet_loss=packet_loss, ack_loss=ack_loss,
+                     latency_s=latency_s, unplugged=unplugged)
+
+    def dongle_count(self) -> int:
+        return int(self.control("dongle_count"))
+
+    # convenience wrappers used by tests and tools
+    def add_crazyflie(self, uri: str, name: Optional[str] = None, position=(0.0, 0.0, 0.0),
+                      firmware: str = "current") -> Dict[str, Any]:
+        return self.control("add_crazyflie", uri=uri, name=name, position=list(position), firmware=firmware)
+
+    def remove_crazyflie(self, uri: str) -> None:
+        self.control("remove_crazyflie", uri=uri)
+
+    def power(self, uri: str, on: bool) -> None:
+        self.control("power", uri=uri, on=bool(on))
+
+    def crazyflie_state(self, uri: str) -> Dict[str, Any]:
+        return self.control("state", uri=uri)
+
+    def list_crazyflies(self) -> List[Dict[str, Any]]:
+        return self.control("list")
+
+    def set_rssi(self, uri: str, mean_dbm: float, noise_db: Optional[float] = None) -> None:
+        self.control("set_rssi", uri=uri, mean_dbm=mean_dbm, noise_db=noise_db)
+
+    def ping(self) -> float:
+        """World time of the server (a cheap liveness check)."""
+        return float(self.control("time"))
+

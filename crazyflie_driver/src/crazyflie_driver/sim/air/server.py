@@ -1,0 +1,357 @@
+"""The world server: one process owning the simulated world that every tool and node shares.
+
+`WorldServer` owns a world (`sim.world.World`), the `LocalMedium` and one `SimulatedCrazyflie` per
+vehicle; it serves `RemoteMedium` clients on loopback TCP (one thread per connection), runs the
+firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
+
+CLI: ``rosrun crazyflie_driver crazyflie_sim --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import socket
+import sys
+import threading
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.sim.air import wire
+from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
+from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
+
+_log = logging.getLogger(__name__)
+UDP_BASE_PORT = 19850
+TICK_PERIOD_S = 0.001
+
+
+@dataclass
+class SimEntry:
+    uri: str
+    name: str
+    key: Tuple[int, int, bytes]
+    crazyflie: SimulatedCrazyflie
+    udp: Any = None          # sim.udp.UdpEndpoint when UDP is on
+
+    def describe(self) -> Dict[str, Any]:
+        d = {"uri": self.uri, "name": self.name, "firmware": self.crazyflie.profile.generation}
+        if self.udp is not None:
+            d["udp"] = self.udp.uri
+        return d
+
+
+class WorldServer:
+    """Serves a world's simulated Crazyflies to RemoteMedium clients (and UDP clients)."""
+
+    def __init__(self, world, dongles: int = 1, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+                 seed: Optional[int] = None, udp_base_port: Optional[int] = None) -> None:
+        self.world = world
+        self.medium = LocalMedium(dongles, seed)
+        self.host, self.port = parse_address("%s:%d" % (host, port))
+        self.udp_base_port = udp_base_port
+        self._entries: Dict[str, SimEntry] = {}
+        self._lock = threading.RLock()
+        self._listener: Optional[socket.socket] = None
+        self._clients: List[socket.socket] = []
+        self._threads: List[threading.Thread] = []
+        self._running = threading.Event()
+        self._udp_next = 0
+        world.add_tick_listener(self._tick, TICK_PERIOD_S)
+
+    # --- Crazyflies --------------------------------------------------------------------------
+    def add_crazyflie(self, uri: str, name: Optional[str] = None, position: Sequence[float] = (0.0, 0.0, 0.0),
+                      firmware: str = "current", yaw: float = 0.0) -> SimulatedCrazyflie:
+        if firmware not in PROFILES:
+            raise ValueError("unknown firmware %r for %s (choose one of: %s)" % (firmware, uri, ", ".join(PROFILES)))
+        key = key_of(uri)
+        pos = tuple(float(v) for v in position)
+        if len(pos) != 3:
+            raise ValueError("position of %s must have 3 numbers, got %r" % (uri, position))
+        with self._lock:
+            if self.medium.crazyflie(*key) is not None:
+                raise ValueError("a simulated Crazyflie already answers on %s" % uri)
+            name = name or "cf%d" % (len(self._entries) + 1)
+            if name in self._entries:
+                raise ValueError("a simulated Crazyflie is already called %r" % name)
+            vehicle = self.world.add_vehicle(name, position=pos, yaw=float(yaw), firmware=firmware)
+            cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware)
+            self.medium.add_crazyflie(cf, key[0], key[1])
+            entry = SimEntry(uri, name, key, cf)
+            if self.udp_base_port is not None:
+                from crazyflie_driver.sim.air.udp import UdpEndpoint
+                port = self.udp_base_port + self._udp_next if self.udp_base_port else 0
+                self._udp_next += 1
+                entry.udp = UdpEndpoint(cf, port=port)
+                entry.udp.start()
+            self._entries[name] = entry
+            return cf
+
+    def remove_crazyflie(self, uri_or_name: str) -> None:
+        with self._lock:
+            entry = self._find(uri_or_name)
+            self.medium.remove_crazyflie(*entry.key)
+            if entry.udp is not None:
+                entry.udp.stop()
+            del self._entries[entry.name]
+            try:
+                self.world.remove_vehicle(entry.name)
+            except Exception:
+                _log.exception("world.remove_vehicle(%s) failed", entry.name)
+
+    def _find(self, uri_or_name: str) -> SimEntry:
+        entry = self._entries.get(uri_or_name)
+        if entry is not None:
+            return entry
+        try:
+            key = key_of(uri_or_name)
+        except CrazyflieError:
+            raise KeyError("no simulated Crazyflie called %r" % (uri_or_name,)) from None
+        for entry in self._entries.values():
+            if entry.key == key:
+                return entry
+        raise KeyError("no simulated Crazyflie on %s" % (uri_or_name,))
+
+    def crazyflie(self, uri_or_name: str) -> SimulatedCrazyflie:
+        with self._lock:
+            return self._find(uri_or_name).crazyflie
+
+    def entries(self) -> List[SimEntry]:
+        with self._lock:
+            return list(self._entries.values())
+
+    def _tick(self, now: float) -> None:
+        for entry in list(self._entries.values()):
+            entry.crazyflie.tick(now)
+
+    # --- control calls -----------------------------------------------------------------------
+    def control(self, op: str, args: Dict[str, Any]) -> Any:
+        """Control operations for tests and tools (also reachable through RemoteMedium.control)."""
+        if op == "time":
+            return float(self.world.time)
+        if op == "dongle_count":
+            return self.medium.dongle_count()
+        if op == "set_dongle_faults":
+            self.medium.set_dongle_faults(int(args["dongle"]), args.get("packet_loss"), args.get("ack_loss"),
+                                          args.get("latency_s"), args.get("unplugged"))
+            return None
+        if op == "add_crazyflie":
+            self.add_crazyflie(args["uri"], args.get("name"), args.get("position") or (0.0, 0.0, 0.0),
+                               args.get("firmware") or "current")
+            return self._find(args["uri"]).describe()
+        if op == "remove_crazyflie":
+            self.remove_crazyflie(args["uri"])
+            return None
+        if op == "list":
+            return [e.describe() for e in self.entries()]
+        if op == "state":
+            return self.crazyflie(args["uri"]).snapshot()
+        if op == "vehicle_state":   # the body: position, velocity, motors, lock (World's Vehicle.state)
+            with self._lock:
+                name = self._find(args["uri"]).name
+            return self.world.vehicle(name).state()
+        if op == "power":
+            cf = self.crazyflie(args["uri"])
+            cf.power_on() if args.get("on") else cf.power_off()
+            return None
+        if op == "reboot":
+            self.crazyflie(args["uri"]).reboot()
+            return None
+        if op == "set_rssi":
+            entry = self._find(args["uri"])
+            self.medium.set_rssi(*entry.key, mean_dbm=float(args["mean_dbm"]), noise_db=args.get("noise_db"))
+            return None
+        raise ValueError("unknown control operation %r" % (op,))
+
+    # --- serving -----------------------------------------------------------------------------
+    def start(self) -> Tuple[str, int]:
+        """Listen and serve in background threads; returns the bound (host, port)."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((self.host, self.port))
+        except OSError as e:
+            sock.close()
+            raise CrazyflieError("cannot serve the simulated world on %s:%d: %s (is another crazyflie_sim "
+                                 "running? choose another with --address)" % (self.host, self.port, e.strerror or e))
+        sock.listen(16)
+        sock.settimeout(0.2)
+        self._listener = sock
+        self.port = sock.getsockname()[1]
+        self._running.set()
+        t = threading.Thread(target=self._accept_loop, name="world-server-accept", daemon=True)
+        t.start()
+        self._threads.append(t)
+        return self.host, self.port
+
+    @property
+    def address(self) -> str:
+        return "%s:%d" % (self.host, self.port)
+
+    def _accept_loop(self) -> None:
+        while self._running.is_set():
+            try:
+                client, _ = self._listener.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                break
+            client.settimeout(None)
+            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            with self._lock:
+                self._clients.append(client)
+            t = threading.Thread(target=self._serve, args=(client,), name="world-server-client", daemon=True)
+            t.start()
+            self._threads.append(t)
+
+    def _serve(self, client: socket.socket) -> None:
+        conn = wire.Connection(client)
+        medium = self.medium
+        try:
+            while self._running.is_set():
+                try:
+                    code, body = conn.receive()
+                except (EOFError, OSError):
+                    break
+                try:
+                    if code == wire.OP_TRANSMIT:
+                        reply = medium.transmit(*wire.decode_transmit(body))
+                        conn.send(wire.STATUS_OK, wire.encode_air_reply(reply))
+                        continue
+                    if code == wire.OP_CONTROL:
+                        request = json.loads(body.decode("utf-8"))
+                        result = self.control(str(request.get("op")), dict(request.get("args") or {}))
+                        conn.send(wire.STATUS_OK, json.dumps(result).encode("utf-8"))
+                        continue
+                    conn.send(wire.STATUS_ERROR, json.dumps("unknown request code %d" % code).encode("utf-8"))
+                except OSError:
+                    break
+                except Exception as e:  # a bad request gets an answer, never a dead server
+                    text = str(e.args[0]) if isinstance(e, KeyError) and e.args else str(e)
+                    try:
+                        conn.send(wire.STATUS_ERROR, json.dumps(text or type(e).__name__).encode("utf-8"))
+                    except OSError:
+                        break
+        finally:
+            conn.close()
+            with self._lock:
+                if client in self._clients:
+                    self._clients.remove(client)
+
+    def stop(self) -> None:
+        self._running.clear()
+        if self._listener is not None:
+            try:
+                self._listener.close()
+            except OSError:
+                pass
+        with self._lock:
+            for c in self._clients:
+                try:
+                    c.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+                c.close()
+            self._clients.clear()
+            for entry in self._entries.values():
+                if entry.udp is not None:
+                    entry.udp.stop()
+        for t in self._threads:
+            if t is not threading.current_thread():
+                t.join(timeout=2.0)
+        self._threads.clear()
+
+
+# --- command line --------------------------------------------------------------------------------
+def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
+    """Vehicles from YAML: a list (or `vehicles:` list) of {uri, name, position, firmware, yaw}."""
+    import yaml
+    try:
+        with open(path) as f:
+            doc = yaml.safe_load(f)
+    except OSError as e:
+        raise ValueError("cannot read vehicle config %s: %s" % (path, e.strerror or e)) from None
+    except yaml.YAMLError as e:
+        raise ValueError("vehicle config %s is not valid YAML: %s" % (path, e)) from None
+    items = doc.get("vehicles") if isinstance(doc, dict) else doc
+    if not isinstance(items, list):
+        raise ValueError("vehicle config %s: expected a list of vehicles (or a 'vehicles:' list)" % path)
+    out = []
+    for i, item in enumerate(items):
+        if not isinstance(item, dict) or "uri" not in item:
+            raise ValueError("vehicle config %s: entry %d needs at least a 'uri'" % (path, i + 1))
+        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw"}
+        if unknown:
+            raise ValueError("vehicle config %s: entry %d has unknown keys %s" % (path, i + 1, sorted(unknown)))
+        out.append(dict(item))
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="crazyflie_sim", description="Run the simulated Crazyflie world.")
+    p.add_argument("--uri", action="append", default=[], help="radio URI of a simulated Crazyflie (repeatable)")
+    p.add_argument("--config", help="YAML file listing vehicles (uri, name, position, firmware, yaw)")
+    p.add_argument("--address", default=None,
+                   help="host:port to serve on (default $CRAZYFLIE_SIM_ADDRESS or %s:%d)" % (DEFAULT_HOST, DEFAULT_PORT))
+    p.add_argument("--speed", type=float, default=1.0, help="world time per real time (0 = as fast as possible)")
+    p.add_argument("--firmware", default="current", choices=sorted(PROFILES), help="firmware of --uri vehicles")
+    p.add_argument("--dongles", type=int, default=1, help="number of simulated Crazyradios")
+    p.add_argument("--udp", action="store_true", help="also serve udp://127.0.0.1:%d+i per Crazyflie" % UDP_BASE_PORT)
+    p.add_argument("--seed", type=int, default=None, help="seed for noise and faults")
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="crazyflie_sim: %(message)s")
+    args = build_parser().parse_args(argv)
+    try:
+        vehicles = [{"uri": u, "firmware": args.firmware} for u in args.uri]
+        if args.config:
+            vehicles += load_vehicle_config(args.config)
+        if not vehicles:
+            raise ValueError("no Crazyflies to simulate: give --uri radio://0/80/2M/E7E7E7E701 or --config FILE")
+        for v in vehicles:
+            key_of(str(v["uri"]))             # refuse a bad URI before building the world
+        host, port = parse_address(args.address)
+        if args.speed < 0:
+            raise ValueError("--speed must be >= 0, got %r" % args.speed)
+        if args.dongles < 1:
+            raise ValueError("--dongles must be >= 1, got %r" % args.dongles)
+        from crazyflie_driver.sim.world.world import World
+        world = World(speed=args.speed, seed=args.seed)
+        server = WorldServer(world, dongles=args.dongles, host=host, port=port, seed=args.seed,
+                             udp_base_port=UDP_BASE_PORT if args.udp else None)
+        for i, v in enumerate(vehicles):
+            pos = v.get("position") or (0.5 * i, 0.0, 0.0)
+            server.add_crazyflie(str(v["uri"]), v.get("name"), pos, str(v.get("firmware") or args.firmware),
+                                 float(v.get("yaw") or 0.0))
+        server.start()
+    except (ValueError, KeyError, CrazyflieError, ImportError) as e:
+        print("crazyflie_sim: error: %s" % (e,), file=sys.stderr)
+        return 2
+    stop = threading.Event()
+
+    def on_signal(signum, frame):  # noqa: ARG001
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    world.start()
+    for e in server.entries():
+        _log.info("%s (%s firmware) on %s%s", e.name, e.crazyflie.profile.generation, e.uri,
+                  " and %s" % e.udp.uri if e.udp is not None else "")
+    _log.info("world served on %s (speed %.2f); Ctrl-C to stop", server.address, args.speed)
+    try:
+        while not stop.wait(0.5):
+            pass
+    finally:
+        server.stop()
+        world.stop()
+        _log.info("stopped")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The simulated Crazyflie's protocol side: link layer, TOCs, ports."""

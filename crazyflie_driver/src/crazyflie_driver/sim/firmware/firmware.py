@@ -1,0 +1,371 @@
+"""The simulated Crazyflie's protocol side: nRF radio link plus the STM's CRTP ports.
+
+`SimulatedCrazyflie` answers the real protocol of one of two firmware generations (CRTP.md
+Decisions 1): "current" (protocol 12, TOC V2, 1-byte empty acks) or "2016.02" (protocol 2, TOC V1,
+3-byte empty acks carrying RSSI). Its flight behaviour lives in the `Vehicle` it is given; this
+object only turns packets into vehicle calls and vehicle readings into packets.
+
+Two entry points: `handle_radio_packet` (what the dongle's radio delivers; returns the ack payload)
+and `handle_crtp` + `pop_outgoing` (a packet link such as UDP). `tick(world_time)` runs the log
+timers. Every entry point is thread safe and never raises on malformed input.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable, Deque, Dict, Optional, Sequence, Tuple, Union
+
+from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
+from crazyflie_driver.sim.firmware import ports
+from crazyflie_driver.sim.firmware import tables as T
+from crazyflie_driver.sim.firmware.link import NrfLink, SYS_ALL_OFF, SYS_RESET, SYS_STM_OFF
+from crazyflie_driver.sim.firmware.log import LogService
+from crazyflie_driver.sim.firmware.param import ParamService
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FirmwareProfile:
+    """What differs between the firmware generations the simulation speaks."""
+
+    generation: str
+    protocol_version: int
+    firmware_version: str
+    device_type: str
+    device_type_query: bool          # platform ch 1 cmd 2 and the ch 0 arm/recover commands
+    tx_queue_size: int
+    rssi_in_empty_ack: bool
+    link_loss_timeout: Optional[float]   # radio silence after which running log blocks are deleted
+    ports: frozenset
+    production: bool = True
+
+
+PROFILES: Dict[str, FirmwareProfile] = {
+    T.GEN_CURRENT: FirmwareProfile(T.GEN_CURRENT, 12, "2026.04", "Crazyflie 2.0", True, 200, False, 1.0,
+                                   frozenset({0, 2, 3, 4, 5, 6, 7, 9, 13, 15})),
+    T.GEN_2016: FirmwareProfile(T.GEN_2016, 2, "2016.02", "Crazyflie 2.0", False, 60, True, None,
+                                frozenset({0, 2, 3, 4, 5, 13, 15})),
+}
+
+
+def profile_for(firmware: str) -> FirmwareProfile:
+    try:
+        return PROFILES[firmware]
+    except KeyError:
+        raise ValueError("unknown firmware generation %r (choose one of: %s)"
+                         % (firmware, ", ".join(sorted(PROFILES)))) from None
+
+
+@dataclass
+class SimState:
+    """What the simulated Crazyflie saw, for tests and the world server's control calls."""
+
+    powered: bool = True
+    emergency: bool = False
+    emergency_reason: str = ""
+    armed: bool = True                      # auto-arming is the firmware default
+    last_setpoint: Optional[Tuple[float, float, float, int]] = None
+    setpoints: int = 0
+    last_generic: Optional[Tuple[int, bytes]] = None
+    external_position: Optional[Tuple[float, float, float]] = None
+    estop_watchdog: Optional[float] = None
+    packets_by_port: Dict[int, int] = field(default_factory=dict)
+    tx_dropped: int = 0
+    reboots: int = 0
+
+
+class SimulatedCrazyflie:
+    """One simulated Crazyflie (protocol side) bound to a vehicle of the world."""
+
+    def __init__(self, address: bytes, vehicle: Any, firmware: str = T.GEN_CURRENT,
+                 rssi_dbm: float = -40.0, param_table: Optional[Sequence[T.ParamVar]] = None,
+                 log_table: Optional[Sequence[T.LogVar]] = None) -> None:
+        self.address = bytes(address)
+        self.vehicle = vehicle
+        self.profile = profile_for(firmware)
+        self.rssi_dbm = float(rssi_dbm)          # RSSI of the last uplink packet (set by the medium)
+        self.state = SimState()
+        self.lock = threading.RLock()
+        self._param_table = tuple(param_table if param_table is not None else T.PARAM_TABLE)
+        self._log_table = tuple(log_table if log_table is not None else T.LOG_TABLE)
+        self._tx: Deque[bytes] = deque()
+        self._tx_listener: Optional[Callable[[], None]] = None
+        self._last_radio: Optional[float] = None
+        self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
+                            self.profile.rssi_in_empty_ack, self._system_command)
+        self._ports: Dict[int, Callable[[int, int, bytes], None]] = {}
+        self._boot()
+
+    # --- lifecycle ---------------------------------------------------------------------------
+    def _boot(self) -> None:
+        self._boot_time = self.now()
+        self._tx.clear()
+        self._last_radio = None
+        self.packet_link_active = False      # True while a packet link (UDP) is the active link
+        self.link.reset()
+        self.params = ParamService(self.profile.generation, self.profile.protocol_version, self._param_table,
+                                   self._vehicle_param_defaults(), self._write_param, self.send)
+        self.logs = LogService(self.profile.generation, self._log_table, self.read_value, self.send, self.now)
+        self.console = ports.Console(self.send)
+        handlers = {0: None, 2: self.params.handle, 3: self._bind(ports.commander), 4: self._bind(ports.memory),
+                    5: self.logs.handle, 6: self._bind(ports.localization), 7: self._bind(ports.generic_setpoint),
+                    9: self._bind(ports.supervisor), 13: self._bind(ports.platform), 15: self._bind(ports.link)}
+        self._ports = {p: h for p, h in handlers.items() if h is not None and p in self.profile.ports}
+        cpu_id = "%08X%08X%08X" % tuple(int(self.params.value("cpu.id%d" % i)) for i in range(3)) \
+            if self.params.ident("cpu.id0") is not None else "0" * 24
+        self.console.write(ports.boot_text(self.profile.device_type, self.profile.firmware_version, cpu_id,
+                                           self.profile.production))
+
+    def _bind(self, fn):
+        return lambda header, channel, data: fn(self, header, channel, data)
+
+    def reboot(self) -> None:
+        """Power cycle: protocol state back to boot (params, log blocks, safelink, console text)."""
+        with self.lock:
+            hook = getattr(self.vehicle, "reboot", None)
+            if hook is not None:
+                try:
+                    hook()
+                except Exception:
+                    _log.exception("vehicle.reboot failed")
+            reboots = self.state.reboots + 1
+            self.state = SimState(reboots=reboots)
+            self._boot()
+
+    def power_off(self) -> None:
+        with self.lock:
+            self._cut_power()
+
+    def _cut_power(self) -> None:
+        """STM off: the motors stop with it (the vehicle would otherwise fly on its last setpoint)."""
+        self.state.powered = False
+        stop = getattr(self.vehicle, "stop_motors", None)
+        try:
+            stop() if stop is not None else self.vehicle.set_rpyt(0.0, 0.0, 0.0, 0)
+        except Exception:
+            _log.exception("stopping the vehicle's motors at power-off failed")
+
+    def power_on(self) -> None:
+        with self.lock:
+            if not self.state.powered:
+                self.reboot()
+
+    @property
+    def powered(self) -> bool:
+        return self.state.powered
+
+    # --- clocks and readings -----------------------------------------------------------------
+    def now(self) -> float:
+        try:
+            return float(self.vehicle.time())
+        except Exception:
+            return 0.0
+
+    def timestamp_ms(self, now: Optional[float] = None) -> int:
+        t = self.now() if now is None else now
+        return max(0, int(round((t - self._boot_time) * 1000.0))) & 0xFFFFFF
+
+    def _rssi_positive(self) -> int:
+        return int(round(-self.rssi_dbm))
+
+    def radio_connected(self, now: Optional[float] = None) -> bool:
+        if self._last_radio is None:
+            return False
+        t = self.now() if now is None else now
+        return t - self._last_radio <= 1.0
+
+    def read_value(self, name: str) -> float:
+        """Current value of a log variable (vehicle readings; radio variables from the link)."""
+        if name == "radio.rssi":
+            return float(self._rssi_positive())
+        if name == "radio.isConnected":
+            return 1.0 if self.radio_connected() else 0.0
+        if name == "sys.tick":
+            return float(self.timestamp_ms())
+        if name == "sys.armed":
+            return 1.0 if self.state.armed else 0.0
+        if name == "supervisor.info":
+            return float(self.supervisor_bits())
+        return float(self.vehicle.read(name))
+
+    def _vehicle_param_defaults(self) -> Dict[str, float]:
+        fn = getattr(self.vehicle, "param_defaults", None)
+        try:
+            return dict(fn()) if fn is not None else {}
+        except Exception:
+            _log.exception("vehicle.param_defaults failed")
+            return {}
+
+    def _write_param(self, name: str, value: float) -> None:
+        fn = getattr(self.vehicle, "write_param", None)
+        if fn is not None:
+            fn(name, value)
+
+    def supervisor_bits(self) -> int:
+        def flag(name: str, default: float) -> int:
+            try:
+                return 1 if self.vehicle.read(name) else 0
+            except Exception:
+                return 1 if default else 0
+        try:   # the vehicle's own locks (setpoint watchdog, tumble, battery) lock the supervisor too
+            vehicle_locked = bool(getattr(self.vehicle, "lock_reason", ""))
+        except Exception:
+            vehicle_locked = False
+        locked = self.state.emergency or vehicle_locked
+        bits = 1 << 0                                   # can arm
+        bits |= int(self.state.armed) << 1
+        bits |= 1 << 2                                  # auto arm
+        bits |= (0 if locked else flag("sys.canfly", 1)) << 3
+        bits |= flag("sys.isFlying", 0) << 4
+        bits |= flag("sys.isTumbled", 0) << 5
+        bits |= int(locked) << 6
+        return bits
+
+    # --- packets in --------------------------------------------------------------------------
+    def handle_radio_packet(self, data: bytes, ack_requested: bool = True) -> bytes:
+        """One radio packet from a dongle; returns the ack payload the nRF sends back."""
+        with self.lock:
+            if not self.state.powered:
+                return b""
+            self._last_radio = self.now()
+            self.packet_link_active = False
+            try:
+                return self.link.handle(bytes(data), ack_requested)
+            except Exception:
+                _log.exception("radio packet %s broke the simulated nRF", bytes(data).hex())
+                return self.link.empty_ack()
+
+    def handle_crtp(self, packet: Union[bytes, CRTPPacket]) -> None:
+        """One CRTP packet (header + payload) from a packet link; replies go to the TX queue."""
+        raw = packet.to_bytes() if isinstance(packet, CRTPPacket) else bytes(packet)
+        with self.lock:
+            if self.state.powered:
+                # A packet link is now the active link (as the firmware switches to USB): radio
+                # silence from an earlier radio user must not delete this host's log blocks.
+                self._last_radio = None
+                self.packet_link_active = True
+                self._dispatch(raw)
+
+    def _deliver_from_radio(self, raw: bytes) -> None:
+        self._dispatch(raw)
+
+    def _dispatch(self, raw: bytes) -> None:
+        if not raw or len(raw) > MAX_PAYLOAD + 1:
+            return
+        header = raw[0]
+        port, channel = header >> 4, header & 0x03
+        handler = self._ports.get(port)
+        if handler is None:
+            return
+        self.state.packets_by_port[port] = self.state.packets_by_port.get(port, 0) + 1
+        try:
+            handler(header, channel, raw[1:])
+        except Exception:
+            _log.exception("CRTP packet %s broke port %d of the simulated firmware", raw.hex(), port)
+
+    def _system_command(self, cmd: int) -> None:
+        if cmd == SYS_RESET:
+            self.reboot()
+        elif cmd in (SYS_ALL_OFF, SYS_STM_OFF):
+            self._cut_power()
+
+    # --- packets out -------------------------------------------------------------------------
+    def send(self, header: int, payload: bytes) -> bool:
+        """Queue a packet for the host; False (and dropped) when the TX queue is full."""
+        with self.lock:
+            if len(self._tx) >= self.profile.tx_queue_size:
+                self.state.tx_dropped += 1
+                return False
+            self._tx.append(bytes([header & 0xFF]) + bytes(payload[:MAX_PAYLOAD]))
+            listener = self._tx_listener
+        if listener is not None:
+            try:
+                listener()
+            except Exception:
+                _log.exception("TX listener failed")
+        return True
+
+    def _pop_locked(self) -> Optional[bytes]:
+        return self._tx.popleft() if self._tx else None
+
+    def pop_outgoing(self, packet_link: bool = False) -> Optional[bytes]:
+        """Next queued packet for a packet link (header + payload), or None.
+
+        With ``packet_link=True`` also None while the radio is the active link (a radio packet came
+        after the last packet-link packet), checked atomically with the pop.
+        """
+        with self.lock:
+            if packet_link and not self.packet_link_active:
+                return None
+            return self._pop_locked()
+
+    def pending_outgoing(self) -> int:
+        with self.lock:
+            return len(self._tx)
+
+    def set_tx_listener(self, listener: Optional[Callable[[], None]]) -> None:
+        """`listener()` is called (must not block) whenever a packet is queued."""
+        with self.lock:
+            self._tx_listener = listener
+
+    # --- time ----------------------------------------------------------------------------------
+    def tick(self, now: float) -> None:
+        """Run the firmware timers at world time `now`: log blocks, e-stop watchdog, link loss."""
+        with self.lock:
+            if not self.state.powered:
+                return
+            try:
+                wd = self.state.estop_watchdog
+                if wd is not None and now - wd > 1.0 and not self.state.emergency:
+                    self.emergency_stop("emergency-stop watchdog expired")
+                if not any(b.running for b in self.logs.blocks.values()):
+                    return
+                timeout = self.profile.link_loss_timeout
+                if timeout is not None and self._last_radio is not None and now - self._last_radio > timeout:
+                    self.logs.reset()          # the firmware cleans up after a lost radio link
+                    self._tx.clear()
+                    self._last_radio = None
+                    return
+                self.logs.tick(now, self.timestamp_ms(now))
+            except Exception:
+                _log.exception("firmware tick failed")
+
+    # --- safety ----------------------------------------------------------------------------------
+    def emergency_stop(self, reason: str = "emergency stop") -> None:
+        with self.lock:
+            self.state.emergency = True
+            self.state.emergency_reason = reason
+            try:
+                self.vehicle.emergency_stop()
+            except Exception:
+                _log.exception("vehicle.emergency_stop failed")
+
+    # --- inspection ------------------------------------------------------------------------------
+    def snapshot(self) -> Dict[str, Any]:
+        """Plain-data view of what the Crazyflie saw (JSON friendly, for control clients)."""
+        with self.lock:
+            s = self.state
+            return {
+                "address": self.address.hex().upper(),
+                "firmware": self.profile.generation,
+                "powered": s.powered,
+                "emergency": s.emergency,
+                "emergency_reason": s.emergency_reason,
+                "armed": s.armed,
+                "last_setpoint": list(s.last_setpoint) if s.last_setpoint is not None else None,
+                "setpoints": s.setpoints,
+                "last_generic_type": s.last_generic[0] if s.last_generic else None,
+                "packets_by_port": {str(k): v for k, v in s.packets_by_port.items()},
+                "tx_pending": len(self._tx),
+                "tx_dropped": s.tx_dropped,
+                "safelink": self.link.safelink,
+                "reboots": s.reboots,
+                "rssi_dbm": self.rssi_dbm,
+                "log_blocks": {str(b.ident): {"running": b.running, "period_ms": int(round(b.period_s * 1000)),
+                                              "variables": [self.logs.entries[v].full_name for v, _ in b.ops]}
+                               for b in self.logs.blocks.values()},
+                "params": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)},
+            }

@@ -1,0 +1,1 @@
+"""What the simulated world plays: physics, stabilizer, sensors, battery, motion capture."""

@@ -1,0 +1,270 @@
+"""Rigid-body physics of Crazyflies, all vehicles at once (numpy), behind one `step` call.
+
+Numbers are the Förster identification of the Crazyflie 2.0 (PHYSICS.md §0, §1): thrust per motor
+F(u) = c2·u² + c1·u + c0 for a 16-bit command u (0 for u = 0), a first-order motor lag, yaw
+reaction torque κ·F, body drag −K·Σω·v_body and the X layout of §1.6 (M1 front-right, M2
+back-right, M3 back-left, M4 front-left; M1/M3 react −κF about +z, M2/M4 +κF).
+
+Frames: world x forward, y left, z up; body the same on the vehicle. Quaternions are (x, y, z, w)
+and rotate body vectors into the world; angular velocity is in the body frame (rad/s).
+Another integrator or vehicle model can replace `RigidBodyBackend`: the world only calls
+`step(states, actions, dt)` and reads `position`, `velocity`, `quaternion`, `omega`, `thrust`,
+`specific_force` and `on_ground` from the states.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence, Tuple
+
+import numpy as np
+
+from crazyflie_driver.sim.world.arrays import Rows
+
+GRAVITY = 9.81
+MAX_COMMAND = 65535
+PHYSICS_TICK_S = 0.001
+
+
+@dataclass
+class VehicleParams:
+    """One vehicle's physical constants (defaults: bare Crazyflie 2.0, Förster)."""
+
+    mass: float = 0.027                                   # kg; ~0.030-0.034 with markers/decks
+    arm: float = 0.046                                    # m, centre to motor (X layout)
+    inertia: Tuple[float, float, float] = (16.571710e-6, 16.655602e-6, 29.261652e-6)   # kg m²
+    thrust_coeffs: Tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.484560e-4)  # c2, c1, c0
+    rotor_speed_coeffs: Tuple[float, float] = (0.04076521, 380.8359)    # ω = a·u + b [rad/s]
+    yaw_torque_coeff: float = 0.005964552                # m (κ)
+    motor_tau: float = 0.06                               # s, first-order lag of each motor's thrust
+    body_drag: Tuple[float, float, float] = (9.1785e-7, 9.1785e-7, 10.311e-7)   # kg/rad
+    gravity: float = GRAVITY
+
+    def __post_init__(self) -> None:
+        if not (self.mass > 0 and math.isfinite(self.mass)):
+            raise ValueError("vehicle mass must be a positive number of kg, got %r" % (self.mass,))
+        if not self.motor_tau > 0:
+            raise ValueError("motor_tau must be > 0 s, got %r" % (self.motor_tau,))
+        if len(self.inertia) != 3 or min(self.inertia) <= 0:
+            raise ValueError("inertia must be three positive numbers (kg m²), got %r" % (self.inertia,))
+
+    def thrust(self, command: float) -> float:
+        """Steady thrust of one motor [N] for a 16-bit command."""
+        u = min(max(float(command), 0.0), MAX_COMMAND)
+        if u <= 0.0:
+            return 0.0
+        c2, c1, c0 = self.thrust_coeffs
+        return c2 * u * u + c1 * u + c0
+
+    def command_for_thrust(self, thrust: float) -> float:
+        """Inverse of `thrust`: the command giving `thrust` newtons per motor."""
+        c2, c1, c0 = self.thrust_coeffs
+        disc = c1 * c1 - 4.0 * c2 * (c0 - thrust)
+        return (-c1 + math.sqrt(max(disc, 0.0))) / (2.0 * c2)
+
+    def hover_command(self) -> float:
+        """Command on all four motors that holds the vehicle's weight."""
+        return self.command_for_thrust(self.mass * self.gravity / 4.0)
+
+
+class BodyStates(Rows):
+    """State of every vehicle body plus its physical constants (one row per vehicle)."""
+
+    FIELDS = {
+        "position": ((3,), float),
+        "velocity": ((3,), float),           # world frame, m/s
+        "quaternion": ((4,), float),         # x, y, z, w (body -> world)
+        "omega": ((3,), float),              # body frame, rad/s
+        "thrust": ((4,), float),             # lagged thrust of each motor, N
+        "specific_force": ((3,), float),     # body frame, m/s² (what an ideal accelerometer reads)
+        "acceleration": ((3,), float),       # world frame, m/s²
+        "on_ground": ((), bool),
+        # constants
+        "mass": ((), float),
+        "inertia": ((3,), float),
+        "torque_scale": ((3,), float),       # arm projected on x or y (twice), then κ
+        "thrust_coeffs": ((3,), float),
+        "rotor_speed_coeffs": ((2,), float),
+        "yaw_torque_coeff": ((), float),
+        "motor_tau": ((), float),
+        "body_drag": ((3,), float),
+        "gravity": ((), float),
+    }
+
+    def add(self, params: VehicleParams, position: Sequence[float] = (0.0, 0.0, 0.0), yaw: float = 0.0) -> int:
+        pos = np.asarray(position, dtype=float).reshape(3)
+        g = params.gravity
+        return self.append_row(
+            position=pos, quaternion=(0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)),
+            specific_force=(0.0, 0.0, g) if pos[2] <= 0.0 else (0.0, 0.0, 0.0),
+            on_ground=bool(pos[2] <= 0.0), mass=params.mass, inertia=params.inertia,
+            torque_scale=(params.arm / math.sqrt(2.0), params.arm / math.sqrt(2.0), params.yaw_torque_coeff),
+            thrust_coeffs=params.thrust_coeffs,
+            rotor_speed_coeffs=params.rotor_speed_coeffs, yaw_torque_coeff=params.yaw_torque_coeff,
+            motor_tau=params.motor_tau, body_drag=params.body_drag, gravity=g)
+
+
+# ------------------------------------------------------------------------------------------------
+# quaternion helpers (x, y, z, w), vectorised over the first axis
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(N,4) unit quaternions -> (N,3,3) rotation matrices body -> world."""
+    v = q[:, :3]
+    w = q[:, 3]
+    r = 2.0 * v[:, :, None] * v[:, None, :]                     # 2 v vᵀ
+    d = w * w - (v * v).sum(axis=1)
+    r[:, 0, 0] += d
+    r[:, 1, 1] += d
+    r[:, 2, 2] += d
+    wv = 2.0 * w[:, None] * v                                     # 2 w [v]×
+    r[:, 0, 1] -= wv[:, 2]
+    r[:, 1, 0] += wv[:, 2]
+    r[:, 0, 2] += wv[:, 1]
+    r[:, 2, 0] -= wv[:, 1]
+    r[:, 1, 2] -= wv[:, 0]
+    r[:, 2, 1] += wv[:, 0]
+    return r
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a ⊗ b of (N,4) xyzw quaternions."""
+    ax, ay, az, aw = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
+    bx, by, bz, bw = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=1)
+
+
+def quat_from_rotvec(v: np.ndarray) -> np.ndarray:
+    """(N,3) rotation vectors -> (N,4) quaternions."""
+    angle = np.sqrt((v * v).sum(axis=1))
+    half = 0.5 * angle
+    # sin(half)/angle, with its limit 1/2 at zero
+    k = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
+    return np.concatenate([v * k[:, None], np.cos(half)[:, None]], axis=1)
+
+
+def euler_from_quat(q: np.ndarray) -> np.ndarray:
+    """(N,4) -> (N,3) roll, pitch, yaw [rad], standard Z-Y-X (pitch positive nose down)."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=1)
+
+
+def quat_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """One quaternion (4,) from standard Z-Y-X angles [rad]."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return np.array([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
+
+
+# ------------------------------------------------------------------------------------------------
+
+def motor_thrust(states: BodyStates, commands: np.ndarray) -> np.ndarray:
+    """Steady thrust (N,4) [N] of each motor for 16-bit commands (N,4); 0 for a stopped motor."""
+    u = np.minimum(np.maximum(commands, 0.0), MAX_COMMAND)
+    c = states.thrust_coeffs
+    f = (c[:, 0:1] * u + c[:, 1:2]) * u + c[:, 2:3]
+    return np.where(u > 0.0, f, 0.0)
+
+
+class RigidBodyBackend:
+    """Newton-Euler integration at 1 kHz with motor lag, rotor drag and a floor at z = 0.
+
+    Floor: a vehicle touching the floor whose vertical thrust does not exceed its weight rests:
+    position on the floor, no velocity (friction), no rotation, attitude levelled to its yaw
+    (it stands on its legs). It takes off once the thrust's vertical component exceeds the weight.
+    """
+
+    def __init__(self, tick: float = PHYSICS_TICK_S) -> None:
+        if not tick > 0:
+            raise ValueError("physics tick must be > 0 s")
+        self.tick = float(tick)
+
+    def step(self, states: BodyStates, actions: np.ndarray, dt: float) -> None:
+        """Advance every vehicle by `dt` seconds with motor commands `actions` (N,4, 0..65535)."""
+        if len(states) == 0:
+            return
+        actions = np.asarray(actions, dtype=float)
+        if actions.shape != (len(states), 4):
+            raise ValueError("actions must have shape (%d, 4), got %s" % (len(states), actions.shape))
+        n = max(1, int(round(dt / self.tick)))
+        h = dt / n
+        target = motor_thrust(states, actions)
+        u = np.minimum(np.maximum(actions, 0.0), MAX_COMMAND)
+        a, b = states.rotor_speed_coeffs[:, 0:1], states.rotor_speed_coeffs[:, 1:2]
+        rotor_speed_sum = np.where(u > 0.0, a * u + b, 0.0).sum(axis=1)
+        blend = 1.0 - np.exp(-h / states.motor_tau)
+        for _ in range(n):
+            self._substep(states, target, blend, rotor_speed_sum, h)
+
+    def _substep(self, s: BodyStates, target: np.ndarray, blend: np.ndarray, rotor_speed_sum: np.ndarray,
+                 h: float) -> None:
+        s.thrust += (target - s.thrust) * blend[:, None]
+        f = s.thrust
+        total = f.sum(axis=1)
+        torque = (f @ _TORQUE_PATTERN) * s.torque_scale
+        r = quat_to_matrix(s.quaternion)
+        v_old = s.velocity
+        m = s.mass
+        g = s.gravity
+        if rotor_speed_sum.any():
+            v_body = np.einsum("nji,nj->ni", r, v_old)
+            force_body = v_body * s.body_drag
+            force_body *= -rotor_speed_sum[:, None]
+            force_body[:, 2] += total
+            acc = np.einsum("nij,nj->ni", r, force_body)
+        else:
+            acc = r[:, :, 2] * total[:, None]
+        acc /= m[:, None]
+        acc[:, 2] -= g
+        w = s.omega
+        iw = s.inertia * w
+        gyroscopic = np.empty_like(w)            # w × (I w)
+        gyroscopic[:, 0] = w[:, 1] * iw[:, 2] - w[:, 2] * iw[:, 1]
+        gyroscopic[:, 1] = w[:, 2] * iw[:, 0] - w[:, 0] * iw[:, 2]
+        gyroscopic[:, 2] = w[:, 0] * iw[:, 1] - w[:, 1] * iw[:, 0]
+        w_new = w + (torque - gyroscopic) / s.inertia * h
+
+        v_new = v_old + acc * h
+        p_new = s.position + (v_old + v_new) * (0.5 * h)
+        q_new = quat_multiply(s.quaternion, quat_from_rotvec(w_new * h))
+        q_new /= np.sqrt((q_new * q_new).sum(axis=1))[:, None]
+
+        # floor contact
+        touching = p_new[:, 2] <= 0.0
+        resting = touching
+        if touching.any():
+            lifting = r[:, 2, 2] * total > m * g
+            resting = touching & ~lifting
+            p_new[:, 2] = np.where(touching, 0.0, p_new[:, 2])
+            v_new[:, 2] = np.where(touching, np.maximum(v_new[:, 2], 0.0), v_new[:, 2])
+            if resting.any():
+                v_new = np.where(resting[:, None], 0.0, v_new)
+                w_new = np.where(resting[:, None], 0.0, w_new)
+                yaw = np.arctan2(2 * (q_new[:, 3] * q_new[:, 2] + q_new[:, 0] * q_new[:, 1]),
+                                 1 - 2 * (q_new[:, 1] ** 2 + q_new[:, 2] ** 2))
+                level = np.zeros_like(q_new)
+                level[:, 2] = np.sin(yaw / 2)
+                level[:, 3] = np.cos(yaw / 2)
+                q_new = np.where(resting[:, None], level, q_new)
+                r = np.where(resting[:, None, None], quat_to_matrix(q_new), r)
+            acc = np.where(touching[:, None], (v_new - v_old) / h, acc)
+        s.position, s.velocity, s.omega, s.quaternion = p_new, v_new, w_new, q_new
+        s.acceleration = acc
+        s.on_ground = resting
+        sf_world = acc.copy()
+        sf_world[:, 2] += g
+        s.specific_force = np.einsum("nji,nj->ni", r, sf_world)
+
+
+# torque = (F @ pattern) * (arm_xy, arm_xy, κ): PHYSICS.md §1.6
+_TORQUE_PATTERN = np.array([[-1.0, -1.0, -1.0],
+                            [-1.0, 1.0, 1.0],
+                            [1.0, 1.0, -1.0],
+                            [1.0, -1.0, 1.0]])

@@ -1,0 +1,313 @@
+"""The firmware's flight controller for the legacy RPYT setpoint, all vehicles at once (numpy).
+
+Follows PHYSICS.md §2: commander semantics (thrust below 1 000 is 0, clamp at 60 000, thrust lock
+until a zero-thrust setpoint, the yaw-rate negation, the legacy nose-up-positive pitch), the
+setpoint watchdog (level out after 0.5 s, motors off after 2 s), emergency stop, tumble detection
+(current firmware), attitude PID -> rate PID -> legacy X mixer with the clamping of each firmware
+generation. Battery compensation is taken as ideal: a command means the same thrust at any
+battery voltage (PHYSICS.md §1.5 option a), so the battery only matters through its cut-off.
+
+Sign conventions of the firmware estimate used here and in the logs: roll right-hand about body x,
+pitch positive nose up (the negated standard pitch), yaw counter-clockwise seen from above; degrees.
+"""
+from __future__ import annotations
+
+from typing import Dict, Tuple
+
+import numpy as np
+
+from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.physics import BodyStates, euler_from_quat
+
+GEN_CURRENT = "current"
+GEN_2016 = "2016.02"
+GENERATIONS = (GEN_CURRENT, GEN_2016)
+
+TICK_S = 0.001                   # world / physics tick (current firmware main loop: 1 kHz)
+PID_DT = 1.0 / 500.0             # dt both generations use inside their PIDs
+MIN_THRUST = 1000
+MAX_THRUST = 60000
+RATE_OUTPUT_LIMIT = 32767.0
+WATCHDOG_LEVEL_S = 0.5
+WATCHDOG_SHUTDOWN_S = 2.0
+TUMBLE_TILT_COS = 0.5            # 60 degrees
+TUMBLE_TILT_S = 1.0
+TUMBLE_UPSIDE_DOWN_S = 0.1
+
+# lock reasons (why the motors are held off until a reboot)
+LOCK_NONE, LOCK_EMERGENCY, LOCK_WATCHDOG, LOCK_TUMBLE, LOCK_BATTERY = 0, 1, 2, 3, 4
+LOCK_NAMES = {LOCK_NONE: "", LOCK_EMERGENCY: "emergency stop", LOCK_WATCHDOG: "setpoint watchdog",
+              LOCK_TUMBLE: "tumbled", LOCK_BATTERY: "battery empty"}
+
+AXES = ("roll", "pitch", "yaw")
+TERMS = ("kp", "ki", "kd")
+
+# (kp, ki, kd) per axis and the integral limits, PHYSICS.md §2.4
+GAINS: Dict[str, Dict[str, Tuple[Tuple[float, float, float], ...]]] = {
+    GEN_CURRENT: {"pid_attitude": ((6.0, 3.0, 0.0), (6.0, 3.0, 0.0), (6.0, 1.0, 0.35)),
+                  "pid_rate": ((250.0, 500.0, 2.5), (250.0, 500.0, 2.5), (120.0, 16.7, 0.0))},
+    GEN_2016: {"pid_attitude": ((3.5, 2.0, 0.0), (3.5, 2.0, 0.0), (10.0, 1.0, 0.35)),
+               "pid_rate": ((70.0, 0.0, 0.0), (70.0, 0.0, 0.0), (70.0, 16.7, 0.0))},
+}
+ATTITUDE_ILIMIT = (20.0, 20.0, 360.0)
+RATE_ILIMIT = (33.3, 33.3, 166.7)
+
+# mixer rows: m_i = T + R·MIX_R[i] + P·MIX_P[i] + Y·MIX_Y[i]   (PHYSICS.md §2.5)
+MIX_R = np.array([-0.5, -0.5, 0.5, 0.5])
+MIX_P = np.array([0.5, -0.5, -0.5, 0.5])
+MIX_Y = np.array([1.0, -1.0, 1.0, -1.0])
+
+
+def check_generation(firmware: str) -> str:
+    if firmware not in GENERATIONS:
+        raise ValueError("unknown firmware generation %r (choose one of: %s)" % (firmware, ", ".join(GENERATIONS)))
+    return firmware
+
+
+def default_params(firmware: str) -> Dict[str, float]:
+    """The controller's parameters with the firmware's names, e.g. `pid_rate.roll_kp`."""
+    out: Dict[str, float] = {}
+    for group, per_axis in GAINS[check_generation(firmware)].items():
+        for axis, gains in zip(AXES, per_axis):
+            for term, value in zip(TERMS, gains):
+                out["%s.%s_%s" % (group, axis, term)] = float(value)
+    return out
+
+
+def wrap_deg(a: np.ndarray) -> np.ndarray:
+    return (a + 180.0) % 360.0 - 180.0
+
+
+class OnboardStates(Rows):
+    FIELDS = {
+        "gen2016": ((), bool),
+        "att_gains": ((3, 3), float),       # [axis, term]
+        "rate_gains": ((3, 3), float),
+        "att_ilimit": ((3,), float),
+        "rate_ilimit": ((3,), float),
+        # last setpoint (raw wire values) and when it came
+        "sp": ((4,), float),                # roll, pitch, yaw rate, thrust
+        "sp_time": ((), float),
+        "thrust_locked": ((), bool),        # waits for a zero-thrust setpoint
+        "lock": ((), np.int8),              # LOCK_*: motors off until reboot
+        "stopped": ((), bool),              # param stabilizer.stop
+        # controller state
+        "yaw_sp": ((), float),
+        "att_integ": ((3,), float),
+        "att_prev": ((3,), float),
+        "rate_integ": ((3,), float),
+        "rate_prev": ((3,), float),
+        "rate_desired": ((3,), float),
+        "rate_out": ((3,), float),          # R, P, Y as the mixer takes them
+        "attitude": ((3,), float),          # estimate, firmware convention, deg
+        "attitude_desired": ((3,), float),
+        "thrust": ((), float),              # collective thrust after commander rules
+        "motors": ((4,), float),            # motor commands 0..65535
+        "tilt_time": ((), float),
+        "upside_time": ((), float),
+        "motor_power_enable": ((), bool),
+        "motor_power": ((4,), float),
+    }
+
+    def add(self, firmware: str, now: float, yaw_deg: float = 0.0) -> int:
+        i = self.append_row()
+        self.boot(i, firmware, now, yaw_deg)
+        return i
+
+    def boot(self, i: int, firmware: str, now: float, yaw_deg: float = 0.0) -> None:
+        """Row `i` as after power-on: default gains, thrust locked, controller reset."""
+        for name in self.FIELDS:
+            getattr(self, name)[i] = 0
+        self.gen2016[i] = check_generation(firmware) == GEN_2016
+        g = GAINS[firmware]
+        self.att_gains[i] = g["pid_attitude"]
+        self.rate_gains[i] = g["pid_rate"]
+        self.att_ilimit[i] = ATTITUDE_ILIMIT
+        self.rate_ilimit[i] = RATE_ILIMIT
+        self.sp_time[i] = now
+        self.thrust_locked[i] = True
+        self.yaw_sp[i] = yaw_deg
+        self.att_prev[i] = (0.0, 0.0, -yaw_deg)
+
+
+class OnboardController:
+    """Runs the commander, supervisor and PID cascade of every vehicle, one 1 kHz tick per call."""
+
+    def __init__(self) -> None:
+        self.s = OnboardStates()
+
+    # --- commands (called under the world lock) ----------------------------------------------
+    def set_rpyt(self, i: int, roll: float, pitch: float, yaw: float, thrust: float, now: float) -> None:
+        vals = np.nan_to_num(np.array([roll, pitch, yaw, thrust], dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+        vals[3] = min(max(vals[3], 0.0), 65535.0)
+        s = self.s
+        s.sp[i] = vals
+        s.sp_time[i] = now
+        if vals[3] == 0.0:
+            s.thrust_locked[i] = False
+
+    def lock(self, i: int, reason: int) -> None:
+        if self.s.lock[i] == LOCK_NONE:
+            self.s.lock[i] = reason
+
+    def set_param(self, i: int, name: str, value: float) -> bool:
+        """Apply a firmware parameter; False when the controller does not use it."""
+        group, _, field = name.partition(".")
+        s = self.s
+        if group in ("pid_attitude", "pid_rate"):
+            axis, _, term = field.partition("_")
+            if axis in AXES and term in TERMS:
+                target = s.att_gains if group == "pid_attitude" else s.rate_gains
+                target[i, AXES.index(axis), TERMS.index(term)] = float(value)
+                return True
+        elif group == "motorPowerSet":
+            if field == "enable":
+                s.motor_power_enable[i] = bool(value)
+                return True
+            if field in ("m1", "m2", "m3", "m4"):
+                s.motor_power[i, int(field[1]) - 1] = min(max(float(value), 0.0), 65535.0)
+                return True
+        elif name == "stabilizer.stop":
+            s.stopped[i] = bool(value)
+            return True
+        return False
+
+    def params(self, i: int) -> Dict[str, float]:
+        s = self.s
+        out: Dict[str, float] = {}
+        for group, gains in (("pid_attitude", s.att_gains[i]), ("pid_rate", s.rate_gains[i])):
+            for a, axis in enumerate(AXES):
+                for t, term in enumerate(TERMS):
+                    out["%s.%s_%s" % (group, axis, term)] = float(gains[a, t])
+        return out
+
+    # --- the tick ----------------------------------------------------------------------------
+    def update(self, tick: int, now: float, body: BodyStates, gyro_deg, battery_empty: np.ndarray) -> np.ndarray:
+        """One 1 kHz firmware tick for all vehicles; returns the motor commands (N,4).
+
+        `tick` counts world ticks (decides which loops run: the attitude and rate loops every 2nd
+        tick), `gyro_deg` is the measured body rate (N,3, deg/s, standard signs; needed on even
+        ticks only), `battery_empty` (N,) forces the motors off and locks.
+        """
+        s = self.s
+        if len(s) == 0:
+            return s.motors
+        # supervisor: watchdog and battery
+        age = now - s.sp_time
+        level = age > WATCHDOG_LEVEL_S
+        if level.any():
+            cut = (age > WATCHDOG_SHUTDOWN_S) & (s.sp[:, 3] > 0.0)
+            if cut.any():
+                # 2016.02: thrust 0 and relock; current: supervisor locked until reboot
+                s.thrust_locked |= cut
+                s.sp[:, 3] = np.where(cut, 0.0, s.sp[:, 3])
+                self._lock_rows(cut & ~s.gen2016, LOCK_WATCHDOG)
+        else:
+            level = None
+        if battery_empty.any():
+            self._lock_rows(battery_empty, LOCK_BATTERY)
+
+        raw = s.sp[:, 3]
+        thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
+        off = s.thrust_locked | (s.lock != LOCK_NONE) | s.stopped
+        thrust[off] = 0.0
+
+        if tick % 2 == 0:
+            q = body.quaternion
+            self._tumble(q, thrust)
+            thrust[s.lock != LOCK_NONE] = 0.0
+            # estimate in firmware convention (pitch nose-up positive)
+            euler = np.degrees(euler_from_quat(q))
+            euler[:, 1] *= -1.0
+            s.attitude = euler
+            # attitude loop: 500 Hz (current), 250 Hz (2016.02, still with dt = 1/500 in its PIDs)
+            due = None if tick % 4 == 0 else ~s.gen2016
+            self._attitude_loop(due, level)
+            self._rate_loop(gyro_deg)
+            idle = thrust <= 0.0
+            if idle.any():
+                self._reset(idle)
+
+        m = thrust[:, None] + s.rate_out @ MIX
+        top = m.max(axis=1)
+        if (top > 65535.0).any():
+            excess = np.maximum(top - 65535.0, 0.0) * ~s.gen2016      # current: keep the torques
+            m -= excess[:, None]
+        m = np.minimum(np.maximum(m, 0.0), 65535.0)
+        m *= (thrust > 0.0)[:, None]
+        if s.motor_power_enable.any():
+            m = np.where((s.motor_power_enable & (s.lock == LOCK_NONE))[:, None], s.motor_power, m)
+        s.thrust = thrust
+        s.motors = m
+        return m
+
+    def _lock_rows(self, rows: np.ndarray, reason: int) -> None:
+        s = self.s
+        s.lock = np.where(rows & (s.lock == LOCK_NONE), reason, s.lock).astype(np.int8)
+
+    def _tumble(self, q: np.ndarray, thrust: np.ndarray) -> None:
+        """Current firmware: tilted over 60° for 1 s or upside down for 0.1 s while flying -> locked."""
+        s = self.s
+        tilt_cos = 1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)
+        flying = thrust > 0.0
+        tilted = flying & (tilt_cos < TUMBLE_TILT_COS)
+        if not (tilted.any() or s.tilt_time.any()):
+            return
+        dt = 2 * TICK_S
+        s.tilt_time = np.where(tilted, s.tilt_time + dt, 0.0)
+        s.upside_time = np.where(flying & (tilt_cos < 0.0), s.upside_time + dt, 0.0)
+        tumbled = ~s.gen2016 & ((s.tilt_time > TUMBLE_TILT_S) | (s.upside_time > TUMBLE_UPSIDE_DOWN_S))
+        if tumbled.any():
+            self._lock_rows(tumbled, LOCK_TUMBLE)
+
+    def _attitude_loop(self, due, level) -> None:
+        s = self.s
+        dt_yaw = np.where(s.gen2016, 2 * PID_DT, PID_DT)
+        sp = s.sp[:, :3] if level is None else np.where(level[:, None], 0.0, s.sp[:, :3])
+        yaw_sp = wrap_deg(s.yaw_sp - sp[:, 2] * dt_yaw)           # the firmware negates the yaw rate
+        desired = sp.copy()
+        desired[:, 2] = yaw_sp
+        err = desired - s.attitude
+        err[:, 2] = wrap_deg(err[:, 2])
+        integ = np.minimum(np.maximum(s.att_integ + err * PID_DT, -s.att_ilimit), s.att_ilimit)
+        src = np.where(s.gen2016[:, None], err, -s.attitude)   # 2016: D on error; now: on measurement
+        deriv = wrap_deg(src - s.att_prev) * (1.0 / PID_DT)
+        g = s.att_gains
+        out = g[:, :, 0] * err + g[:, :, 1] * integ + g[:, :, 2] * deriv
+        if due is None:
+            s.yaw_sp, s.attitude_desired, s.att_integ, s.att_prev, s.rate_desired = yaw_sp, desired, integ, src, out
+        else:
+            d2 = due[:, None]
+            s.yaw_sp = np.where(due, yaw_sp, s.yaw_sp)
+            s.attitude_desired = np.where(d2, desired, s.attitude_desired)
+            s.att_integ = np.where(d2, integ, s.att_integ)
+            s.att_prev = np.where(d2, src, s.att_prev)
+            s.rate_desired = np.where(d2, out, s.rate_desired)
+
+    def _rate_loop(self, gyro_deg: np.ndarray) -> None:
+        s = self.s
+        meas = gyro_deg * _LEGACY_RATE_SIGNS                      # legacy pitch: −gyro_y
+        err = s.rate_desired - meas
+        integ = np.minimum(np.maximum(s.rate_integ + err * PID_DT, -s.rate_ilimit), s.rate_ilimit)
+        src = np.where(s.gen2016[:, None], err, -meas)
+        deriv = (src - s.rate_prev) * (1.0 / PID_DT)
+        g = s.rate_gains
+        out = g[:, :, 0] * err + g[:, :, 1] * integ + g[:, :, 2] * deriv
+        out = np.minimum(np.maximum(out, -RATE_OUTPUT_LIMIT), RATE_OUTPUT_LIMIT)
+        out[:, 2] *= -1.0                                         # yaw output sign-flipped for the mixer
+        s.rate_integ, s.rate_prev, s.rate_out = integ, src, out
+
+    def _reset(self, rows: np.ndarray) -> None:
+        """Motors off: PID states cleared, yaw set-point re-seeded with the current yaw."""
+        s = self.s
+        s.att_integ[rows] = 0.0
+        s.rate_integ[rows] = 0.0
+        s.rate_prev[rows] = 0.0
+        s.rate_desired[rows] = 0.0
+        s.rate_out[rows] = 0.0
+        s.yaw_sp[rows] = s.attitude[rows, 2]
+        s.att_prev[rows] = np.where(s.gen2016[rows, None], 0.0, -s.attitude[rows])
+
+
+_LEGACY_RATE_SIGNS = np.array([1.0, -1.0, 1.0])
+MIX = np.stack([MIX_R, MIX_P, MIX_Y])       # (3,4): [R, P, Y] @ MIX

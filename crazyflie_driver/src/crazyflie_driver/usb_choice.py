@@ -1,0 +1,84 @@
+"""Which pyusb backend the Crazyradio code uses: real libusb, or a fake dongle in the simulated world.
+
+* default: ``None``, i.e. pyusb picks libusb1 (real hardware);
+* ``CRAZYFLIE_BACKEND=sim``: one shared ``FakeUsbBackend`` attached to the world server at
+  ``CRAZYFLIE_SIM_ADDRESS`` (default 127.0.0.1:19840), so nodes and tools fly simulated Crazyflies
+  without a code change;
+* ``use_backend(b)``: an explicit backend for this process (tests inject an in-process fake),
+  usable as a plain call or as a context manager that restores the previous choice.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from typing import Optional, Tuple
+
+from crazyflie_driver.errors import CrazyflieError
+
+ENV_BACKEND = "CRAZYFLIE_BACKEND"
+ENV_SIM_ADDRESS = "CRAZYFLIE_SIM_ADDRESS"
+DEFAULT_SIM_ADDRESS = "127.0.0.1:19840"
+
+_lock = threading.Lock()
+_override = None
+_sim_backends: dict = {}
+
+
+def parse_sim_address(text: str) -> Tuple[str, int]:
+    """'host:port' -> (host, port); only loopback hosts make sense for the simulator."""
+    host, sep, port_text = text.strip().rpartition(":")
+    if not sep or not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise CrazyflieError("%s=%r is not host:port (e.g. %s)" % (ENV_SIM_ADDRESS, text, DEFAULT_SIM_ADDRESS))
+    return host, int(port_text)
+
+
+def get_backend():
+    """The backend to pass to pyusb: None (libusb1), the injected one, or the simulator's fake."""
+    if _override is not None:
+        return _override
+    name = os.environ.get(ENV_BACKEND, "").strip().lower()
+    if name in ("", "libusb", "libusb1", "usb", "hw", "hardware"):
+        return None
+    if name == "sim":
+        return _sim_backend(os.environ.get(ENV_SIM_ADDRESS, DEFAULT_SIM_ADDRESS))
+    raise CrazyflieError("%s=%r is not understood: leave it unset for real Crazyradios or set it to 'sim'"
+                         % (ENV_BACKEND, name))
+
+
+def _sim_backend(address: str):
+    host, port = parse_sim_address(address)
+    with _lock:
+        backend = _sim_backends.get((host, port))
+        if backend is None:
+            from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend   # lazily: real hardware never loads the sim
+            from crazyflie_driver.sim.air.medium import RemoteMedium
+            medium = RemoteMedium(host, port)
+            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()))
+            _sim_backends[(host, port)] = backend
+        return backend
+
+
+class use_backend:
+    """Make ``get_backend()`` return ``backend`` (None = back to the environment's choice).
+
+    ``use_backend(fake)`` takes effect at once; ``with use_backend(fake): ...`` also restores the
+    previous backend on exit.
+    """
+
+    def __init__(self, backend) -> None:
+        global _override
+        self._previous = _override
+        self.backend = backend
+        _override = backend
+
+    def __enter__(self):
+        return self.backend
+
+    def __exit__(self, *exc) -> None:
+        global _override
+        _override = self._previous
+
+
+def current_override() -> Optional[object]:
+    """The backend set by ``use_backend``, if any."""
+    return _override
