@@ -90,16 +90,18 @@ def test_scan_lists_each_answering_uri(sim, capsys):
     sim.add(URI2)
     sim.add("radio://0/5/250K/E7E7E7E701")
     assert scan.main(["--address", "E7E7E7E701"]) == 0
-    assert capsys.readouterr().out.splitlines() == ["radio://0/5/250K/E7E7E7E701", URI1]
+    dongle = "Configured Dongle with version 0.53"
+    assert capsys.readouterr().out.splitlines() == [dongle, "radio://0/5/250K/E7E7E7E701", URI1]
     assert scan.main(["--address", "0xE7E7E7E702"]) == 0
-    assert capsys.readouterr().out.splitlines() == [URI2]
+    assert capsys.readouterr().out.splitlines() == [dongle, URI2]
 
 
 def test_scan_default_address_finds_nothing_here(sim, capsys):
     sim.add(URI1)
     assert scan.main([]) == 0
     captured = capsys.readouterr()
-    assert captured.out == "" and "no Crazyflie answered at address E7E7E7E7E7" in captured.err
+    assert captured.out == "Configured Dongle with version 0.53\n"
+    assert "no Crazyflie answered at address E7E7E7E7E7" in captured.err
 
 
 def test_scan_bad_address(sim, capsys):

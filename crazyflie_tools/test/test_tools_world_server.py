@@ -123,7 +123,41 @@ def test_scan_finds_both(server, tmp_path):
     a = run_tool(server, tmp_path, "scan", "--address", "E7E7E7E701")
     b = run_tool(server, tmp_path, "scan", "--address", "E7E7E7E702")
     assert (a.returncode, b.returncode) == (0, 0), a.stderr + b.stderr
-    assert a.stdout.splitlines() == [URI1] and b.stdout.splitlines() == [URI2]
+    dongle = "Configured Dongle with version 0.53"
+    assert a.stdout.splitlines() == [dongle, URI1] and b.stdout.splitlines() == [dongle, URI2]
+
+
+def run_without_sim_backend(tmp_path, name, sim_address, *args):
+    """A tool as the chapter types it: no CRAZYFLIE_BACKEND, so it looks for a real Crazyradio."""
+    env = {k: v for k, v in os.environ.items() if k != "CRAZYFLIE_BACKEND"}
+    env.update(CRAZYFLIE_SIM_ADDRESS=sim_address, CRAZYFLIE_TOC_CACHE=str(tmp_path / "toc"),
+               PYTHONPATH=os.pathsep.join([os.path.join(REPO, "crazyflie_driver", "src"),
+                                           os.path.join(REPO, "crazyflie_tools", "src")]))
+    return subprocess.run([sys.executable, os.path.join(SCRIPTS, name)] + list(args), env=env,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
+                          timeout=60)
+
+
+def free_port():
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_scan_without_dongle_points_at_running_world(server, tmp_path):
+    r = run_without_sim_backend(tmp_path, "scan", server)
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    lines = r.stderr.splitlines()
+    assert lines[0].startswith("scan: error: no Crazyradio found")
+    assert lines[1] == ("scan: a simulated world is listening at %s: to use its fake Crazyradio, run "
+                        "CRAZYFLIE_BACKEND=sim rosrun crazyflie_tools scan" % server)
+
+
+def test_scan_without_dongle_or_world_says_only_that(tmp_path):
+    r = run_without_sim_backend(tmp_path, "scan", "127.0.0.1:%d" % free_port())
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert r.stderr.startswith("scan: error: no Crazyradio found") and r.stderr.count("\n") == 1
 
 
 @pytest.mark.parametrize("uri", [URI1, URI2])

@@ -10,6 +10,8 @@ from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.errors import (CrazyflieError, LinkTimeout, RadioAccessDenied,
                                      RadioNotFound, UnknownName, UriError)
 
+from .sim_hint import sim_hint
+
 DEFAULT_URI = "radio://0/80/2M/E7E7E7E7E7"
 UDEV_HINT = ("install the udev rules shipped in crazyflie_driver/udev into /etc/udev/rules.d/ "
              "and add your user to group plugdev, then re-plug the dongle")
@@ -60,6 +62,10 @@ def run(main: Callable[[argparse.Namespace], int], args: argparse.Namespace,
     except (CrazyflieError, OSError, ValueError) as error:
         # OSError covers pyusb's USBError; ValueError covers bad option values.
         print("%s: error: %s" % (prog, describe_error(error)), file=sys.stderr)
+        if isinstance(error, RadioNotFound):
+            hint = sim_hint(prog)
+            if hint:
+                print("%s: %s" % (prog, hint), file=sys.stderr)
         return 1
 
 

@@ -1,17 +1,28 @@
-"""scan: list every Crazyflie that answers on any data rate and channel at one address."""
+"""scan: the dongle's version line, then every Crazyflie that answers on any data rate and channel at one address."""
 from __future__ import annotations
 
 import sys
 from typing import List, Optional
 
+from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.radio.scan import parse_address, scan
 
 from .common import parser, run
 
 
+def dongle_line(version: float) -> str:
+    """The first line of the output, as the chapter shows it: the dongle's firmware version."""
+    return "Configured Dongle with version %g" % version
+
+
 def _scan(args) -> int:
     address = parse_address(args.address)
-    found = scan(args.radio, address)
+    radio = Crazyradio(args.radio)
+    try:
+        print(dongle_line(radio.version), flush=True)
+        found = scan(args.radio, address, radio=radio)
+    finally:
+        radio.close()
     for uri in found:
         print(uri)
     if not found:
