@@ -1,10 +1,16 @@
 #!/usr/bin/env python3
-"""Waypoints of the second Crazyflie in multi_waypoint_vicon.launch: [x, y, z, yaw_deg, sleep_s]."""
-from crazyflie_demo.demo_node import run
-run([
-    [0.0, -0.75, 0.5, 0, 2],
-    [-0.5, -0.75, 0.5, 0, 2],
-    [-0.5, -1.25, 0.7, 0, 2],
-    [0.0, -1.25, 0.7, -90, 2],
-    [0.0, -0.75, 0.5, 0, 2],
-])
+"""The chapter's demo2.py: the second Crazyflie of multi_waypoint_vicon.launch."""
+from demo import Demo
+
+if __name__ == '__main__':
+    demo = Demo(
+        [
+            # x,   y,    z,    yaw (rad), sleep (s)
+            [0.0, -1.0, 0.5, 0, 2],
+            [1.5, -1.0, 0.5, 0, 2],
+            [-1.5, -1.0, 0.75, 0, 2],
+            [-1.5, -1.5, 0.5, 0, 2],
+            [0.0, -1.0, 0.5, 0, 0],
+        ]
+    )
+    demo.run()

@@ -66,7 +66,7 @@ class MultiWaypoint(unittest.TestCase):
             reached_at = [t for t, _ in indices[n][1:]] + [self.finished[n]]
             times = []
             for k, (w, t) in enumerate(zip(waypoints, reached_at)):
-                p = self.track.at(n, t)["position"]
+                p = self.track.position_at(n, t)
                 for axis in range(3):
                     self.assertLess(abs(p[axis] - w[axis]), 0.3,
                                     "%s at %s when waypoint %d %s counted as reached" % (n, p, k + 1, w))
