@@ -24,7 +24,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
 
 from crazyflie_driver.protocol.crazyflie import Crazyflie                     # noqa: E402
-from crazyflie_driver.radio.link import RadioManager                       # noqa: E402
+from crazyflie_driver.radio.shared_radio import RadioManager                       # noqa: E402
 from crazyflie_driver.server.registry import CrazyflieRegistry              # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend             # noqa: E402
 from crazyflie_driver.sim.air.server import WorldServer                  # noqa: E402
@@ -43,6 +43,23 @@ class Counter(WorkerListener):
             self.imu += 1
 
 
+class TimedCrazyflie(Crazyflie):
+    """Records, for each setpoint sent, the time from the latest cmd_vel handed to its worker
+    (``handed_at``, set by the commander) until the setpoint's round trip returned."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.handed_at = None
+        self.latencies: list = []
+
+    def send_setpoint(self, roll, pitch, yawrate, thrust):
+        handed = self.handed_at
+        acked = super().send_setpoint(roll, pitch, yawrate, thrust)
+        if handed is not None:
+            self.latencies.append(time.monotonic() - handed)
+        return acked
+
+
 def percentile(values, p):
     s = sorted(values)
     return s[min(len(s) - 1, int(round(p / 100.0 * (len(s) - 1))))]
@@ -56,25 +73,29 @@ def run_case(n: int, logging_on: bool, seconds: float, cache_dir: str) -> dict:
         server.add_crazyflie(uri, "cf%d" % (i + 1), (0.5 * i, 0.0, 0.0))
     world.start()
     manager = RadioManager(backend=FakeUsbBackend(server.medium, dongles=1))
-    registry = CrazyflieRegistry(lambda uri: Crazyflie(uri, radio_manager=manager, cache_dir=cache_dir))
-    workers, counters, latencies = [], [], []
-    lat_lock = threading.Lock()
+    crazyflies = {}
+
+    def factory(uri):
+        crazyflies[uri] = TimedCrazyflie(uri, radio_manager=manager, cache_dir=cache_dir)
+        return crazyflies[uri]
+    registry = CrazyflieRegistry(factory)
+    workers, counters, latencies, timed = [], [], [], []
     try:
         for i, uri in enumerate(uris):
             c = Counter()
             w = registry.add(WorkerConfig(uri=uri, tf_prefix="cf%d" % (i + 1), enable_logging=logging_on,
                                           enable_parameters=False), c, timeout=60.0)
-            own: list = []
-            w.latency_listener = own.append
             workers.append(w)
             counters.append(c)
-            latencies.append(own)
+            timed.append(crazyflies[uri])
+            latencies.append(crazyflies[uri].latencies)
         stop = threading.Event()
 
-        def commander(w):
+        def commander(w, cf):
             period = 1.0 / CMD_RATE_HZ
             next_t = time.monotonic()
             while not stop.is_set():
+                cf.handed_at = time.monotonic()
                 w.cmd_vel(0.0, 0.0, 0.0, 0.0)
                 next_t += period
                 time.sleep(max(0.0, next_t - time.monotonic()))
@@ -86,7 +107,7 @@ def run_case(n: int, logging_on: bool, seconds: float, cache_dir: str) -> dict:
         imu0 = [c.imu for c in counters]
         snap0 = [server.crazyflie(u).snapshot()["setpoints"] for u in uris]
         trips0 = server.medium.round_trips
-        threads = [threading.Thread(target=commander, args=(w,), daemon=True) for w in workers]
+        threads = [threading.Thread(target=commander, args=(w, cf), daemon=True) for w, cf in zip(workers, timed)]
         t0 = time.monotonic()
         for t in threads:
             t.start()

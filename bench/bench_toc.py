@@ -13,7 +13,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
 from crazyflie_driver.protocol.crazyflie import Crazyflie  # noqa: E402
-from crazyflie_driver.radio.link import RadioManager  # noqa: E402
+from crazyflie_driver.radio.shared_radio import RadioManager  # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie  # noqa: E402
 from crazyflie_driver.sim.air.medium import LocalMedium  # noqa: E402

@@ -16,6 +16,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
 from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.radio.statistics import LinkStatistics
 
 ENOENT, E2BIG, ENOEXEC, ENOMEM, EEXIST = 2, 7, 8, 12, 17
 
@@ -218,20 +219,13 @@ class ScriptedFirmware:
         return CRTPPacket(5, 2, bytes([block]) + ts + values)
 
 
-class LinkStats:
-    def __init__(self) -> None:
-        self.sent = 0
-        self.acked = 0
-        self.rssi = None
-
-
 class ScriptedLink:
     """The link contract over a ScriptedFirmware (or any ``responder(packet) -> [packets]``)."""
 
     def __init__(self, uri: str = "radio://0/80/2M/E7E7E7E701",
                  responder: Optional[Callable[[CRTPPacket], List[CRTPPacket]]] = None) -> None:
         self.uri = parse_uri(uri)
-        self.stats = LinkStats()
+        self.stats = LinkStatistics()
         self.responder = responder or (lambda p: [])
         self.sent: List[CRTPPacket] = []
         self.downlink: deque = deque()
@@ -248,15 +242,13 @@ class ScriptedLink:
 
     def send(self, packet: CRTPPacket) -> bool:
         self.sent.append(packet)
-        self.stats.sent += 1
-        self.stats.acked += 1
+        self.stats.record(True)
         self.downlink.extend(self.responder(packet))
         self._deliver_one()
         return True
 
     def poll(self) -> bool:
-        self.stats.sent += 1
-        self.stats.acked += 1
+        self.stats.record(True)
         self._deliver_one()
         return True
 

@@ -10,6 +10,7 @@ import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
 from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, list_radios
+from crazyflie_driver.radio.shared_radio import default_manager
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
 from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 
@@ -198,10 +199,13 @@ def test_backend_choice(monkeypatch, medium):
     fake = FakeUsbBackend(medium, timing=DongleTiming.instant())
     with usb_backend.use_backend(fake):
         assert usb_backend.get_backend() is fake
-        radio = Crazyradio(0)                  # no backend argument: the injected one is used
-        assert radio.serial == fake.dongles[0].serial
-        radio.close()
+        manager = usb_backend.radio_manager()
+        assert manager.backend is fake and usb_backend.radio_manager() is manager   # one per backend
+        shared = manager.acquire(0)
+        assert shared.radio.serial == fake.dongles[0].serial
+        manager.release(shared)
     assert usb_backend.get_backend() is None
+    assert usb_backend.radio_manager() is default_manager()     # libusb: the radio layer's own default
     monkeypatch.setenv("CRAZYFLIE_BACKEND", "bogus")
     with pytest.raises(CrazyflieError, match="CRAZYFLIE_BACKEND='bogus'"):
         usb_backend.get_backend()

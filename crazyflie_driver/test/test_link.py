@@ -8,7 +8,10 @@ import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, LinkTimeout, RadioUnplugged
-from crazyflie_driver.radio.link import FairLock, LinkStatistics, RadioLink, RadioManager
+from crazyflie_driver.radio.fair_lock import FairLock
+from crazyflie_driver.radio.link import RadioLink, open_link
+from crazyflie_driver.radio.shared_radio import RadioManager
+from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 
 from radio_doubles import AirReply, NrfPeer, ScriptedMedium
@@ -60,7 +63,7 @@ def test_open_with_safelink_then_sequence_bits():
 def test_fallback_to_plain_acks_when_the_handshake_is_not_echoed():
     peer = NrfPeer(safelink_capable=False)
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     assert not link.safelink and link.needs_resending
     assert [t.data for t in medium.transmits if peer.hears(t)] == [b"\xff\x05\x01"] * 10
     assert link.send(CRTPPacket(2, 1, b"\x05"))
@@ -81,7 +84,7 @@ def test_open_without_any_ack_raises_and_releases_the_dongle():
 def test_safelink_ack_loss_resends_same_bit_and_the_peer_drops_the_duplicate():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     peer.lose_ack = {peer.count, peer.count + 1}         # the peer hears it, the acks get lost twice
     assert link.send(CRTPPacket(3, 0, b"\x01"))
     tries = [t.data for t in medium.transmits[-3:]]
@@ -95,7 +98,7 @@ def test_safelink_ack_loss_resends_same_bit_and_the_peer_drops_the_duplicate():
 def test_safelink_downlink_delivered_once_despite_lost_acks():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     got = []
     link.subscribe(0, None, got.append)
     peer.queue.extend([b"\x00first", b"\x00second"])
@@ -108,7 +111,7 @@ def test_safelink_downlink_delivered_once_despite_lost_acks():
 def test_plain_link_dispatch_and_null_acks_ignored():
     peer = NrfPeer(safelink_capable=False)
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     on_port2, on_2_1, anything = [], [], []
     unsubscribe = link.subscribe(2, None, on_port2.append)
     link.subscribe(2, 1, on_2_1.append)
@@ -128,7 +131,7 @@ def test_plain_link_dispatch_and_null_acks_ignored():
 def test_rssi_from_three_byte_empty_acks():
     peer = NrfPeer(rssi=42)
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     assert link.stats.rssi is None                      # the handshake echo carries no RSSI
     link.poll()
     assert link.stats.rssi == 42
@@ -140,7 +143,7 @@ def test_rssi_from_three_byte_empty_acks():
 def test_callback_errors_do_not_break_the_sender(caplog):
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     good = []
     link.subscribe(0, None, lambda p: 1 / 0)
     link.subscribe(0, None, good.append)
@@ -153,7 +156,7 @@ def test_callback_errors_do_not_break_the_sender(caplog):
 def test_request_returns_the_matching_reply():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     peer.on_packet = lambda data: peer.queue.extend([b"\x00noise", bytes([0xDD, 0x00, 0x0C])])
     reply = link.request(CRTPPacket(13, 1, b"\x00"), lambda p: p.port == 13 and p.channel == 1,
                          what="protocol version")
@@ -164,7 +167,7 @@ def test_request_returns_the_matching_reply():
 def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink():
     peer = NrfPeer(safelink_capable=False)
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     t0 = time.monotonic()
     with pytest.raises(LinkTimeout) as info:
         link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.25, resend_interval=0.05,
@@ -176,7 +179,7 @@ def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink():
 
     peer2 = NrfPeer()
     medium2, backend2, manager2 = setup(peer2)
-    link2 = manager2.open_link(URI)
+    link2 = open_link(URI, manager2)
     with pytest.raises(LinkTimeout):
         link2.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.15, resend_interval=0.02)
     assert peer2.received == [b"\x20\x03"]               # safelink: sent (and delivered) once
@@ -185,7 +188,7 @@ def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink():
 def test_request_match_error_is_raised_in_the_requesting_thread():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     peer.queue.append(b"\x00x")
     with pytest.raises(ZeroDivisionError):
         link.request(CRTPPacket(0, 0, b""), lambda p: 1 / 0, timeout=0.5)
@@ -194,11 +197,13 @@ def test_request_match_error_is_raised_in_the_requesting_thread():
 def test_statistics_window_and_link_lost():
     stats = LinkStatistics(lost_threshold=5, window=4)
     assert stats.ack_ratio == 0.0 and stats.retries == 0.0
+    assert stats.samples == 0
     for acked, retries in [(True, 2), (False, 0), (True, 4), (True, 0)]:
         stats.record(acked, retries)
     assert stats.ack_ratio == 0.75 and stats.retries == 2.0
     stats.record(False, 3)        # pushes out (True, 2)
     assert stats.ack_ratio == 0.5 and stats.retries == 2.0
+    assert stats.samples == 4               # the window is full: the oldest round trip left it
     for _ in range(3):
         stats.record(False, 3)
     assert stats.ack_ratio == 0.0 and stats.consecutive_failures == 4 and not stats.link_lost
@@ -244,9 +249,9 @@ def test_two_links_on_one_dongle_reconfigure_only_when_needed():
     b = NrfPeer(channel=90, address=b"\xe7\xe7\xe7\xe7\x01")
     c = NrfPeer(channel=90, address=b"\xe7\xe7\xe7\xe7\x02")
     medium, backend, manager = setup(a, b, c)
-    la = manager.open_link("radio://0/80/2M/E7E7E7E701")
-    lb = manager.open_link("radio://0/90/2M/E7E7E7E701")
-    lc = manager.open_link("radio://0/90/2M/E7E7E7E702")
+    la = open_link("radio://0/80/2M/E7E7E7E701", manager)
+    lb = open_link("radio://0/90/2M/E7E7E7E701", manager)
+    lc = open_link("radio://0/90/2M/E7E7E7E702", manager)
     assert manager.users(0) == 3
     dongle = backend.dongles[0]
 
@@ -266,8 +271,8 @@ def test_two_links_on_one_dongle_reconfigure_only_when_needed():
 def test_reference_counting_closes_the_dongle_with_the_last_link():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    l1 = manager.open_link(URI)
-    l2 = manager.open_link(URI)
+    l1 = open_link(URI, manager)
+    l2 = open_link(URI, manager)
     dongle = backend.dongles[0]
     assert dongle.claimed_by is not None
     l1.close()
@@ -278,7 +283,7 @@ def test_reference_counting_closes_the_dongle_with_the_last_link():
         l1.poll()
     l2.close()
     assert manager.users(0) == 0 and dongle.claimed_by is None
-    l3 = manager.open_link(URI)                           # re-opened from scratch
+    l3 = open_link(URI, manager)                           # re-opened from scratch
     assert l3.poll()
     l3.close()
 
@@ -287,8 +292,8 @@ def test_two_dongles():
     p0 = NrfPeer(channel=80)
     p1 = NrfPeer(channel=81)
     medium, backend, manager = setup(p0, p1, dongles=2)
-    l0 = manager.open_link("radio://0/80/2M/E7E7E7E701")
-    l1 = manager.open_link("radio://1/81/2M/E7E7E7E701")
+    l0 = open_link("radio://0/80/2M/E7E7E7E701", manager)
+    l1 = open_link("radio://1/81/2M/E7E7E7E701", manager)
     l0.send(CRTPPacket(3, 0, b"\x00"))
     l1.send(CRTPPacket(3, 0, b"\x01"))
     assert {(t.dongle, t.channel) for t in medium.transmits if t.data[0] & 0xF3 == 0x30} == {(0, 80), (1, 81)}
@@ -298,7 +303,7 @@ def test_two_dongles():
 def test_unplug_raises_from_send():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     backend.unplug(0)
     with pytest.raises(RadioUnplugged):
         link.send(CRTPPacket(3, 0, b""))
@@ -309,7 +314,7 @@ def test_unplug_raises_from_send():
 def test_link_carries_on_after_the_dongle_is_plugged_back_in():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     shared = manager.acquire(0)
     shared._reopen_interval = 0.0
     backend.unplug(0)
@@ -330,7 +335,7 @@ def test_link_carries_on_after_the_dongle_is_plugged_back_in():
 def test_several_threads_share_one_safelink_link():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     got = []
     link.subscribe(0, None, got.append)
     peer.on_packet = lambda data: peer.queue.append(b"\x00" + data[1:])   # echo on port 0
@@ -379,7 +384,7 @@ def test_fair_lock_serves_waiters_in_arrival_order():
 def test_safelink_drops_a_downlink_packet_with_the_old_sequence_bit():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     got = []
     link.subscribe(0, None, got.append)
     # Host expects down = 0: a payload with bit 2 set is a repeat of an earlier one.

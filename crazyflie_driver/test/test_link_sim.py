@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.radio.link import RadioManager
+from crazyflie_driver.radio.link import open_link
+from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
@@ -32,7 +33,7 @@ def is_echo(payload):
 @pytest.mark.parametrize("firmware", ["current", "2016.02"])
 def test_safelink_and_link_source(firmware):
     medium, backend, manager, fw = make_air(firmware)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     try:
         assert link.safelink
         reply = link.request(CRTPPacket(15, 1, b"\x00"), lambda p: p.port == 15 and p.channel == 1,
@@ -48,7 +49,7 @@ def test_safelink_and_link_source(firmware):
 def test_rssi_from_2016_empty_acks_only():
     for firmware, expect_rssi in (("2016.02", True), ("current", False)):
         medium, backend, manager, fw = make_air(firmware)
-        link = manager.open_link(URI)
+        link = open_link(URI, manager)
         for _ in range(100):                       # drain the boot console text first
             link.poll()
             if fw.pending_outgoing() == 0:
@@ -63,7 +64,7 @@ def test_rssi_from_2016_empty_acks_only():
 
 def test_every_echo_exactly_once_through_ack_loss():
     medium, backend, manager, fw = make_air(seed=3)
-    link = manager.open_link(URI)
+    link = open_link(URI, manager)
     got = []
     link.subscribe(15, 0, got.append)
     # Fault injection the way a Crazyradio 2.0 takes it: request 0x30 [packet loss %, ack loss %].

@@ -12,6 +12,7 @@ from typing import Any, Dict, List
 
 from crazyflie_driver.errors import RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.protocol.toc import TocEntry
+from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 
 
@@ -79,13 +80,11 @@ class FakeParams:
         self.values[name] = value
 
 
-class Stats:
-    rssi = None
-
-
 class Link:
+    """The part of the link contract the worker reads: its statistics."""
+
     def __init__(self):
-        self.stats = Stats()
+        self.stats = LinkStatistics()
 
 
 class FakeCrazyflie:
@@ -127,6 +126,7 @@ class FakeCrazyflie:
             raise RadioUnplugged("dongle 0 unplugged")
         with self.lock:
             self.packets.append((time.monotonic(), kind, args))
+            self.link.stats.record(self.acking)
         return self.acking
 
     def send_setpoint(self, roll, pitch, yawrate, thrust):

@@ -1,4 +1,6 @@
-"""Which pyusb backend the Crazyradio code uses: real libusb, or a fake dongle in the simulated world.
+"""Which pyusb backend a process's Crazyradios use: real libusb, or a fake dongle in the simulated world.
+
+Only entry points (nodes, tools, tests, benchmarks) call this; ``radio/`` takes the backend it is given.
 
 * default: ``None``, i.e. pyusb picks libusb1 (real hardware);
 * ``CRAZYFLIE_BACKEND=sim``: one shared ``FakeUsbBackend`` attached to the world server at
@@ -14,6 +16,7 @@ import threading
 from typing import Optional, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.radio.shared_radio import RadioManager, default_manager
 
 ENV_BACKEND = "CRAZYFLIE_BACKEND"
 ENV_SIM_ADDRESS = "CRAZYFLIE_SIM_ADDRESS"
@@ -22,6 +25,7 @@ DEFAULT_SIM_ADDRESS = "127.0.0.1:19840"
 _lock = threading.Lock()
 _override = None
 _sim_backends: dict = {}
+_managers: dict = {}
 
 
 def parse_sim_address(text: str) -> Tuple[str, int]:
@@ -82,3 +86,16 @@ class use_backend:
 def current_override() -> Optional[object]:
     """The backend set by ``use_backend``, if any."""
     return _override
+
+
+def radio_manager() -> RadioManager:
+    """The process-wide ``RadioManager`` on ``get_backend()``, so every Crazyflie of the process
+    shares its dongles (one manager per backend)."""
+    backend = get_backend()
+    if backend is None:
+        return default_manager()
+    with _lock:
+        manager = _managers.get(backend)
+        if manager is None:
+            manager = _managers[backend] = RadioManager(backend=backend)
+        return manager

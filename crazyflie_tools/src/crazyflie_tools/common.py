@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Callable, List, Optional
 
+from crazyflie_driver import usb_choice
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.errors import (CrazyflieError, LinkTimeout, RadioAccessDenied,
                                      RadioNotFound, UnknownName, UriError)
@@ -29,7 +30,7 @@ def parser(description: str, uri: bool = True) -> argparse.ArgumentParser:
 
 def open_crazyflie(args: argparse.Namespace, cache_dir: Optional[str] = None) -> Crazyflie:
     """A connected Crazyflie for ``args.uri`` (errors are left to ``run``)."""
-    cf = Crazyflie(args.uri, cache_dir=cache_dir, timeout=args.timeout)
+    cf = Crazyflie(args.uri, usb_choice.radio_manager(), cache_dir=cache_dir, timeout=args.timeout)
     cf.connect()
     return cf
 

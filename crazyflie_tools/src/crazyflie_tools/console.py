@@ -5,6 +5,7 @@ import sys
 import time
 from typing import List, Optional
 
+from crazyflie_driver import usb_choice
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 
 from .common import parser, run
@@ -20,7 +21,7 @@ def _write(text: str) -> None:
 def _console(args) -> int:
     if args.seconds < 0:
         raise ValueError("--seconds must be >= 0, got %g" % args.seconds)
-    cf = Crazyflie(args.uri, timeout=args.timeout)
+    cf = Crazyflie(args.uri, usb_choice.radio_manager(), timeout=args.timeout)
     cf.console.on_text(_write)   # before connect: the boot text arrives right away
     cf.connect()
     try:

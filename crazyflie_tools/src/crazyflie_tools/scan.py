@@ -4,6 +4,7 @@ from __future__ import annotations
 import sys
 from typing import List, Optional
 
+from crazyflie_driver import usb_choice
 from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.radio.scan import parse_address, scan
 
@@ -17,7 +18,7 @@ def dongle_line(version: float) -> str:
 
 def _scan(args) -> int:
     address = parse_address(args.address)
-    radio = Crazyradio(args.radio)
+    radio = Crazyradio(args.radio, usb_choice.get_backend())
     try:
         print(dongle_line(radio.version), flush=True)
         found = scan(args.radio, address, radio=radio)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import sys
 from typing import List, Optional
 
+from crazyflie_driver import usb_choice
 from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.errors import RadioAccessDenied, RadioNotFound
 
@@ -11,7 +12,7 @@ from .common import UDEV_HINT, open_crazyflie, parser, run
 
 
 def _version(args) -> int:
-    radios = list_radios()
+    radios = list_radios(usb_choice.get_backend())
     if not radios:
         raise RadioNotFound("no Crazyradio found (is it plugged in? if it is: %s)" % UDEV_HINT)
     for radio in radios:

@@ -281,9 +281,9 @@ class CrazyflieServer:
 def make_factory(timeout: float):
     """Crazyflies sharing one RadioManager (one SharedRadio per dongle)."""
     from crazyflie_driver.protocol.crazyflie import Crazyflie
-    from crazyflie_driver.radio.link import RadioManager
+    from crazyflie_driver import usb_choice
 
-    manager = RadioManager()
+    manager = usb_choice.radio_manager()
     cache_dir = os.environ.get("CRAZYFLIE_TOC_CACHE") or None
 
     def factory(uri: str):

@@ -12,7 +12,8 @@ from typing import Optional, Union
 
 from crazyflie_driver.protocol.commander import Commander
 from crazyflie_driver.protocol.console import Console
-from crazyflie_driver.radio.link import RadioLink, RadioManager
+from crazyflie_driver.radio.link import RadioLink
+from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.protocol.log import LogClient
 from crazyflie_driver.protocol.param import ParamClient
 from crazyflie_driver.protocol.platform import Platform, toc_version

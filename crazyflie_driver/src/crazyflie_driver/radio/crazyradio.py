@@ -12,7 +12,6 @@ from typing import List, NamedTuple, Optional
 import usb.core
 import usb.util
 
-from crazyflie_driver import usb_choice as usb_backend
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
 
 VENDOR_ID = 0x1915
@@ -85,9 +84,10 @@ def _access_denied(index: int, exc: usb.core.USBError) -> RadioAccessDenied:
 
 
 def list_radios(backend=None) -> List[RadioInfo]:
-    """Every Crazyradio on the bus, in the order ``Crazyradio(index)`` numbers them."""
-    if backend is None:
-        backend = usb_backend.get_backend()
+    """Every Crazyradio on the bus, in the order ``Crazyradio(index)`` numbers them.
+
+    ``backend``: the pyusb backend (None: pyusb's default, libusb).
+    """
     radios = []
     for i, dev in enumerate(_find(backend)):
         try:
@@ -103,12 +103,12 @@ def list_radios(backend=None) -> List[RadioInfo]:
 class Crazyradio:
     """The ``index``-th Crazyradio (PA or 2.0) on the bus, configured to the firmware defaults.
 
-    Not thread-safe by itself: ``link.SharedRadio`` serialises access.
+    ``backend`` is the pyusb backend to find it with (None: pyusb's default, libusb, i.e. real
+    hardware); the entry point chooses it (``crazyflie_driver.usb_choice``). Not thread-safe by
+    itself: ``shared_radio.SharedRadio`` serialises access.
     """
 
     def __init__(self, index: int = 0, backend=None, usb_timeout_ms: int = 1000):
-        if backend is None:
-            backend = usb_backend.get_backend()
         self.index = index
         self.usb_timeout_ms = usb_timeout_ms
         self.control_transfers = 0

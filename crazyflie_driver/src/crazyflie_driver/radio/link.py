@@ -1,278 +1,32 @@
-"""The radio link to one Crazyflie, and the sharing of one Crazyradio between several of them.
+"""The radio link to one Crazyflie over a shared Crazyradio.
 
-* ``RadioManager`` keeps one ``SharedRadio`` per dongle index, opened by the first link that needs
-  it and closed when the last one leaves.
-* ``SharedRadio`` time-slices round trips of several Crazyflies with a FIFO lock, and reconfigures
-  channel, data rate and address only when they differ from the previous packet's.
-* ``RadioLink`` is one Crazyflie: safelink (CRTP.md §R4.5, §P2) with a fallback to plain acks,
-  downlink dispatch from the ack payloads, request/reply with timeouts, ``LinkStatistics``.
-
-No thread of its own: a round trip happens in the thread that calls ``send``/``poll``/``request``,
-and downlink callbacks run there.
+``RadioLink`` does safelink (see docs/protocol.md, "Safelink") with a fallback to plain acks, dispatches
+the downlink carried by the ack payloads, does request/reply with timeouts and keeps the link's
+``LinkStatistics``. No thread of its own: a round trip happens in the thread that calls
+``send``/``poll``/``request``, and downlink callbacks run there.
 """
 from __future__ import annotations
 
 import logging
 import threading
 import time
-from collections import deque
 from typing import Callable, Dict, Optional, Tuple, Union
 
-from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import CrazyflieError, LinkTimeout, RadioUnplugged
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
+from crazyflie_driver.errors import CrazyflieError, LinkTimeout
+from crazyflie_driver.radio.crazyradio import RadioAck
+from crazyflie_driver.radio.shared_radio import RadioManager, SharedRadio, default_manager
+from crazyflie_driver.radio.statistics import DEFAULT_LOST_THRESHOLD, LinkStatistics
 
 _log = logging.getLogger(__name__)
 
 SAFELINK_ON = b"\xff\x05\x01"
 NULL_PACKET = b"\xff"
-DEFAULT_LOST_THRESHOLD = 100
-STATS_WINDOW = 100
 # Every one-byte packet (a header alone, e.g. a null packet with safelink bits) preallocated.
 _ONE_BYTE = tuple(bytes((h,)) for h in range(256))
 
 Callback = Callable[[CRTPPacket], None]
-
-
-class FairLock:
-    """A FIFO lock: waiting threads get it in arrival order, so N Crazyflies polling flat out on
-    one dongle each get 1/N of its round trips (``threading.Lock`` lets the releasing thread win)."""
-
-    __slots__ = ("_mutex", "_held", "_waiters")
-
-    def __init__(self) -> None:
-        self._mutex = threading.Lock()
-        self._held = False
-        self._waiters: deque = deque()
-
-    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
-        with self._mutex:
-            if not self._held:
-                self._held = True
-                return True
-            if not blocking:
-                return False
-            waiter = threading.Lock()
-            waiter.acquire()
-            self._waiters.append(waiter)
-        if waiter.acquire(True, timeout):
-            return True
-        with self._mutex:
-            try:
-                self._waiters.remove(waiter)
-            except ValueError:
-                return True   # handed over to us while timing out
-            return False
-
-    def release(self) -> None:
-        with self._mutex:
-            if self._waiters:
-                self._waiters.popleft().release()   # ownership passes directly
-            elif self._held:
-                self._held = False
-            else:
-                raise RuntimeError("release of an unlocked FairLock")
-
-    def locked(self) -> bool:
-        return self._held
-
-    __enter__ = acquire
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
-
-class LinkStatistics:
-    """Per-Crazyflie counters, updated on every round trip.
-
-    ``ack_ratio`` and ``retries`` (mean retransmissions of acked packets) cover the last ``window``
-    round trips; ``rssi`` is the latest value carried by an empty ack (raw, i.e. -dBm), None until
-    one arrives; ``link_lost`` is true after ``lost_threshold`` unacked round trips in a row.
-    """
-
-    def __init__(self, lost_threshold: int = DEFAULT_LOST_THRESHOLD, window: int = STATS_WINDOW):
-        if window < 1 or lost_threshold < 1:
-            raise ValueError("window and lost_threshold must be >= 1")
-        self.lost_threshold = lost_threshold
-        self.window = window
-        self.sent = 0
-        self.acked = 0
-        self.consecutive_failures = 0
-        self.rssi: Optional[int] = None
-        self._acks = [0] * window
-        self._retries = [0] * window
-        self._pos = 0
-        self._filled = 0
-        self._ack_sum = 0
-        self._retry_sum = 0
-
-    def record(self, acked: bool, retries: int) -> None:
-        pos = self._pos
-        a = 1 if acked else 0
-        r = retries if acked else 0
-        self._ack_sum += a - self._acks[pos]
-        self._retry_sum += r - self._retries[pos]
-        self._acks[pos] = a
-        self._retries[pos] = r
-        pos += 1
-        self._pos = 0 if pos == self.window else pos
-        if self._filled < self.window:
-            self._filled += 1
-        self.sent += 1
-        if acked:
-            self.acked += 1
-            self.consecutive_failures = 0
-        else:
-            self.consecutive_failures += 1
-
-    @property
-    def ack_ratio(self) -> float:
-        """Acked fraction of the last ``window`` round trips (0.0 before the first one)."""
-        return self._ack_sum / self._filled if self._filled else 0.0
-
-    @property
-    def retries(self) -> float:
-        """Mean retransmissions per acked packet over the window."""
-        return self._retry_sum / self._ack_sum if self._ack_sum else 0.0
-
-    @property
-    def link_lost(self) -> bool:
-        return self.consecutive_failures >= self.lost_threshold
-
-    def as_dict(self) -> dict:
-        return {"sent": self.sent, "acked": self.acked, "ack_ratio": self.ack_ratio,
-                "retries": self.retries, "rssi": self.rssi,
-                "consecutive_failures": self.consecutive_failures, "link_lost": self.link_lost}
-
-    def __repr__(self) -> str:
-        return ("LinkStatistics(sent=%d, acked=%d, ack_ratio=%.2f, retries=%.2f, rssi=%s, "
-                "consecutive_failures=%d)" % (self.sent, self.acked, self.ack_ratio, self.retries,
-                                              self.rssi, self.consecutive_failures))
-
-
-class SharedRadio:
-    """One Crazyradio shared by every link on it; ``round_trip`` is the only way to use it.
-
-    When the dongle disappears (``RadioUnplugged``) the dead handle is dropped; later round trips
-    try to open the dongle again through ``opener`` (at most every ``reopen_interval`` seconds),
-    so a dongle that is plugged back in carries on without restarting anything.
-    """
-
-    def __init__(self, index: int, radio: Crazyradio,
-                 opener: Optional[Callable[[int], Crazyradio]] = None, reopen_interval: float = 0.5):
-        self.index = index
-        self.radio: Optional[Crazyradio] = radio
-        self.lock = FairLock()
-        self.users = 0
-        self._opener = opener
-        self._reopen_interval = reopen_interval
-        self._next_reopen = 0.0
-
-    def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
-        """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack."""
-        lock = self.lock
-        lock.acquire()
-        try:
-            radio = self.radio
-            if radio is None:
-                radio = self._reopen()
-            try:
-                if channel != radio._channel or datarate != radio._datarate or address != radio._address:
-                    radio.configure(channel, datarate, address)
-                return radio.send_packet(data)
-            except RadioUnplugged:
-                self._drop()
-                raise
-        finally:
-            lock.release()
-
-    def _drop(self) -> None:
-        radio, self.radio = self.radio, None
-        self._next_reopen = time.monotonic() + self._reopen_interval
-        if radio is not None:
-            try:
-                radio.close()
-            except Exception:  # the handle is dead anyway
-                pass
-
-    def _reopen(self) -> Crazyradio:
-        if self._opener is None or time.monotonic() < self._next_reopen:
-            raise RadioUnplugged("Crazyradio %d is unplugged" % self.index)
-        try:
-            self.radio = self._opener(self.index)
-        except CrazyflieError as exc:
-            self._next_reopen = time.monotonic() + self._reopen_interval
-            raise RadioUnplugged("Crazyradio %d is unplugged (%s)" % (self.index, exc)) from exc
-        _log.info("Crazyradio %d is back", self.index)
-        return self.radio
-
-    def close(self) -> None:
-        with self.lock:
-            if self.radio is not None:
-                self.radio.close()
-                self.radio = None
-
-
-class RadioManager:
-    """One ``SharedRadio`` per dongle index, reference counted.
-
-    ``backend`` is the pyusb backend for the dongles (None: ``usb_backend.get_backend()``);
-    ``radio_factory(index)`` replaces how a dongle is opened altogether.
-    """
-
-    def __init__(self, backend=None, radio_factory: Optional[Callable[[int], Crazyradio]] = None):
-        self.backend = backend
-        self._factory = radio_factory
-        self._lock = threading.Lock()
-        self._radios: Dict[int, SharedRadio] = {}
-
-    def acquire(self, index: int) -> SharedRadio:
-        """The shared radio for dongle ``index``, opened if nobody uses it yet."""
-        with self._lock:
-            shared = self._radios.get(index)
-            if shared is None:
-                shared = SharedRadio(index, self._open(index), opener=self._open)
-                self._radios[index] = shared
-            shared.users += 1
-            return shared
-
-    def _open(self, index: int) -> Crazyradio:
-        return self._factory(index) if self._factory else Crazyradio(index, backend=self.backend)
-
-    def release(self, shared: SharedRadio) -> None:
-        """One user fewer; the dongle is closed when the last one leaves."""
-        with self._lock:
-            shared.users -= 1
-            if shared.users > 0:
-                return
-            if self._radios.get(shared.index) is shared:
-                del self._radios[shared.index]
-        shared.close()
-
-    def users(self, index: int) -> int:
-        with self._lock:
-            shared = self._radios.get(index)
-            return shared.users if shared else 0
-
-    def open_link(self, uri: Union[str, RadioUri], **options) -> "RadioLink":
-        """A new ``RadioLink`` on this manager, already opened."""
-        link = RadioLink(uri, self, **options)
-        link.open()
-        return link
-
-
-_default_manager: Optional[RadioManager] = None
-_default_lock = threading.Lock()
-
-
-def default_manager() -> RadioManager:
-    """The process-wide manager, so every Crazyflie of a process shares its dongles."""
-    global _default_manager
-    with _default_lock:
-        if _default_manager is None:
-            _default_manager = RadioManager()
-        return _default_manager
 
 
 class _Waiter:
@@ -531,3 +285,10 @@ class RadioLink:
     def __repr__(self) -> str:
         return "<RadioLink %s %s>" % (self.uri, "safelink" if self.safelink else
                                        ("plain" if self.is_open else "closed"))
+
+
+def open_link(uri: Union[str, RadioUri], manager: Optional[RadioManager] = None, **options) -> RadioLink:
+    """A new ``RadioLink`` on ``manager`` (the process-wide one if None), already opened."""
+    link = RadioLink(uri, manager, **options)
+    link.open()
+    return link

@@ -30,7 +30,7 @@ def scan(radio_index: int = 0, address: bytes = DEFAULT_ADDRESS,
     """Every (datarate, channel) where something acks a null packet sent to ``address``.
 
     ``radio``: an already open Crazyradio (left open); otherwise dongle ``radio_index`` is
-    opened (and closed) with ``backend`` (None: usb_backend.get_backend()).
+    opened (and closed) with ``backend`` (None: pyusb's default, libusb).
     """
     if len(address) != 5:
         raise ValueError("a radio address has 5 bytes, got %d" % len(address))

@@ -8,8 +8,8 @@ object with the same methods) and is the only thread that streams to it:
 * when no setpoint comes, null packets keep the link alive (at least every ``keepalive_period``)
   and fetch the log data the Crazyflie has queued, one packet per poll, paced by
   :class:`~crazyflie_driver.server.poll_pacer.PollPacer`;
-* link quality (acked / sent over a window) is tracked per Crazyflie, a listener is told when it
-  drops below ``LINK_QUALITY_WARNING``;
+* link quality (acked / sent over a window, from the link's ``LinkStatistics``) is watched per
+  Crazyflie, a listener is told when it drops below ``LINK_QUALITY_WARNING``;
 * a Crazyflie that stops answering is reported as lost and retried slowly, without holding the
   dongle for the others; when it answers again its log blocks are set up again;
 * :meth:`CrazyflieWorker.emergency` works from any thread, at once, and is idempotent: no
@@ -28,8 +28,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
-from crazyflie_driver.radio.quality import (LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING,
-                           LINK_QUALITY_WINDOW, LinkQuality)
+from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
                        PlannedBlock, log_packet_rate, plan_log_blocks)
 from crazyflie_driver.server.param_values import coerce_param_value
@@ -106,7 +105,6 @@ class CrazyflieWorker:
 
         self.state = WorkerState.CONNECTING
         self.error: Optional[BaseException] = None
-        self.quality = LinkQuality()
         self.setpoints_sent = 0
         self.keepalives_sent = 0
         self.log_topics: List[str] = []          # topics whose blocks were started
@@ -115,7 +113,6 @@ class CrazyflieWorker:
 
         self._cond = threading.Condition()
         self._pending: Optional[Setpoint] = None
-        self._pending_since = 0.0
         self._send_lock = threading.Lock()       # a setpoint check-and-send vs. emergency
         self._emergency = False
         self._stopping = False
@@ -130,7 +127,6 @@ class CrazyflieWorker:
         self._downlink_packets = 0
         self._pacer = PollPacer(keepalive_period, now=clock())
         self._log_plan: List[PlannedBlock] = []
-        self.latency_listener: Optional[Callable[[float], None]] = None   # bench hook
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -188,7 +184,6 @@ class CrazyflieWorker:
             return False
         with self._cond:
             self._pending = setpoint
-            self._pending_since = self._clock()
             self._cond.notify_all()
         return True
 
@@ -304,7 +299,7 @@ class CrazyflieWorker:
         self.missing_fixed_topics = []
         if cfg.enable_logging:
             fixed = list(FIXED_LOG_TOPICS)
-            rssi = getattr(getattr(getattr(self.cf, "link", None), "stats", None), "rssi", None)
+            rssi = self.cf.link.stats.rssi
             if rssi is None and RSSI_LOG_VARIABLE in types:
                 fixed.append((RADIO_RSSI_TOPIC, 100, (RSSI_LOG_VARIABLE,)))
                 self._rssi_from_log = True
@@ -375,10 +370,10 @@ class CrazyflieWorker:
                     self._cond.wait(wait)
                 if self._stopping:
                     return
-                setpoint, since = self._pending, self._pending_since
+                setpoint = self._pending
                 self._pending = None
             downlink_before = self._downlink_packets
-            acked = self._round_trip(setpoint, since)
+            acked = self._round_trip(setpoint)
             now = self._clock()
             if self.state == WorkerState.LOST:
                 next_due = now + self.lost_retry_period
@@ -387,7 +382,7 @@ class CrazyflieWorker:
             if acked is not None:
                 self._after_round_trip(acked, now)
 
-    def _round_trip(self, setpoint: Optional[Setpoint], since: float) -> Optional[bool]:
+    def _round_trip(self, setpoint: Optional[Setpoint]) -> Optional[bool]:
         """One packet to the Crazyflie. Returns acked, or None when the dongle failed."""
         try:
             with self._send_lock:
@@ -397,8 +392,6 @@ class CrazyflieWorker:
                     acked = bool(self.cf.send_setpoint(setpoint.roll, setpoint.pitch,
                                                        setpoint.yawrate, setpoint.thrust))
                     self.setpoints_sent += 1
-                    if self.latency_listener is not None:
-                        self.latency_listener(self._clock() - since)
                     return acked
                 acked = bool(self.cf.send_keepalive())
                 self.keepalives_sent += 1
@@ -407,12 +400,10 @@ class CrazyflieWorker:
             self._mark_lost("the Crazyradio was unplugged (%s)" % e)
             return None
         except CrazyflieError as e:
-            self.quality.record(False)
             self._check_lost(self._clock(), str(e))
             return None
 
     def _after_round_trip(self, acked: bool, now: float) -> None:
-        self.quality.record(acked)
         if acked:
             self._last_ack = now
             if self.state == WorkerState.LOST:
@@ -421,7 +412,7 @@ class CrazyflieWorker:
             self._check_lost(now, "no ack for %.1f s" % (now - self._last_ack))
         self._check_quality(now)
         if acked and not self._rssi_from_log and now - self._rssi_sent_at >= self.rssi_period:
-            rssi = getattr(getattr(getattr(self.cf, "link", None), "stats", None), "rssi", None)
+            rssi = self.cf.link.stats.rssi
             if rssi is not None:
                 self._rssi_sent_at = now
                 self.listener.on_rssi(float(rssi))
@@ -452,15 +443,10 @@ class CrazyflieWorker:
         self.listener.on_link_restored()
 
     def link_quality(self) -> Tuple[float, int]:
-        """(acked / sent, samples) over the recent window: per radio packet from the link's own
-        statistics when it keeps them (safelink re-sends hide losses from ``send``'s result),
-        else over this worker's round trips."""
-        stats = getattr(getattr(self.cf, "link", None), "stats", None)
-        ratio = getattr(stats, "ack_ratio", None)
-        sent = getattr(stats, "sent", None)
-        if isinstance(ratio, float) and isinstance(sent, int):
-            return ratio, min(sent, LINK_QUALITY_WINDOW)
-        return self.quality.value, self.quality.samples
+        """(acked / sent, samples) over the recent window, per radio packet, from the link's
+        statistics (safelink re-sends hide losses from ``send``'s result)."""
+        stats = self.cf.link.stats
+        return stats.ack_ratio, stats.samples
 
     def _check_quality(self, now: float) -> None:
         q, samples = self.link_quality()

@@ -14,7 +14,7 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 import numpy as np
 
 from crazyflie_driver.protocol.crazyflie import Crazyflie
-from crazyflie_driver.radio.link import RadioManager
+from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie

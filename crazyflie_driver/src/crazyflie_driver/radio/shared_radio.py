@@ -1,0 +1,138 @@
+"""One Crazyradio shared by several Crazyflies: ``SharedRadio`` time-slices its round trips,
+``RadioManager`` opens one per dongle index for the first link that needs it and closes it when the
+last one leaves.
+
+The pyusb backend is injected (``RadioManager(backend=...)``); None means pyusb's own choice (libusb,
+real hardware). Which backend a process uses is decided by its entry point (``crazyflie_driver.usb_choice``).
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable, Dict, Optional
+
+from crazyflie_driver.errors import CrazyflieError, RadioUnplugged
+from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck
+from crazyflie_driver.radio.fair_lock import FairLock
+
+_log = logging.getLogger(__name__)
+
+
+class SharedRadio:
+    """One Crazyradio shared by every link on it; ``round_trip`` is the only way to use it.
+
+    When the dongle disappears (``RadioUnplugged``) the dead handle is dropped; later round trips
+    try to open the dongle again through ``opener`` (at most every ``reopen_interval`` seconds),
+    so a dongle that is plugged back in carries on without restarting anything.
+    """
+
+    def __init__(self, index: int, radio: Crazyradio,
+                 opener: Optional[Callable[[int], Crazyradio]] = None, reopen_interval: float = 0.5):
+        self.index = index
+        self.radio: Optional[Crazyradio] = radio
+        self.lock = FairLock()
+        self.users = 0
+        self._opener = opener
+        self._reopen_interval = reopen_interval
+        self._next_reopen = 0.0
+
+    def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
+        """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack."""
+        lock = self.lock
+        lock.acquire()
+        try:
+            radio = self.radio
+            if radio is None:
+                radio = self._reopen()
+            try:
+                if channel != radio._channel or datarate != radio._datarate or address != radio._address:
+                    radio.configure(channel, datarate, address)
+                return radio.send_packet(data)
+            except RadioUnplugged:
+                self._drop()
+                raise
+        finally:
+            lock.release()
+
+    def _drop(self) -> None:
+        radio, self.radio = self.radio, None
+        self._next_reopen = time.monotonic() + self._reopen_interval
+        if radio is not None:
+            try:
+                radio.close()
+            except Exception:  # the handle is dead anyway
+                pass
+
+    def _reopen(self) -> Crazyradio:
+        if self._opener is None or time.monotonic() < self._next_reopen:
+            raise RadioUnplugged("Crazyradio %d is unplugged" % self.index)
+        try:
+            self.radio = self._opener(self.index)
+        except CrazyflieError as exc:
+            self._next_reopen = time.monotonic() + self._reopen_interval
+            raise RadioUnplugged("Crazyradio %d is unplugged (%s)" % (self.index, exc)) from exc
+        _log.info("Crazyradio %d is back", self.index)
+        return self.radio
+
+    def close(self) -> None:
+        with self.lock:
+            if self.radio is not None:
+                self.radio.close()
+                self.radio = None
+
+
+class RadioManager:
+    """One ``SharedRadio`` per dongle index, reference counted.
+
+    ``backend`` is the pyusb backend for the dongles (None: pyusb's default, libusb);
+    ``radio_factory(index)`` replaces how a dongle is opened altogether.
+    """
+
+    def __init__(self, backend=None, radio_factory: Optional[Callable[[int], Crazyradio]] = None):
+        self.backend = backend
+        self._factory = radio_factory
+        self._lock = threading.Lock()
+        self._radios: Dict[int, SharedRadio] = {}
+
+    def acquire(self, index: int) -> SharedRadio:
+        """The shared radio for dongle ``index``, opened if nobody uses it yet."""
+        with self._lock:
+            shared = self._radios.get(index)
+            if shared is None:
+                shared = SharedRadio(index, self._open(index), opener=self._open)
+                self._radios[index] = shared
+            shared.users += 1
+            return shared
+
+    def _open(self, index: int) -> Crazyradio:
+        return self._factory(index) if self._factory else Crazyradio(index, backend=self.backend)
+
+    def release(self, shared: SharedRadio) -> None:
+        """One user fewer; the dongle is closed when the last one leaves."""
+        with self._lock:
+            shared.users -= 1
+            if shared.users > 0:
+                return
+            if self._radios.get(shared.index) is shared:
+                del self._radios[shared.index]
+        shared.close()
+
+    def users(self, index: int) -> int:
+        with self._lock:
+            shared = self._radios.get(index)
+            return shared.users if shared else 0
+
+
+_default_manager: Optional[RadioManager] = None
+_default_lock = threading.Lock()
+
+
+def default_manager() -> RadioManager:
+    """The process-wide manager on pyusb's default backend, so every Crazyflie of a process shares
+    its dongles. Entry points that may fly the simulated world use ``usb_choice.radio_manager()``."""
+    global _default_manager
+    with _default_lock:
+        if _default_manager is None:
+            _default_manager = RadioManager()
+        return _default_manager
