@@ -38,7 +38,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 from crazyflie_driver.radio.link import RadioLink                            # noqa: E402
 from crazyflie_driver.radio.shared_radio import RadioManager                # noqa: E402
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend  # noqa: E402
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming  # noqa: E402
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie            # noqa: E402
 from crazyflie_driver.sim.air.medium import LocalMedium                     # noqa: E402
 

@@ -73,7 +73,7 @@ def served():
 
 def run_session(python, server, uri, *args):
     env = dict(os.environ)
-    env.update(PYTHONPATH=str(SRC), CRAZYFLIE_SIM_ADDRESS=server.address, PYTHONUNBUFFERED="1")
+    env.update(PYTHONPATH=os.pathsep.join((str(SRC), str(HERE))), CRAZYFLIE_SIM_ADDRESS=server.address, PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
     proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

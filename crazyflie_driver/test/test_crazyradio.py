@@ -12,7 +12,8 @@ from crazyflie_driver import usb_choice as usb_backend
 from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, list_radios
 from crazyflie_driver.radio.shared_radio import default_manager
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
 from radio_doubles import AirReply, FakeClock, ScriptedMedium
 

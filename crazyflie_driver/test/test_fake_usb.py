@@ -7,10 +7,11 @@ import pytest
 import usb.core
 import usb.util
 
-from crazyflie_driver.sim.air import fake_usb
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
 from radio_doubles import AirReply, FakeClock, ScriptedMedium
+from support.cflib_find_patch import install_find_patch
 
 VENDOR_OUT = 0x40
 
@@ -364,7 +365,7 @@ def test_install_find_patch_overrides_any_backend(backend):
     class Other:
         pass
 
-    uninstall = fake_usb.install_find_patch(backend)
+    uninstall = install_find_patch(backend)
     try:
         devs = list(usb.core.find(idVendor=0x1915, idProduct=0x7777, find_all=True, backend=Other()))
         assert len(devs) == 1 and devs[0].backend is backend

@@ -12,7 +12,8 @@ from crazyflie_driver.radio.fair_lock import FairLock
 from crazyflie_driver.radio.link import RadioLink, open_link
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.radio.statistics import LinkStatistics
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
 from radio_doubles import AirReply, NrfPeer, ScriptedMedium
 

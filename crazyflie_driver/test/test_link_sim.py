@@ -7,7 +7,8 @@ import pytest
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.radio.link import open_link
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.crtp.uri import parse_uri

@@ -10,7 +10,8 @@ import pytest
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.errors import LinkTimeout, LogConfigError, ReadOnlyParam, UnknownName
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 

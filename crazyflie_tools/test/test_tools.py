@@ -10,7 +10,8 @@ import pytest
 import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.crtp.uri import parse_uri

@@ -71,8 +71,10 @@ def start_watchdog(seconds: float) -> None:
 
 def install_fake_dongle(dongles: int):
     """Make every usb.core.find (cflib passes its own backend=) see our fake Crazyradios."""
-    from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend, install_find_patch
+    from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+    from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
     from crazyflie_driver.sim.air.medium import RemoteMedium
+    from support.cflib_find_patch import install_find_patch
     timing = DongleTiming.instant() if os.environ.get("CFLIB_PEER_TIMING") == "instant" else DongleTiming()
     backend = FakeUsbBackend(RemoteMedium(), dongles=dongles, timing=timing)
     install_find_patch(backend)

@@ -16,7 +16,8 @@ import numpy as np
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_driver.sim.air.fake_usb import DongleTiming, FakeUsbBackend
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.sim.world.mocap import MocapModel

@@ -1,0 +1,218 @@
+"""One fake Crazyradio's own state and firmware: its radio settings, its vendor requests, and the
+radio packets it hands to the medium.
+
+The vendor requests and their effects follow the dongle firmware (sources in docs/simulation.md,
+"The fake Crazyradio"); USB errors are raised as libusb reports them.
+"""
+from __future__ import annotations
+
+import array
+import errno
+import threading
+from collections import deque
+from typing import Deque, Optional
+
+import usb.core
+
+# The dongle's USB identity and vendor requests are shared with the host driver.
+from crazyflie_driver.radio.crazyradio import (
+    ACK_ENABLE, PRODUCT_ID, SCAN_CHANNELS, SET_CONT_CARRIER, SET_DATA_RATE, SET_RADIO_ADDRESS,
+    SET_RADIO_ARC, SET_RADIO_ARD, SET_RADIO_CHANNEL, SET_RADIO_POWER)
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.usb_descriptors import CRAZYRADIO_2_54, PA_053, DongleModel
+
+BOOTLOADER_PRODUCT_ID = 0x0101
+# Requests the host driver does not use
+SET_PACKET_LOSS_SIMULATION = 0x30
+LAUNCH_BOOTLOADER = 0xFF
+
+MAX_SCAN_HITS = 63
+VENDOR_REQUEST_LOG = 10000
+MAX_RADIO_PAYLOAD = 32          # bytes of one radio packet
+
+
+def stall(what: str) -> usb.core.USBError:
+    return usb.core.USBError("Pipe error (%s)" % what, -9, errno.EPIPE)
+
+
+def no_device() -> usb.core.USBError:
+    return usb.core.USBError("No such device (it may have been disconnected)", -4, errno.ENODEV)
+
+
+def usb_timeout() -> usb.core.USBTimeoutError:
+    return usb.core.USBTimeoutError("Operation timed out", -7, errno.ETIMEDOUT)
+
+
+class FakeDongle:
+    """One emulated dongle: its identity and the radio state shared by every handle opened on it."""
+
+    def __init__(self, ident: int, model: DongleModel, serial: str):
+        self.ident = ident
+        self.model = model
+        self.serial = serial
+        self.lock = threading.Lock()
+        self.unplugged = False
+        self.in_bootloader = False
+        self.bootloader_requested = False
+        self.generation = 0              # bumped on re-enumeration; older handles get ENODEV
+        self.configuration = 1           # Linux configures single-config devices on plug-in
+        self.claimed_by: Optional[object] = None
+        self.reply: Optional[bytes] = None   # IN reply waiting to be read
+        self.reply_ready_at = 0.0
+        # Counters for tests and benchmarks.
+        self.control_transfers = 0
+        # (bmRequestType, bRequest, wValue, wIndex, data) of the latest vendor requests (bounded).
+        self.vendor_requests: Deque[tuple] = deque(maxlen=VENDOR_REQUEST_LOG)
+        self.bulk_out = 0
+        self.bulk_in = 0
+        self.reset_radio()
+
+    def reset_radio(self) -> None:
+        """The firmware's power-up radio settings."""
+        self.channel = 2
+        self.address = b"\xe7\xe7\xe7\xe7\xe7"
+        self.datarate = 2
+        self.power = 3
+        self.ard = 0xA0
+        self.arc = 3
+        self.ack_enabled = True
+        self.cont_carrier = False
+        self.scan_hits = b""
+
+    @property
+    def product_id(self) -> int:
+        return BOOTLOADER_PRODUCT_ID if self.in_bootloader else PRODUCT_ID
+
+    def __repr__(self) -> str:
+        return "<FakeDongle %d %s serial %s>" % (self.ident, self.model.name, self.serial)
+
+
+class DongleFirmware:
+    """What the dongle's firmware does with vendor requests and bulk OUT packets: radio settings,
+    channel scans, the packet-loss request, and one radio packet per bulk OUT sent into ``medium``.
+
+    ``clock`` needs ``time()`` and ``sleep(s)``; the time a radio packet takes comes from ``timing``.
+    The caller holds the dongle's lock.
+    """
+
+    def __init__(self, medium, timing: DongleTiming, clock, fault_request: bool = True) -> None:
+        self.medium = medium
+        self.timing = timing
+        self.clock = clock
+        self.fault_request = fault_request
+
+    def vendor_out(self, d: FakeDongle, req: int, wValue: int, wIndex: int, data: bytes) -> int:
+        is_v2 = d.model is CRAZYRADIO_2_54
+        if req == SET_RADIO_CHANNEL:
+            if wValue <= 125:
+                d.channel = wValue
+        elif req == SET_RADIO_ADDRESS:
+            if is_v2:
+                if len(data) == 5:
+                    d.address = data
+            elif 3 <= len(data) <= 5:
+                d.address = data + d.address[len(data):]
+            else:
+                raise stall("SET_RADIO_ADDRESS with %d bytes" % len(data))
+        elif req == SET_DATA_RATE:
+            if wValue < 3:
+                d.datarate = wValue
+        elif req == SET_RADIO_POWER:
+            d.power = min(wValue, 3) if is_v2 else wValue & 3
+        elif req == SET_RADIO_ARD:
+            if not is_v2:
+                d.ard = wValue & 0xFF
+        elif req == SET_RADIO_ARC:
+            d.arc = wValue & 0x0F
+        elif req == ACK_ENABLE:
+            d.ack_enabled = wValue != 0
+        elif req == SET_CONT_CARRIER:
+            d.cont_carrier = wValue != 0
+        elif req == SCAN_CHANNELS:
+            if not data:
+                raise stall("START_SCAN_CHANNELS without a packet")
+            self.scan(d, wValue, min(wIndex, 125), data)
+        elif req == SET_PACKET_LOSS_SIMULATION and (is_v2 or self.fault_request):
+            if len(data) != 2 or data[0] > 100 or data[1] > 100:
+                raise stall("SET_PACKET_LOSS_SIMULATION needs 2 bytes of percent (0-100)")
+            self.medium.set_dongle_faults(d.ident, packet_loss=float(data[0]), ack_loss=float(data[1]))
+        elif req == LAUNCH_BOOTLOADER:
+            d.bootloader_requested = True
+        else:
+            raise stall("unknown vendor request 0x%02X" % req)
+        return len(data)
+
+    def vendor_in(self, d: FakeDongle, req: int, wValue: int, wIndex: int, data) -> int:
+        if req == SCAN_CHANNELS:
+            return fill(data, d.scan_hits)
+        raise stall("unknown vendor IN request 0x%02X" % req)
+
+    def scan(self, d: FakeDongle, start: int, stop: int, packet: bytes) -> None:
+        """Firmware scan: send the packet on start..stop (every 2nd channel at 2M on the PA)."""
+        step = 2 if (d.datarate == 2 and d.model is PA_053) else 1
+        hits = bytearray()
+        spent = 0.0
+        channel = start
+        for channel in range(start, stop + 1, step):
+            if not self.radio_allowed(d, channel):
+                continue
+            reply = self.medium.transmit(d.ident, channel, d.datarate, d.address,
+                                         packet[:MAX_RADIO_PAYLOAD], True, d.arc)
+            if reply.unplugged:
+                d.unplugged = True
+                raise no_device()
+            spent += self.air_time(d, reply)
+            if reply.acked and len(hits) < MAX_SCAN_HITS:
+                hits.append(channel)
+        if start <= stop:
+            d.channel = channel
+        d.scan_hits = bytes(hits)
+        if spent:
+            self.clock.sleep(spent)
+
+    def radio_allowed(self, d: FakeDongle, channel: int) -> bool:
+        if d.model is CRAZYRADIO_2_54:
+            return d.datarate != 0 and channel <= 100
+        return True
+
+    def air_time(self, d: FakeDongle, reply) -> float:
+        t = self.timing
+        retries = reply.retries if reply.acked else d.arc
+        return t.bulk_round_trip_s + retries * t.retransmission_s + reply.latency_s
+
+    def send_packet(self, d: FakeDongle, data, start: float) -> None:
+        """One bulk OUT (``data``, an array of at least one byte, sent at ``start``): its radio packet
+        on the air, the IN reply left in ``d.reply`` (none when acks are off), ready at ``d.reply_ready_at``."""
+        packet = data[:MAX_RADIO_PAYLOAD].tobytes() if len(data) > MAX_RADIO_PAYLOAD else data.tobytes()
+        if not self.radio_allowed(d, d.channel):
+            d.reply = b"\x00"  # Crazyradio 2.0: invalid settings, nothing sent, "no ack"
+            d.reply_ready_at = start + self.timing.bulk_round_trip_s
+            return
+        reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, packet,
+                                     d.ack_enabled, d.arc)
+        if reply.unplugged:
+            d.unplugged = True
+            raise no_device()
+        if not d.ack_enabled:
+            # No IN reply; the dongle still needs the air time before it takes the next OUT.
+            busy = self.timing.bulk_round_trip_s + reply.latency_s
+            if busy > 0:
+                self.clock.sleep(busy)
+            return
+        if reply.acked:
+            payload = reply.payload
+            if len(payload) > MAX_RADIO_PAYLOAD:
+                payload = payload[:MAX_RADIO_PAYLOAD]
+            status = 1 | (0x02 if reply.power_detector else 0) | ((reply.retries & 0x0F) << 4)
+            d.reply = bytes((status,)) + payload
+        else:
+            d.reply = b"\x00"
+        d.reply_ready_at = start + self.air_time(d, reply)
+
+
+def fill(buff, raw: bytes) -> int:
+    """Copy an IN data stage into pyusb's buffer in place, as the libusb1 backend does."""
+    n = min(len(buff), len(raw))
+    if n:
+        buff[:n] = array.array("B", raw[:n])
+    return n
