@@ -14,6 +14,7 @@ from crazyflie_driver.radio.shared_radio import default_manager
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+from crazyflie_driver.sim.air.medium import parse_address
 
 from radio_doubles import AirReply, FakeClock, ScriptedMedium
 
@@ -222,6 +223,7 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
 
     module = types.ModuleType("crazyflie_driver.sim.air.medium")
     module.RemoteMedium = RemoteMedium
+    module.parse_address = parse_address                 # the world's own address rules (loopback only)
     monkeypatch.setitem(sys.modules, "crazyflie_driver.sim.air.medium", module)
     monkeypatch.setattr(usb_backend, "_sim_backends", {})
     monkeypatch.setenv("CRAZYFLIE_BACKEND", "sim")
@@ -233,4 +235,7 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
     assert len(backend.dongles) == 2
     monkeypatch.setenv("CRAZYFLIE_SIM_ADDRESS", "nonsense")
     with pytest.raises(CrazyflieError, match="host:port"):
+        usb_backend.get_backend()
+    monkeypatch.setenv("CRAZYFLIE_SIM_ADDRESS", "192.168.1.5:19840")
+    with pytest.raises(CrazyflieError, match="only loopback"):
         usb_backend.get_backend()

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional
 
 from crazyflie_driver.errors import RadioNotFound, RadioUnplugged, UnknownName
-from crazyflie_driver.protocol.toc import TocEntry
+from crazyflie_driver.protocol.toc import Toc, TocEntry
 from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 
@@ -38,7 +38,7 @@ class FakeBlock:
 class FakeLog:
     def __init__(self, cf: "FakeCrazyflie"):
         self.cf = cf
-        self.toc: List[TocEntry] = []
+        self.toc: Optional[Toc] = None
         self.blocks: List[FakeBlock] = []
         self.resets = 0
 
@@ -49,7 +49,7 @@ class FakeLog:
 
     def fetch_toc(self):
         self.cf.calls.append("log.fetch_toc")
-        self.toc = [TocEntry(i, *n.split("."), t) for i, (n, t) in enumerate(self.cf.log_vars.items())]
+        self.toc = Toc([TocEntry(i, *n.split("."), t) for i, (n, t) in enumerate(self.cf.log_vars.items())])
         return self.toc
 
     def create_block(self, variables, period_ms, callback):
@@ -62,12 +62,12 @@ class FakeLog:
 class FakeParams:
     def __init__(self, cf: "FakeCrazyflie"):
         self.cf = cf
-        self.toc: List[TocEntry] = []
+        self.toc: Optional[Toc] = None
         self.values = {k: v for k, (_, v) in PARAMS.items()}
 
     def fetch_toc(self):
         self.cf.calls.append("params.fetch_toc")
-        self.toc = [TocEntry(i, *n.split("."), t) for i, (n, (t, _)) in enumerate(PARAMS.items())]
+        self.toc = Toc([TocEntry(i, *n.split("."), t) for i, (n, (t, _)) in enumerate(PARAMS.items())])
         return self.toc
 
     def read_all(self):

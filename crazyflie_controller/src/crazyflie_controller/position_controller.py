@@ -44,6 +44,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable, NamedTuple, Optional, Tuple
 
+from crazyflie_driver.mocap.frames import yaw_of
+
 from .hover_thrust import HoverThrustFit
 from .liftoff import LiftoffEstimator
 from .pid import DERIVATIVE_MODES, PID, PidGains, clamp
@@ -110,7 +112,8 @@ class Goal(NamedTuple):
 
 
 def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    """Yaw (rad) of the quaternion (x, y, z, w), as ROS messages order it."""
+    return yaw_of((x, y, z, w))
 
 
 def wrap_angle(a: float) -> float:

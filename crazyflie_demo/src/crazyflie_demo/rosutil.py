@@ -7,6 +7,7 @@ from typing import Optional, Tuple
 import rospy
 from geometry_msgs.msg import PoseStamped
 
+from crazyflie_driver.mocap.frames import yaw_of
 from crazyflie_driver.nodes.ros_signals import shutting_down
 
 
@@ -17,7 +18,7 @@ def yaw_to_quaternion(yaw_rad: float) -> Tuple[float, float, float, float]:
 
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     """Yaw (rad) of a quaternion, ZYX convention."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return yaw_of((x, y, z, w))
 
 
 def make_goal(frame_id: str, x: float, y: float, z: float, yaw_rad: float,

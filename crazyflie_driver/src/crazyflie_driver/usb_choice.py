@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 import threading
-from typing import Optional, Tuple
+from typing import Optional
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.radio.shared_radio import RadioManager, default_manager
@@ -26,14 +26,6 @@ _lock = threading.Lock()
 _override = None
 _sim_backends: dict = {}
 _managers: dict = {}
-
-
-def parse_sim_address(text: str) -> Tuple[str, int]:
-    """'host:port' -> (host, port); only loopback hosts make sense for the simulator."""
-    host, sep, port_text = text.strip().rpartition(":")
-    if not sep or not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
-        raise CrazyflieError("%s=%r is not host:port (e.g. %s)" % (ENV_SIM_ADDRESS, text, DEFAULT_SIM_ADDRESS))
-    return host, int(port_text)
 
 
 def get_backend():
@@ -50,12 +42,16 @@ def get_backend():
 
 
 def _sim_backend(address: str):
-    host, port = parse_sim_address(address)
+    from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address   # lazily: real hardware never loads the sim
+    from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+    try:
+        host, port = parse_address(address)
+    except ValueError as exc:
+        raise CrazyflieError("%s=%r is not a loopback host:port (e.g. %s): %s"
+                             % (ENV_SIM_ADDRESS, address, DEFAULT_SIM_ADDRESS, exc)) from None
     with _lock:
         backend = _sim_backends.get((host, port))
         if backend is None:
-            from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend   # lazily: real hardware never loads the sim
-            from crazyflie_driver.sim.air.medium import RemoteMedium
             medium = RemoteMedium(host, port)
             backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()))
             _sim_backends[(host, port)] = backend

@@ -113,25 +113,9 @@ class Toc:
         return entry
 
 
-def toc_entries(toc: Any) -> List[Any]:
-    """The entries of a TOC whether the client exposes a list, a dict or an object with entries."""
-    if toc is None:
-        return []
-    if isinstance(toc, dict):
-        return list(toc.values())
-    entries = getattr(toc, "entries", None)
-    if entries is not None:
-        return list(entries.values()) if isinstance(entries, dict) else list(entries)
-    return list(toc)
-
-
-def toc_types(toc: Any) -> Dict[str, str]:
-    """``{"group.name": ctype}`` of a TOC."""
-    out = {}
-    for e in toc_entries(toc):
-        full = getattr(e, "full_name", None) or "%s.%s" % (e.group, e.name)
-        out[full] = e.ctype
-    return out
+def toc_types(toc: Optional[Toc]) -> Dict[str, str]:
+    """``{"group.name": ctype}`` of a TOC ({} before it is fetched)."""
+    return {} if toc is None else {e.full_name: e.ctype for e in toc}
 
 
 def parse_item(kind: str, version: int, data: bytes) -> TocEntry:

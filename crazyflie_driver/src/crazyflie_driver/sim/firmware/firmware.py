@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Deque, Dict, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
@@ -23,6 +23,7 @@ from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.link import NrfLink, SYS_ALL_OFF, SYS_RESET, SYS_STM_OFF
 from crazyflie_driver.sim.firmware.log import LogService
 from crazyflie_driver.sim.firmware.param import ParamService
+from crazyflie_driver.sim.firmware.state import SimState
 
 _log = logging.getLogger(__name__)
 
@@ -59,24 +60,6 @@ def profile_for(firmware: str) -> FirmwareProfile:
                          % (firmware, ", ".join(sorted(PROFILES)))) from None
 
 
-@dataclass
-class SimState:
-    """What the simulated Crazyflie saw, for tests and the world server's control calls."""
-
-    powered: bool = True
-    emergency: bool = False
-    emergency_reason: str = ""
-    armed: bool = True                      # auto-arming is the firmware default
-    last_setpoint: Optional[Tuple[float, float, float, int]] = None
-    setpoints: int = 0
-    last_generic: Optional[Tuple[int, bytes]] = None
-    external_position: Optional[Tuple[float, float, float]] = None
-    estop_watchdog: Optional[float] = None
-    packets_by_port: Dict[int, int] = field(default_factory=dict)
-    tx_dropped: int = 0
-    reboots: int = 0
-
-
 class SimulatedCrazyflie:
     """One simulated Crazyflie (protocol side) bound to a vehicle of the world."""
 
@@ -110,17 +93,24 @@ class SimulatedCrazyflie:
                                    self._vehicle_param_defaults(), self._write_param, self.send)
         self.logs = LogService(self.profile.generation, self._log_table, self.read_value, self.send, self.now)
         self.console = ports.Console(self.send)
-        handlers = {0: None, 2: self.params.handle, 3: self._bind(ports.commander), 4: self._bind(ports.memory),
-                    5: self.logs.handle, 6: self._bind(ports.localization), 7: self._bind(ports.generic_setpoint),
-                    9: self._bind(ports.supervisor), 13: self._bind(ports.platform), 15: self._bind(ports.link)}
-        self._ports = {p: h for p, h in handlers.items() if h is not None and p in self.profile.ports}
+        state, hook, profile = self.state, ports.vehicle_hook(self.vehicle), self.profile
+        handlers = {
+            2: self.params.handle,
+            3: ports.commander_port(state, hook),
+            4: ports.memory_port(self.send),
+            5: self.logs.handle,
+            6: ports.localization_port(state, hook, self.emergency_stop, self.now),
+            7: ports.generic_setpoint_port(state, hook),
+            9: ports.supervisor_port(state, self.send, self.supervisor_bits, self.emergency_stop, self.now),
+            13: ports.platform_port(state, self.send, profile.protocol_version, profile.firmware_version,
+                                    profile.device_type, profile.device_type_query),
+            15: ports.link_port(self.send),
+        }
+        self._ports = {p: h for p, h in handlers.items() if p in self.profile.ports}
         cpu_id = "%08X%08X%08X" % tuple(int(self.params.value("cpu.id%d" % i)) for i in range(3)) \
             if self.params.ident("cpu.id0") is not None else "0" * 24
         self.console.write(ports.boot_text(self.profile.device_type, self.profile.firmware_version, cpu_id,
                                            self.profile.production))
-
-    def _bind(self, fn):
-        return lambda header, channel, data: fn(self, header, channel, data)
 
     def reboot(self) -> None:
         """Power cycle: protocol state back to boot (params, log blocks, safelink, console text)."""

@@ -1,17 +1,17 @@
 """The small ports of the simulated firmware: console (0), commander (3), memory (4),
 localization (6), generic setpoint (7), supervisor (9), platform (13) and link (15).
 
-Each handler takes the firmware object (for `send`, `profile`, `vehicle` and `state`), the request
-header, channel and payload; formats are those of CRTP.md §P2, §P3, §P6, §P8-§P10.
+Each ``*_port`` function builds a handler ``(header, channel, payload) -> None`` from the narrow
+things that port needs: ``send`` for replies, the ``SimState`` record it updates, ``vehicle_hook`` for
+the vehicle's optional hooks, and callables for the rest. Packet formats: docs/protocol.md.
 """
 from __future__ import annotations
 
 import logging
 import struct
-from typing import TYPE_CHECKING, Callable, List
+from typing import Any, Callable, List
 
-if TYPE_CHECKING:  # pragma: no cover
-    from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.firmware.state import SimState
 
 _log = logging.getLogger(__name__)
 
@@ -20,6 +20,10 @@ CONSOLE_LINE = 30
 LINK_SOURCE = b"Bitcraze Crazyflie".ljust(30, b"\x00")
 RPYT = struct.Struct("<fffH")
 EIO = 5
+
+Handler = Callable[[int, int, bytes], None]
+Send = Callable[[int, bytes], bool]
+VehicleHook = Callable[..., bool]       # (hook name, *args) -> whether the vehicle has that hook
 
 
 class Console:
@@ -57,123 +61,145 @@ def boot_text(device_type: str, firmware_version: str, cpu_id: str, production: 
     return "".join(line + "\n" for line in lines)
 
 
-def _call(fn_name: str, fw: "SimulatedCrazyflie", *args) -> None:
-    """Call an optional vehicle hook, logging (not raising) a failure inside the physics."""
-    fn = getattr(fw.vehicle, fn_name, None)
-    if fn is None:
-        return
-    try:
-        fn(*args)
-    except Exception:
-        _log.exception("vehicle.%s failed", fn_name)
+def vehicle_hook(vehicle: Any) -> VehicleHook:
+    """``hook(name, *args)`` calls the vehicle's optional method ``name``, logging (not raising) a
+    failure inside the physics; returns False when the vehicle has no such method."""
+    def hook(name: str, *args) -> bool:
+        fn = getattr(vehicle, name, None)
+        if fn is None:
+            return False
+        try:
+            fn(*args)
+        except Exception:
+            _log.exception("vehicle.%s failed", name)
+        return True
+    return hook
 
 
-def commander(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
+def commander_port(state: SimState, hook: VehicleHook) -> Handler:
     """Port 3: the legacy RPYT setpoint (14 bytes). No reply."""
-    if channel != 0 or len(data) < RPYT.size:
-        return
-    roll, pitch, yaw, thrust = RPYT.unpack_from(data)
-    fw.state.last_setpoint = (roll, pitch, yaw, thrust)
-    fw.state.setpoints += 1
-    _call("set_rpyt", fw, roll, pitch, yaw, thrust)
-
-
-def generic_setpoint(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
-    """Port 7: type 0 stops the motors; other types are recorded and offered to the vehicle."""
-    if channel != 0 or not data:
-        return
-    kind = data[0]
-    fw.state.last_generic = (kind, bytes(data[1:]))
-    if kind == 0:
-        fw.state.setpoints += 1
-        fw.state.last_setpoint = (0.0, 0.0, 0.0, 0)
-        if hasattr(fw.vehicle, "stop_motors"):
-            _call("stop_motors", fw)
-        else:
-            _call("set_rpyt", fw, 0.0, 0.0, 0.0, 0)
-    else:
-        _call("set_generic_setpoint", fw, kind, bytes(data[1:]))
-
-
-def memory(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
-    """Port 4: a Crazyflie without memories (`[1]` -> `[1, 0]`)."""
-    if not data:
-        return
-    if channel == 0:
-        if data[0] == 1:
-            fw.send(header, b"\x01\x00")
-        elif data[0] == 2 and len(data) >= 2:
-            fw.send(header, bytes(data[:2]))  # short info reply: no such memory
-    elif channel in (1, 2) and len(data) >= 5:
-        fw.send(header, bytes(data[:5]) + bytes([EIO]))
-
-
-def localization(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
-    """Port 6: external position (recorded) and the emergency stop (ch 1 types 3 and 4)."""
-    if channel == 0 and len(data) >= 12:
-        fw.state.external_position = struct.unpack_from("<fff", data)
-        _call("set_external_position", fw, *fw.state.external_position)
-    elif channel == 1 and data:
-        if data[0] == 3:
-            fw.emergency_stop("localization emergency stop")
-        elif data[0] == 4:
-            fw.state.estop_watchdog = fw.now()
-
-
-def supervisor(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
-    """Port 9 (protocol 12): state queries on ch 0, arm / recover / e-stop on ch 1."""
-    if not data:
-        return
-    cmd = data[0]
-    if channel == 0:
-        bits = fw.supervisor_bits()
-        if 0x01 <= cmd <= 0x0B:
-            fw.send(header, bytes([0x80 | cmd, (bits >> (cmd - 1)) & 1]))
-        elif cmd == 0x0C:
-            fw.send(header, struct.pack("<BH", 0x8C, bits))
-    elif channel == 1:
-        if cmd == 1 and len(data) >= 2:
-            fw.state.armed = bool(data[1])
-            fw.send(header, bytes([0x81, 1, int(fw.state.armed)]))
-        elif cmd == 2:
-            fw.send(header, bytes([0x82, 1, 1]))
-        elif cmd == 3:
-            fw.emergency_stop("supervisor emergency stop")
-        elif cmd == 4:
-            fw.state.estop_watchdog = fw.now()
-
-
-def platform(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
-    """Port 13: protocol version, firmware version, device type; ch 0 platform commands."""
-    if not data:
-        return
-    cmd, profile = data[0], fw.profile
-    if channel == 1:
-        if cmd == 0:
-            fw.send(header, struct.pack("<Bi", 0, profile.protocol_version))
-        elif cmd == 1:
-            fw.send(header, b"\x01" + profile.firmware_version.encode("ascii")[:29])
-        elif cmd == 2 and profile.device_type_query:
-            fw.send(header, b"\x02" + profile.device_type.encode("ascii")[:29])
-    elif channel == 0:
-        if not profile.device_type_query:  # the 2016 firmware: continuous wave only, echoed
-            if cmd == 0:
-                fw.send(header, bytes(data))
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if channel != 0 or len(data) < RPYT.size:
             return
-        if cmd == 1 and len(data) >= 2:
-            fw.state.armed = bool(data[1])
-            fw.send(header, bytes([1, 1, int(fw.state.armed)]))
-        elif cmd == 2:
-            fw.send(header, bytes([2, 1, 1]))
-        elif cmd == 3:
-            fw.send(header, b"")
+        roll, pitch, yaw, thrust = RPYT.unpack_from(data)
+        state.last_setpoint = (roll, pitch, yaw, thrust)
+        state.setpoints += 1
+        hook("set_rpyt", roll, pitch, yaw, thrust)
+    return handle
+
+
+def generic_setpoint_port(state: SimState, hook: VehicleHook) -> Handler:
+    """Port 7: type 0 stops the motors; other types are recorded and offered to the vehicle."""
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if channel != 0 or not data:
+            return
+        kind = data[0]
+        state.last_generic = (kind, bytes(data[1:]))
+        if kind == 0:
+            state.setpoints += 1
+            state.last_setpoint = (0.0, 0.0, 0.0, 0)
+            if not hook("stop_motors"):
+                hook("set_rpyt", 0.0, 0.0, 0.0, 0)
         else:
-            fw.send(header, bytes(data))
+            hook("set_generic_setpoint", kind, bytes(data[1:]))
+    return handle
 
 
-def link(fw: "SimulatedCrazyflie", header: int, channel: int, data: bytes) -> None:
+def memory_port(send: Send) -> Handler:
+    """Port 4: a Crazyflie without memories (`[1]` -> `[1, 0]`)."""
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if not data:
+            return
+        if channel == 0:
+            if data[0] == 1:
+                send(header, b"\x01\x00")
+            elif data[0] == 2 and len(data) >= 2:
+                send(header, bytes(data[:2]))  # short info reply: no such memory
+        elif channel in (1, 2) and len(data) >= 5:
+            send(header, bytes(data[:5]) + bytes([EIO]))
+    return handle
+
+
+def localization_port(state: SimState, hook: VehicleHook, emergency_stop: Callable[[str], None],
+                      now: Callable[[], float]) -> Handler:
+    """Port 6: external position (recorded) and the emergency stop (ch 1 types 3 and 4)."""
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if channel == 0 and len(data) >= 12:
+            state.external_position = struct.unpack_from("<fff", data)
+            hook("set_external_position", *state.external_position)
+        elif channel == 1 and data:
+            if data[0] == 3:
+                emergency_stop("localization emergency stop")
+            elif data[0] == 4:
+                state.estop_watchdog = now()
+    return handle
+
+
+def supervisor_port(state: SimState, send: Send, supervisor_bits: Callable[[], int],
+                    emergency_stop: Callable[[str], None], now: Callable[[], float]) -> Handler:
+    """Port 9 (protocol 12): state queries on ch 0, arm / recover / e-stop on ch 1."""
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if not data:
+            return
+        cmd = data[0]
+        if channel == 0:
+            bits = supervisor_bits()
+            if 0x01 <= cmd <= 0x0B:
+                send(header, bytes([0x80 | cmd, (bits >> (cmd - 1)) & 1]))
+            elif cmd == 0x0C:
+                send(header, struct.pack("<BH", 0x8C, bits))
+        elif channel == 1:
+            if cmd == 1 and len(data) >= 2:
+                state.armed = bool(data[1])
+                send(header, bytes([0x81, 1, int(state.armed)]))
+            elif cmd == 2:
+                send(header, bytes([0x82, 1, 1]))
+            elif cmd == 3:
+                emergency_stop("supervisor emergency stop")
+            elif cmd == 4:
+                state.estop_watchdog = now()
+    return handle
+
+
+def platform_port(state: SimState, send: Send, protocol_version: int, firmware_version: str,
+                  device_type: str, device_type_query: bool) -> Handler:
+    """Port 13: protocol version, firmware version, device type; ch 0 platform commands.
+
+    ``device_type_query`` false plays the 2016 firmware: no device type, and on ch 0 only the
+    continuous-wave command, echoed."""
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if not data:
+            return
+        cmd = data[0]
+        if channel == 1:
+            if cmd == 0:
+                send(header, struct.pack("<Bi", 0, protocol_version))
+            elif cmd == 1:
+                send(header, b"\x01" + firmware_version.encode("ascii")[:29])
+            elif cmd == 2 and device_type_query:
+                send(header, b"\x02" + device_type.encode("ascii")[:29])
+        elif channel == 0:
+            if not device_type_query:
+                if cmd == 0:
+                    send(header, bytes(data))
+                return
+            if cmd == 1 and len(data) >= 2:
+                state.armed = bool(data[1])
+                send(header, bytes([1, 1, int(state.armed)]))
+            elif cmd == 2:
+                send(header, bytes([2, 1, 1]))
+            elif cmd == 3:
+                send(header, b"")
+            else:
+                send(header, bytes(data))
+    return handle
+
+
+def link_port(send: Send) -> Handler:
     """Port 15: echo (unchanged), source string (30 bytes), sink; ch 3 (null) dropped."""
-    if channel == 0:
-        fw.send(header, bytes(data))
-    elif channel == 1:
-        fw.send(header, LINK_SOURCE)
+    def handle(header: int, channel: int, data: bytes) -> None:
+        if channel == 0:
+            send(header, bytes(data))
+        elif channel == 1:
+            send(header, LINK_SOURCE)
+    return handle

@@ -1,0 +1,23 @@
+"""What a simulated Crazyflie saw: the record its port handlers update and tests read."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Optional, Tuple
+
+
+@dataclass
+class SimState:
+    """What the simulated Crazyflie saw, for tests and the world server's control calls."""
+
+    powered: bool = True
+    emergency: bool = False
+    emergency_reason: str = ""
+    armed: bool = True                      # auto-arming is the firmware default
+    last_setpoint: Optional[Tuple[float, float, float, int]] = None
+    setpoints: int = 0
+    last_generic: Optional[Tuple[int, bytes]] = None
+    external_position: Optional[Tuple[float, float, float]] = None
+    estop_watchdog: Optional[float] = None
+    packets_by_port: Dict[int, int] = field(default_factory=dict)
+    tx_dropped: int = 0
+    reboots: int = 0
