@@ -51,3 +51,19 @@ class ReadOnlyParam(CrazyflieError):
 
 class ParamValueError(CrazyflieError, ValueError):
     """A parameter value that cannot be converted to the parameter's type or is out of range."""
+
+
+class CommandValueError(CrazyflieError, ValueError):
+    """A command argument that cannot go on the wire (NaN, out of range, bad group mask)."""
+
+
+class TrajectoryError(CommandValueError):
+    """A trajectory that cannot be uploaded or started (piece shape, memory size, identifier)."""
+
+
+class NotSupported(CrazyflieError):
+    """The Crazyflie's protocol version lacks the port or command asked for."""
+
+
+class CommandRejected(CrazyflieError):
+    """The Crazyflie answered a command with an error code."""

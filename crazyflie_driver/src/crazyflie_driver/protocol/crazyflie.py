@@ -12,6 +12,11 @@ from typing import Optional, Union
 
 from crazyflie_driver.protocol.commander import Commander
 from crazyflie_driver.protocol.console import Console
+from crazyflie_driver.protocol.high_level import HighLevelCommander
+from crazyflie_driver.protocol.localization import LocalizationSender
+from crazyflie_driver.protocol.memory import MemoryClient
+from crazyflie_driver.protocol.setpoints import SetpointSender
+from crazyflie_driver.protocol.supervisor import Supervisor
 from crazyflie_driver.radio.link import RadioLink
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.protocol.log import LogClient
@@ -42,6 +47,13 @@ class Crazyflie:
         self.log = LogClient(self.link, self.cache, timeout)
         self.console = Console(self.link)
         self.commander = Commander(self.link)
+        label = str(self.uri)
+        self.setpoints = SetpointSender(self.link.send)
+        self.localization = LocalizationSender(self.link.send)
+        self.memory = MemoryClient(self.link.request, timeout, label)
+        self.high_level = HighLevelCommander(self.link.send, self.link.request, self.memory, timeout=timeout,
+                                             label=label)
+        self.supervisor = Supervisor(self.link.send, self.link.request, timeout=timeout, label=label)
 
     @property
     def toc_version(self) -> int:
@@ -57,7 +69,7 @@ class Crazyflie:
             self.link.close()
             raise
         self.protocol_version = version
-        for client in (self.params, self.log, self.commander):
+        for client in (self.params, self.log, self.commander, self.setpoints, self.high_level, self.supervisor):
             client.protocol_version = version
         self.connected = True
         _LOG.debug("%s: protocol version %d", self.uri, version)

@@ -1,0 +1,139 @@
+"""Port 4 (memory subsystem): enumerate the Crazyflie's memories, read and write them.
+
+Channel 0 asks how many memories there are and what each one is (type, size); channel 1 reads
+and channel 2 writes at most ``CHUNK`` bytes per packet, each answered with a status byte.
+Writes are idempotent (same bytes at the same address), so a lost reply is simply asked again.
+"""
+from __future__ import annotations
+
+import struct
+from typing import Callable, List, NamedTuple, Optional
+
+from crazyflie_driver.crtp.packet import PORT_MEM, CRTPPacket
+from crazyflie_driver.errors import CommandRejected, ProtocolError
+
+CH_INFO = 0
+CH_READ = 1
+CH_WRITE = 2
+CMD_NUMBER = 1
+CMD_DETAILS = 2
+
+#: Memory type of the high-level commander's trajectory memory.
+TYPE_TRAJECTORY = 0x12
+#: Bytes of data per read/write packet (30-byte payload minus id and u32 address, rounded to 4).
+CHUNK = 24
+_DETAILS = struct.Struct("<BBBI8s")
+_ADDRESS = struct.Struct("<BI")
+
+Request = Callable[..., CRTPPacket]
+
+
+class MemoryInfo(NamedTuple):
+    """One memory as the Crazyflie describes it."""
+
+    id: int
+    type: int
+    size: int          # bytes
+    serial: bytes
+
+
+def number_packet() -> CRTPPacket:
+    return CRTPPacket(PORT_MEM, CH_INFO, bytes([CMD_NUMBER]))
+
+
+def details_packet(mem_id: int) -> CRTPPacket:
+    return CRTPPacket(PORT_MEM, CH_INFO, bytes([CMD_DETAILS, mem_id]))
+
+
+def write_packet(mem_id: int, address: int, data: bytes) -> CRTPPacket:
+    if not 0 < len(data) <= CHUNK:
+        raise ValueError("a memory write carries 1..%d bytes, got %d" % (CHUNK, len(data)))
+    return CRTPPacket(PORT_MEM, CH_WRITE, _ADDRESS.pack(mem_id, address) + bytes(data))
+
+
+def read_packet(mem_id: int, address: int, length: int) -> CRTPPacket:
+    if not 0 < length <= CHUNK:
+        raise ValueError("a memory read asks for 1..%d bytes, got %d" % (CHUNK, length))
+    return CRTPPacket(PORT_MEM, CH_READ, _ADDRESS.pack(mem_id, address) + bytes([length]))
+
+
+def parse_details(data: bytes) -> MemoryInfo:
+    """A details reply ``[2, id, type, size u32, serial 8 B]``."""
+    if len(data) < _DETAILS.size or data[0] != CMD_DETAILS:
+        raise ProtocolError("memory details reply has %d bytes (%s), expected %d" % (len(data), data.hex(' '),
+                                                                                    _DETAILS.size))
+    _, mem_id, kind, size, serial = _DETAILS.unpack_from(data)
+    return MemoryInfo(mem_id, kind, size, serial)
+
+
+def chunks(address: int, data: bytes):
+    """(address, bytes) pieces of at most CHUNK bytes covering ``data`` written at ``address``."""
+    for i in range(0, len(data), CHUNK):
+        yield address + i, bytes(data[i:i + CHUNK])
+
+
+class MemoryClient:
+    """Memory access over ``request(packet, match, timeout=, what=)`` (the link's request)."""
+
+    def __init__(self, request: Request, timeout: float = 1.0, label: str = "") -> None:
+        self._request = request
+        self.timeout = timeout
+        self.label = label
+        self._memories: Optional[List[MemoryInfo]] = None
+
+    def memories(self, refresh: bool = False) -> List[MemoryInfo]:
+        """Every memory of the Crazyflie (asked once, then cached)."""
+        if self._memories is None or refresh:
+            reply = self._request(number_packet(), match=lambda p: _is_info(p, CMD_NUMBER),
+                                  timeout=self.timeout, what="memory count (4:0)")
+            if len(reply.data) < 2:
+                raise ProtocolError("%s: memory count reply too short: %s" % (self.label, reply.data.hex(' ')))
+            found = []
+            for mem_id in range(reply.data[1]):
+                details = self._request(details_packet(mem_id),
+                                        match=lambda p, i=mem_id: (_is_info(p, CMD_DETAILS)
+                                                                   and p.data[1:2] == bytes([i])),
+                                        timeout=self.timeout, what="details of memory %d (4:0)" % mem_id)
+                found.append(parse_details(details.data))
+            self._memories = found
+        return list(self._memories)
+
+    def find(self, kind: int) -> Optional[MemoryInfo]:
+        """The first memory of type ``kind``, or None."""
+        for info in self.memories():
+            if info.type == kind:
+                return info
+        return None
+
+    def write(self, mem_id: int, address: int, data: bytes) -> None:
+        """Write ``data`` at ``address``, chunk by chunk; CommandRejected when a chunk is refused."""
+        for addr, chunk in chunks(address, data):
+            head = _ADDRESS.pack(mem_id, addr)
+            reply = self._request(write_packet(mem_id, addr, chunk),
+                                  match=lambda p, h=head: p.port == PORT_MEM and p.channel == CH_WRITE
+                                  and p.data[:5] == h and len(p.data) >= 6,
+                                  timeout=self.timeout, what="memory %d write at %d (4:2)" % (mem_id, addr))
+            if reply.data[5] != 0:
+                raise CommandRejected("%s: memory %d refused %d bytes at address %d (status %d)"
+                                      % (self.label, mem_id, len(chunk), addr, reply.data[5]))
+
+    def read(self, mem_id: int, address: int, length: int) -> bytes:
+        """``length`` bytes from ``address``; CommandRejected when the Crazyflie reports an error."""
+        out = b""
+        while len(out) < length:
+            addr = address + len(out)
+            n = min(CHUNK, length - len(out))
+            head = _ADDRESS.pack(mem_id, addr)
+            reply = self._request(read_packet(mem_id, addr, n),
+                                  match=lambda p, h=head: p.port == PORT_MEM and p.channel == CH_READ
+                                  and p.data[:5] == h and len(p.data) >= 6,
+                                  timeout=self.timeout, what="memory %d read at %d (4:1)" % (mem_id, addr))
+            if reply.data[5] != 0:
+                raise CommandRejected("%s: memory %d refused a read of %d bytes at address %d (status %d)"
+                                      % (self.label, mem_id, n, addr, reply.data[5]))
+            out += reply.data[6:6 + n]
+        return out
+
+
+def _is_info(packet: CRTPPacket, cmd: int) -> bool:
+    return packet.port == PORT_MEM and packet.channel == CH_INFO and packet.data[:1] == bytes([cmd])
