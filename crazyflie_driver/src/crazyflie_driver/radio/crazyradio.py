@@ -31,6 +31,10 @@ DR_250KPS, DR_1MPS, DR_2MPS = 0, 1, 2
 P_M18DBM, P_M12DBM, P_M6DBM, P_0DBM = 0, 1, 2, 3
 
 DEFAULT_ADDRESS = b"\xe7\xe7\xe7\xe7\xe7"
+#: Crazyradio PA firmware from which a bulk OUT of 33-64 bytes with acks off goes out as two
+#: radio packets of half its length each (the "99.55" image; 0.53 drops the bytes past 32).
+TWO_PER_TRANSFER_FROM = 99.55
+MAX_RADIO_PACKET = 32
 UDEV_RULES_FILE = "99-crazyradio.rules"
 _TYPE_VENDOR_OUT = 0x40
 _TYPE_VENDOR_IN = 0xC0
@@ -296,6 +300,32 @@ class Crazyradio:
         if status & 1:
             return RadioAck(True, bool(status & 2), status >> 4, buf[1:n].tobytes())
         return RadioAck(False, False, self.arc, b"")
+
+    @property
+    def two_per_transfer(self) -> bool:
+        """True when one no-ack transfer may carry two packets of the same length."""
+        return self.version >= TWO_PER_TRANSFER_FROM
+
+    def send_no_ack(self, data: bytes) -> bool:
+        """One no-ack transfer (acks are switched off first if they are on): one packet of 1-32 bytes,
+        or, where ``two_per_transfer``, two packets of the same length back to back. Nothing comes
+        back; False when the USB write timed out."""
+        dev = self._dev
+        if dev is None:
+            raise RadioUnplugged("Crazyradio %d is closed" % self.index)
+        n = len(data)
+        if not (0 < n <= MAX_RADIO_PACKET or (self.two_per_transfer and n <= 2 * MAX_RADIO_PACKET and n % 2 == 0)):
+            raise ValueError("a no-ack transfer has 1-32 bytes%s, got %d" % (
+                " or two packets of equal length" if self.two_per_transfer else "", n))
+        if self.ack_enabled:
+            self.set_ack_enable(False)
+        try:
+            dev.write(_EP_OUT, data, self.usb_timeout_ms)
+        except usb.core.USBTimeoutError:
+            return False
+        except usb.core.USBError as exc:
+            raise self._usb_error(exc, "sending a broadcast") from exc
+        return True
 
     def close(self) -> None:
         """Release the interface and the handle; the dongle can then be opened again."""

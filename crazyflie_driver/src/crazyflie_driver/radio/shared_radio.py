@@ -10,17 +10,18 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Optional, TypeVar
 
 from crazyflie_driver.errors import CrazyflieError, RadioUnplugged
 from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck
 from crazyflie_driver.radio.fair_lock import FairLock
 
 _log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 
 class SharedRadio:
-    """One Crazyradio shared by every link on it; ``round_trip`` is the only way to use it.
+    """One Crazyradio shared by every link on it; ``round_trip`` and ``run`` are the only ways to use it.
 
     When the dongle disappears (``RadioUnplugged``) the dead handle is dropped; later round trips
     try to open the dongle again through ``opener`` (at most every ``reopen_interval`` seconds),
@@ -48,7 +49,26 @@ class SharedRadio:
             try:
                 if channel != radio._channel or datarate != radio._datarate or address != radio._address:
                     radio.configure(channel, datarate, address)
+                if not radio.ack_enabled:
+                    radio.set_ack_enable(True)   # a broadcast switched acks off
                 return radio.send_packet(data)
+            except RadioUnplugged:
+                self._drop()
+                raise
+        finally:
+            lock.release()
+
+    def run(self, use: Callable[[Crazyradio], _T]) -> _T:
+        """``use(radio)`` holding the dongle for one turn of the FIFO (a broadcast burst), with the
+        unplug handling of ``round_trip``."""
+        lock = self.lock
+        lock.acquire()
+        try:
+            radio = self.radio
+            if radio is None:
+                radio = self._reopen()
+            try:
+                return use(radio)
             except RadioUnplugged:
                 self._drop()
                 raise
