@@ -21,10 +21,11 @@ from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.sim.world.mocap import MocapModel
-from crazyflie_driver.sim.world.world import TICK_S, World
+from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
+from crazyflie_driver.sim.world.world import World
 
 DEFAULT_URI = "radio://0/80/2M/E7E7E7E701"
-FIRMWARE_TICK_S = 0.001            # the firmware's timers (log blocks, watchdogs) run every world tick
+
 
 
 class RadioRig:
@@ -55,7 +56,7 @@ class RadioRig:
 
     def advance(self, seconds: float) -> None:
         """Step the world (and so the firmware timers and the motion capture) by `seconds`."""
-        ticks = int(round(seconds / TICK_S))
+        ticks = int(round(seconds / FIRMWARE_TICK_S))
         if ticks < 0:
             raise ValueError("cannot advance the world by a negative time (%r s)" % (seconds,))
         self.world.step(ticks)

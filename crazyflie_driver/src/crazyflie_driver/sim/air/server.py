@@ -22,10 +22,10 @@ from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air import wire
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
+from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
 UDP_BASE_PORT = 19850
-TICK_PERIOD_S = 0.001
 
 
 @dataclass
@@ -53,13 +53,14 @@ class WorldServer:
         self.host, self.port = parse_address("%s:%d" % (host, port))
         self.udp_base_port = udp_base_port
         self._entries: Dict[str, SimEntry] = {}
+        self._crazyflies: Tuple[SimulatedCrazyflie, ...] = ()     # replaced whole: the ticking thread reads it
         self._lock = threading.RLock()
         self._listener: Optional[socket.socket] = None
         self._clients: List[socket.socket] = []
         self._threads: List[threading.Thread] = []
         self._running = threading.Event()
         self._udp_next = 0
-        world.add_tick_listener(self._tick, TICK_PERIOD_S)
+        world.add_tick_listener(self._tick, FIRMWARE_TICK_S)
 
     # --- Crazyflies --------------------------------------------------------------------------
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position: Sequence[float] = (0.0, 0.0, 0.0),
@@ -87,6 +88,7 @@ class WorldServer:
                 entry.udp = UdpEndpoint(cf, port=port)
                 entry.udp.start()
             self._entries[name] = entry
+            self._crazyflies = tuple(e.crazyflie for e in self._entries.values())
             return cf
 
     def remove_crazyflie(self, uri_or_name: str) -> None:
@@ -96,6 +98,7 @@ class WorldServer:
             if entry.udp is not None:
                 entry.udp.stop()
             del self._entries[entry.name]
+            self._crazyflies = tuple(e.crazyflie for e in self._entries.values())
             try:
                 self.world.remove_vehicle(entry.name)
             except Exception:
@@ -123,8 +126,10 @@ class WorldServer:
             return list(self._entries.values())
 
     def _tick(self, now: float) -> None:
-        for entry in list(self._entries.values()):
-            entry.crazyflie.tick(now)
+        """The firmware timers of every Crazyflie that has one due (most ticks: none)."""
+        for cf in self._crazyflies:
+            if now >= cf.timer_due - 1e-9:
+                cf.tick(now)
 
     # --- control calls -----------------------------------------------------------------------
     def control(self, op: str, args: Dict[str, Any]) -> Any:

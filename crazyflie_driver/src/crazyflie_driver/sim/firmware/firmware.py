@@ -84,6 +84,7 @@ class SimulatedCrazyflie:
 
     # --- lifecycle ---------------------------------------------------------------------------
     def _boot(self) -> None:
+        self.timer_due = 0.0                 # world time at which `tick` next has work (0: at once)
         self._boot_time = self.now()
         self._tx.clear()
         self._last_radio = None
@@ -251,6 +252,7 @@ class SimulatedCrazyflie:
         if handler is None:
             return
         self.state.packets_by_port[port] = self.state.packets_by_port.get(port, 0) + 1
+        self.timer_due = 0.0                 # a packet may start a log block or a watchdog
         try:
             handler(header, channel, raw[1:])
         except Exception:
@@ -303,25 +305,43 @@ class SimulatedCrazyflie:
 
     # --- time ----------------------------------------------------------------------------------
     def tick(self, now: float) -> None:
-        """Run the firmware timers at world time `now`: log blocks, e-stop watchdog, link loss."""
+        """Run the firmware timers at world time `now`: log blocks, e-stop watchdog, link loss.
+
+        Sets `timer_due`, the world time before which another call has nothing to do (a packet
+        that may change the timers sets it back to 0), so a caller ticking many Crazyflies every
+        millisecond skips the idle ones.
+        """
         with self.lock:
-            if not self.state.powered:
-                return
+            due = float("inf")
             try:
+                if not self.state.powered:
+                    return
                 wd = self.state.estop_watchdog
-                if wd is not None and now - wd > 1.0 and not self.state.emergency:
-                    self.emergency_stop("emergency-stop watchdog expired")
-                if not any(b.running for b in self.logs.blocks.values()):
+                if wd is not None and not self.state.emergency:
+                    if now - wd > 1.0:
+                        self.emergency_stop("emergency-stop watchdog expired")
+                    else:
+                        due = wd + 1.0
+                blocks = [b for b in self.logs.blocks.values() if b.running]
+                if not blocks:
                     return
                 timeout = self.profile.link_loss_timeout
-                if timeout is not None and self._last_radio is not None and now - self._last_radio > timeout:
-                    self.logs.reset()          # the firmware cleans up after a lost radio link
-                    self._tx.clear()
-                    self._last_radio = None
-                    return
+                if timeout is not None and self._last_radio is not None:
+                    if now - self._last_radio > timeout:
+                        self.logs.reset()          # the firmware cleans up after a lost radio link
+                        self._tx.clear()
+                        self._last_radio = None
+                        return
+                    due = min(due, self._last_radio + timeout)
                 self.logs.tick(now, self.timestamp_ms(now))
+                for b in blocks:
+                    if b.running:
+                        due = min(due, now if b.next_due is None else b.next_due)
             except Exception:
                 _log.exception("firmware tick failed")
+                due = 0.0
+            finally:
+                self.timer_due = due
 
     # --- safety ----------------------------------------------------------------------------------
     def emergency_stop(self, reason: str = "emergency stop") -> None:

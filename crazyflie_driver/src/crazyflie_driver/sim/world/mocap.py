@@ -17,6 +17,7 @@ from typing import Callable, Deque, Dict, List, Optional, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.world.physics import quat_from_rotvec, quat_multiply
+from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 
 @dataclass
@@ -62,25 +63,29 @@ class MocapModel:
 
     # --- driving -----------------------------------------------------------------------------
     def attach(self) -> "MocapModel":
-        """Run from the world's ticks (every 1 ms of world time): sampling and delivery."""
+        """Run from the world's ticks: a capture every 1/rate s of world time, each delivered `latency` later."""
         if not self._attached:
-            self._next_sample = float(self.world.time) + 1.0 / self.rate
-            self.world.add_tick_listener(self._on_tick, 0.001)
+            period = 1.0 / self.rate
+            self._next_sample = float(self.world.time) + period
+            self.world.add_tick_listener(self._on_capture, period)
+            if self.latency > 0:
+                self.world.add_tick_listener(self._on_delivery, period, first=self._next_sample + self.latency)
             self._attached = True
         return self
 
     def detach(self) -> None:
         remove = getattr(self.world, "remove_tick_listener", None)
         if self._attached and remove is not None:
-            remove(self._on_tick)
+            remove(self._on_capture)
+            remove(self._on_delivery)
         self._attached = False
 
-    def _on_tick(self, now: float) -> None:
-        if now >= self._next_sample - 1e-9:
-            self._next_sample += 1.0 / self.rate
-            if self._next_sample <= now:
-                self._next_sample = now + 1.0 / self.rate
-            self.capture(now)
+    def _on_capture(self, now: float) -> None:
+        self.capture(now)
+        if self.latency <= 0:
+            self.deliver(now)
+
+    def _on_delivery(self, now: float) -> None:
         self.deliver(now)
 
     def capture(self, now: float) -> List[MocapFrame]:

@@ -55,7 +55,7 @@ class SensorStates(Rows):
 
 def vibration(thrust_fraction: np.ndarray) -> np.ndarray:
     """0 with the motors off, ≈1 at hover."""
-    return np.clip(thrust_fraction, 0.0, 2.0)
+    return np.minimum(np.maximum(thrust_fraction, 0.0), 2.0)
 
 
 def gyro_measured(s: SensorStates, omega: np.ndarray, thrust_fraction: np.ndarray,

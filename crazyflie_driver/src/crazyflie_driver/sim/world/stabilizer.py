@@ -12,24 +12,26 @@ pitch positive nose up (the negated standard pitch), yaw counter-clockwise seen 
 """
 from __future__ import annotations
 
+import math
 from typing import Dict, Tuple
 
 import numpy as np
 
 from crazyflie_driver.sim.world.arrays import Rows
-from crazyflie_driver.sim.world.physics import BodyStates, euler_from_quat
+from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
+from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
 GEN_CURRENT = "current"
 GEN_2016 = "2016.02"
 GENERATIONS = (GEN_CURRENT, GEN_2016)
 
-TICK_S = 0.001                   # world / physics tick (current firmware main loop: 1 kHz)
-PID_DT = 1.0 / 500.0             # dt both generations use inside their PIDs
+PID_DT = CONTROL_PERIOD_S        # dt both generations use inside their PIDs (1/500 s)
 MIN_THRUST = 1000
 MAX_THRUST = 60000
 RATE_OUTPUT_LIMIT = 32767.0
 WATCHDOG_LEVEL_S = 0.5
 WATCHDOG_SHUTDOWN_S = 2.0
+WATCHDOG_MARGIN_S = 1.5 * FIRMWARE_TICK_S    # odd ticks recompute the motors this close to a watchdog cut
 TUMBLE_TILT_COS = 0.5            # 60 degrees
 TUMBLE_TILT_S = 1.0
 TUMBLE_UPSIDE_DOWN_S = 0.1
@@ -72,6 +74,12 @@ def default_params(firmware: str) -> Dict[str, float]:
             for term, value in zip(TERMS, gains):
                 out["%s.%s_%s" % (group, axis, term)] = float(value)
     return out
+
+
+def _finite_or_zero(value: float) -> float:
+    """A setpoint field as the firmware's float: NaN and infinities become 0."""
+    v = float(value)
+    return v if math.isfinite(v) else 0.0
 
 
 def wrap_deg(a: np.ndarray) -> np.ndarray:
@@ -135,25 +143,30 @@ class OnboardController:
 
     def __init__(self) -> None:
         self.s = OnboardStates()
+        self.dirty = True            # something changed the motors' inputs since the last update
+        self._cut_soon = False       # a setpoint watchdog cut is due within the next ticks
 
     # --- commands (called under the world lock) ----------------------------------------------
     def set_rpyt(self, i: int, roll: float, pitch: float, yaw: float, thrust: float, now: float) -> None:
-        vals = np.nan_to_num(np.array([roll, pitch, yaw, thrust], dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+        vals = [_finite_or_zero(roll), _finite_or_zero(pitch), _finite_or_zero(yaw), _finite_or_zero(thrust)]
         vals[3] = min(max(vals[3], 0.0), 65535.0)
         s = self.s
         s.sp[i] = vals
         s.sp_time[i] = now
         if vals[3] == 0.0:
             s.thrust_locked[i] = False
+        self.dirty = True
 
     def lock(self, i: int, reason: int) -> None:
         if self.s.lock[i] == LOCK_NONE:
             self.s.lock[i] = reason
+        self.dirty = True
 
     def set_param(self, i: int, name: str, value: float) -> bool:
         """Apply a firmware parameter; False when the controller does not use it."""
         group, _, field = name.partition(".")
         s = self.s
+        self.dirty = True
         if group in ("pid_attitude", "pid_rate"):
             axis, _, term = field.partition("_")
             if axis in AXES and term in TERMS:
@@ -188,20 +201,28 @@ class OnboardController:
         `tick` counts world ticks (decides which loops run: the attitude and rate loops every 2nd
         tick), `gyro_deg` is the measured body rate (N,3, deg/s, standard signs; needed on even
         ticks only), `battery_empty` (N,) forces the motors off and locks.
+
+        Between two runs of the PIDs the motors change only when a setpoint, a lock, a parameter or
+        the setpoint watchdog changes the thrust: `motors_may_change` says whether an odd tick has
+        anything to compute; when it says no, `motors` holds what this call would return.
         """
         s = self.s
+        self.dirty = False
         if len(s) == 0:
             return s.motors
         # supervisor: watchdog and battery
         age = now - s.sp_time
         level = age > WATCHDOG_LEVEL_S
+        self._cut_soon = False
         if level.any():
-            cut = (age > WATCHDOG_SHUTDOWN_S) & (s.sp[:, 3] > 0.0)
+            flying = s.sp[:, 3] > 0.0
+            cut = (age > WATCHDOG_SHUTDOWN_S) & flying
             if cut.any():
                 # 2016.02: thrust 0 and relock; current: supervisor locked until reboot
                 s.thrust_locked |= cut
                 s.sp[:, 3] = np.where(cut, 0.0, s.sp[:, 3])
                 self._lock_rows(cut & ~s.gen2016, LOCK_WATCHDOG)
+            self._cut_soon = bool(((age > WATCHDOG_SHUTDOWN_S - WATCHDOG_MARGIN_S) & flying).any())
         else:
             level = None
         if battery_empty.any():
@@ -212,28 +233,26 @@ class OnboardController:
         off = s.thrust_locked | (s.lock != LOCK_NONE) | s.stopped
         thrust[off] = 0.0
 
-        if tick % 2 == 0:
-            q = body.quaternion
-            self._tumble(q, thrust)
-            thrust[s.lock != LOCK_NONE] = 0.0
-            # estimate in firmware convention (pitch nose-up positive)
-            euler = np.degrees(euler_from_quat(q))
-            euler[:, 1] *= -1.0
-            s.attitude = euler
+        if tick % CONTROL_TICKS == 0:
+            terms = _attitude_terms(body.quaternion)
+            if self._tumble(terms[:, 2], thrust):
+                thrust[s.lock != LOCK_NONE] = 0.0
+            s.attitude = _attitude_from_terms(terms)
             # attitude loop: 500 Hz (current), 250 Hz (2016.02, still with dt = 1/500 in its PIDs)
-            due = None if tick % 4 == 0 else ~s.gen2016
+            due = None if tick % (2 * CONTROL_TICKS) == 0 or not s.gen2016.any() else ~s.gen2016
             self._attitude_loop(due, level)
             self._rate_loop(gyro_deg)
             idle = thrust <= 0.0
             if idle.any():
                 self._reset(idle)
 
-        m = thrust[:, None] + s.rate_out @ MIX
-        top = m.max(axis=1)
-        if (top > 65535.0).any():
-            excess = np.maximum(top - 65535.0, 0.0) * ~s.gen2016      # current: keep the torques
+        m = s.rate_out @ MIX
+        m += thrust[:, None]
+        if m.max() > 65535.0:
+            excess = np.maximum(m.max(axis=1) - 65535.0, 0.0) * ~s.gen2016      # current: keep the torques
             m -= excess[:, None]
-        m = np.minimum(np.maximum(m, 0.0), 65535.0)
+        np.maximum(m, 0.0, out=m)
+        np.minimum(m, 65535.0, out=m)
         m *= (thrust > 0.0)[:, None]
         if s.motor_power_enable.any():
             m = np.where((s.motor_power_enable & (s.lock == LOCK_NONE))[:, None], s.motor_power, m)
@@ -241,28 +260,39 @@ class OnboardController:
         s.motors = m
         return m
 
+    @property
+    def motors_may_change(self) -> bool:
+        """Whether a tick without the PIDs could give other motor commands than the last call returned."""
+        return self.dirty or self._cut_soon
+
     def _lock_rows(self, rows: np.ndarray, reason: int) -> None:
         s = self.s
         s.lock = np.where(rows & (s.lock == LOCK_NONE), reason, s.lock).astype(np.int8)
 
-    def _tumble(self, q: np.ndarray, thrust: np.ndarray) -> None:
-        """Current firmware: tilted over 60° for 1 s or upside down for 0.1 s while flying -> locked."""
+    def _tumble(self, tilt_cos: np.ndarray, thrust: np.ndarray) -> bool:
+        """Current firmware: tilted over 60° for 1 s or upside down for 0.1 s while flying -> locked.
+
+        `tilt_cos`: cosine of each body's tilt (its z axis against the world's). True when a vehicle
+        was locked by this call.
+        """
         s = self.s
-        tilt_cos = 1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)
         flying = thrust > 0.0
         tilted = flying & (tilt_cos < TUMBLE_TILT_COS)
         if not (tilted.any() or s.tilt_time.any()):
-            return
-        dt = 2 * TICK_S
+            return False
+        dt = CONTROL_PERIOD_S
         s.tilt_time = np.where(tilted, s.tilt_time + dt, 0.0)
         s.upside_time = np.where(flying & (tilt_cos < 0.0), s.upside_time + dt, 0.0)
         tumbled = ~s.gen2016 & ((s.tilt_time > TUMBLE_TILT_S) | (s.upside_time > TUMBLE_UPSIDE_DOWN_S))
         if tumbled.any():
             self._lock_rows(tumbled, LOCK_TUMBLE)
+            return True
+        return False
 
     def _attitude_loop(self, due, level) -> None:
         s = self.s
-        dt_yaw = np.where(s.gen2016, 2 * PID_DT, PID_DT)
+        old = s.gen2016.any()
+        dt_yaw = np.where(s.gen2016, 2 * PID_DT, PID_DT) if old else PID_DT
         sp = s.sp[:, :3] if level is None else np.where(level[:, None], 0.0, s.sp[:, :3])
         yaw_sp = wrap_deg(s.yaw_sp - sp[:, 2] * dt_yaw)           # the firmware negates the yaw rate
         desired = sp.copy()
@@ -270,7 +300,7 @@ class OnboardController:
         err = desired - s.attitude
         err[:, 2] = wrap_deg(err[:, 2])
         integ = np.minimum(np.maximum(s.att_integ + err * PID_DT, -s.att_ilimit), s.att_ilimit)
-        src = np.where(s.gen2016[:, None], err, -s.attitude)   # 2016: D on error; now: on measurement
+        src = np.where(s.gen2016[:, None], err, -s.attitude) if old else -s.attitude   # 2016: D on error
         deriv = wrap_deg(src - s.att_prev) * (1.0 / PID_DT)
         g = s.att_gains
         out = g[:, :, 0] * err + g[:, :, 1] * integ + g[:, :, 2] * deriv
@@ -289,7 +319,7 @@ class OnboardController:
         meas = gyro_deg * _LEGACY_RATE_SIGNS                      # legacy pitch: −gyro_y
         err = s.rate_desired - meas
         integ = np.minimum(np.maximum(s.rate_integ + err * PID_DT, -s.rate_ilimit), s.rate_ilimit)
-        src = np.where(s.gen2016[:, None], err, -meas)
+        src = np.where(s.gen2016[:, None], err, -meas) if s.gen2016.any() else -meas
         deriv = (src - s.rate_prev) * (1.0 / PID_DT)
         g = s.rate_gains
         out = g[:, :, 0] * err + g[:, :, 1] * integ + g[:, :, 2] * deriv
@@ -309,5 +339,38 @@ class OnboardController:
         s.att_prev[rows] = np.where(s.gen2016[rows, None], 0.0, -s.attitude[rows])
 
 
+def _euler_terms(q: np.ndarray) -> np.ndarray:
+    """The arguments of euler_from_quat's arctan2/arcsin, each a quadratic form of a unit quaternion."""
+    x, y, z, w = q
+    return np.array([2 * (w * x + y * z), 2 * (w * z + x * y),            # roll, yaw numerators
+                     w * w + z * z - x * x - y * y, w * w + x * x - y * y - z * z,   # = 1 - 2(x²+y²), 1 - 2(y²+z²)
+                     2 * (w * y - z * x)])                             # sin pitch
+
+
+_EULER_TERMS = quadratic_form(_euler_terms, 4)       # (16, 5)
+
+
+def firmware_attitude(q: np.ndarray) -> np.ndarray:
+    """(N,4) unit quaternions -> (N,3) roll, pitch, yaw in degrees, firmware convention (pitch nose-up positive).
+
+    The same as degrees(euler_from_quat(q)) with pitch negated, in a fixed number of numpy calls.
+    """
+    return _attitude_from_terms(_attitude_terms(q))
+
+
+def _attitude_terms(q: np.ndarray) -> np.ndarray:
+    """(N,5) arguments of the Euler angles' arctan2/arcsin; column 2 is the cosine of the tilt."""
+    return (q[:, :, None] * q[:, None, :]).reshape(-1, 16) @ _EULER_TERMS
+
+
+def _attitude_from_terms(t: np.ndarray) -> np.ndarray:
+    out = np.empty((len(t), 3))
+    out[:, 0::2] = np.arctan2(t[:, 0:2], t[:, 2:4])
+    out[:, 1] = np.arcsin(np.minimum(np.maximum(t[:, 4], -1.0), 1.0))
+    out *= _FIRMWARE_ATTITUDE_DEGREES
+    return out
+
+
+_FIRMWARE_ATTITUDE_DEGREES = np.array([180.0 / np.pi, -180.0 / np.pi, 180.0 / np.pi])
 _LEGACY_RATE_SIGNS = np.array([1.0, -1.0, 1.0])
 MIX = np.stack([MIX_R, MIX_P, MIX_Y])       # (3,4): [R, P, Y] @ MIX

@@ -21,12 +21,19 @@ from crazyflie_driver.sim.world import sensors as _sensors
 from crazyflie_driver.sim.world.stabilizer import GEN_CURRENT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE, LOCK_TUMBLE, OnboardController, \
     check_generation, default_params
 from crazyflie_driver.sim.world.physics import BodyStates, RigidBodyBackend, VehicleParams, quat_to_matrix
+from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
 
-TICK_S = 0.001
 BATTERY_EVERY = 10                 # ticks between battery updates
 MAX_LAG_S = 0.25                   # real-time thread: further behind than this, it stops catching up
+WAKE_PERIOD_S = CONTROL_TICKS * FIRMWARE_TICK_S   # real-time thread: world time stepped per wake-up
+MAX_CHUNK_TICKS = 20               # real-time thread: most ticks stepped in one go when catching up
+FAST_CHUNK_TICKS = 10              # speed 0: ticks per loop
+METER_PERIOD_S = 1.0               # wall time over which the real-time factor is measured
+BEHIND_FACTOR = 0.95               # below this fraction of its speed the world counts as behind
+BEHIND_WARNING_PERIOD_S = 10.0     # at most one "behind real time" warning this often
+_ONES4 = np.ones(4)
 
 
 class Vehicle:
@@ -103,6 +110,7 @@ class Vehicle:
             if self._row >= 0:
                 yaw = w.onboard.s.attitude[self._row, 2]
                 w.onboard.s.boot(self._row, self.firmware, w.time, float(yaw))
+                w.onboard.dirty = True
 
     def stop_motors(self) -> None:
         """Generic setpoint type 0 (stop): the same as a zero RPYT setpoint."""
@@ -172,7 +180,7 @@ class World:
         if not (speed >= 0 and math.isfinite(speed)):
             raise ValueError("world speed must be >= 0 (0 = as fast as possible), got %r" % (speed,))
         self.speed = float(speed)
-        self.physics = physics if physics is not None else RigidBodyBackend()
+        self.physics = physics if physics is not None else RigidBodyBackend(tick=CONTROL_PERIOD_S)
         self.ground_asl = float(ground_asl)
         self.ticks = 0
         self.bodies = BodyStates()
@@ -184,14 +192,18 @@ class World:
         self._vehicles: Dict[str, Vehicle] = {}
         self._order: List[Vehicle] = []
         self._listeners: List[list] = []           # [fn, period, next_time]
+        self._listeners_due = math.inf             # earliest next_time of the listeners
         self._thread: Optional[threading.Thread] = None
         self._stop = threading.Event()
+        self._drive = None                         # physics drive of the current motor commands
         self.realtime_factor = 0.0                 # measured by the background thread
         self.overruns = 0                          # times the thread could not keep up and let go
+        self.ticks_behind = 0                      # how far world time trails wall time × speed, in ticks
+        self._last_behind_warning = -math.inf
 
     @property
     def time(self) -> float:
-        return self.ticks * TICK_S
+        return self.ticks * FIRMWARE_TICK_S
 
     # --- vehicles ----------------------------------------------------------------------------
     def add_vehicle(self, name: str, position=(0.0, 0.0, 0.0), yaw: float = 0.0, firmware: str = GEN_CURRENT,
@@ -218,6 +230,8 @@ class World:
             self.battery.add(battery_charge)
             self._vehicles[name] = v
             self._order.append(v)
+            self._drive = None
+            self.onboard.dirty = True
             return v
 
     def remove_vehicle(self, name: str) -> None:
@@ -232,6 +246,8 @@ class World:
             for k, other in enumerate(self._order):
                 other._row = k
             v._row = -1
+            self._drive = None
+            self.onboard.dirty = True
 
     def vehicle(self, name: str) -> Vehicle:
         with self._lock:
@@ -256,11 +272,14 @@ class World:
             with self._lock:
                 self._tick()
                 now = self.time
+                if now < self._listeners_due - 1e-9:
+                    continue
                 due = [l for l in self._listeners if now >= l[2] - 1e-9]
                 for l in due:
                     l[2] += l[1]
                     if l[2] <= now:
                         l[2] = now + l[1]
+                self._listeners_due = min((l[2] for l in self._listeners), default=math.inf)
             for l in due:
                 try:
                     l[0](now)
@@ -268,17 +287,36 @@ class World:
                     _log.exception("world tick listener %r failed", l[0])
 
     def _tick(self) -> None:
+        """One firmware tick of every vehicle: a fixed pipeline of whole-fleet numpy stages.
+
+        First tick of a control period: gyro -> onboard controller (PIDs) -> motors. Other ticks:
+        the motors are recomputed only when a setpoint, lock or parameter changed them. Last tick
+        of a control period: the bodies are integrated over the period (the state a reader sees
+        on the ticks in between is the one at the period's start). Battery every BATTERY_EVERY
+        ticks. A stage that concerns some vehicles only works on all rows with a mask, never with
+        a Python loop over vehicles.
+        """
         k = self.ticks
         if len(self._order):
             b = self.bodies
-            hover = b.mass * b.gravity
-            thrust_fraction = b.thrust.sum(axis=1) / hover
-            gyro = _sensors.gyro_measured(self.sensors, b.omega, thrust_fraction, self.rng) if k % 2 == 0 \
-                else None
-            motors = self.onboard.update(k, self.time, b, gyro, self.battery.empty)
-            self.physics.step(b, motors, TICK_S)
+            onboard = self.onboard
+            if k % CONTROL_TICKS == 0:
+                thrust_fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
+                gyro = _sensors.gyro_measured(self.sensors, b.omega, thrust_fraction, self.rng)
+                motors = onboard.update(k, self.time, b, gyro, self.battery.empty)
+            elif onboard.motors_may_change:
+                motors = onboard.update(k, self.time, b, None, self.battery.empty)
+            else:
+                motors = onboard.s.motors
+            if (k + 1) % CONTROL_TICKS == 0:
+                drive = self._drive
+                if drive is None or drive.commands is not motors:
+                    drive = self._drive = self.physics.drive(b, motors, CONTROL_PERIOD_S)
+                self.physics.step(b, motors, CONTROL_PERIOD_S, drive)
             if k % BATTERY_EVERY == 0:
-                _battery.update(self.battery, TICK_S * BATTERY_EVERY, b.thrust)
+                _battery.update(self.battery, FIRMWARE_TICK_S * BATTERY_EVERY, b.thrust)
+                if self.battery.empty.any():
+                    onboard.dirty = True
         self.ticks = k + 1
 
     # --- readings ----------------------------------------------------------------------------
@@ -319,12 +357,18 @@ class World:
                     "controller.yawRate": float(r[2])}
         return {}
 
-    def add_tick_listener(self, fn: Callable[[float], None], period: float) -> None:
-        """Call fn(world_time) every `period` seconds of world time (from the stepping thread)."""
+    def add_tick_listener(self, fn: Callable[[float], None], period: float, first: Optional[float] = None) -> None:
+        """Call fn(world_time) every `period` seconds of world time (from the stepping thread).
+
+        The first call is at world time `first` (default: one period from now), on the first tick
+        at or after it.
+        """
         if not period > 0:
             raise ValueError("tick listener period must be > 0 s, got %r" % (period,))
         with self._lock:
-            self._listeners.append([fn, float(period), self.time + float(period)])
+            start = self.time + float(period) if first is None else float(first)
+            self._listeners.append([fn, float(period), start])
+            self._listeners_due = min(self._listeners_due, start)
 
     def remove_tick_listener(self, fn: Callable[[float], None]) -> None:
         with self._lock:
@@ -352,22 +396,38 @@ class World:
         return self._thread is not None and self._thread.is_alive()
 
     def _run(self) -> None:
+        """Real-time stepping: wake every WAKE_PERIOD_S of wall time (per `speed`), step what is due."""
         wall0, world0 = _time.monotonic(), self.time
         meter_wall, meter_world = wall0, world0
+        wake_ticks = max(1, int(round(WAKE_PERIOD_S / FIRMWARE_TICK_S)))
         while not self._stop.is_set():
             now = _time.monotonic()
-            if now - meter_wall >= 1.0:
-                self.realtime_factor = (self.time - meter_world) / (now - meter_wall)
+            if now - meter_wall >= METER_PERIOD_S:
+                self._meter((self.time - meter_world) / (now - meter_wall), world0 + (now - wall0) * self.speed)
                 meter_wall, meter_world = now, self.time
             if self.speed <= 0:
-                self.step(10)
+                self.step(FAST_CHUNK_TICKS)
                 continue
-            due = int((world0 + (now - wall0) * self.speed - self.time) / TICK_S)
-            if due <= 0:
-                self._stop.wait(min(0.002, (1 - due) * TICK_S / self.speed))
+            due = int((world0 + (now - wall0) * self.speed - self.time) / FIRMWARE_TICK_S)
+            if due < wake_ticks:
+                self._stop.wait((wake_ticks - due) * FIRMWARE_TICK_S / self.speed)
                 continue
-            if due * TICK_S > MAX_LAG_S:
+            if due * FIRMWARE_TICK_S > MAX_LAG_S:
                 self.overruns += 1
                 wall0, world0 = now, self.time
-                due = 1
-            self.step(min(due, 20))
+                due = wake_ticks
+            self.step(min(due, MAX_CHUNK_TICKS))
+
+    def _meter(self, factor: float, wanted_time: float) -> None:
+        """Record the measured real-time factor; warn (throttled) when the world falls behind its speed."""
+        self.realtime_factor = factor
+        self.ticks_behind = max(0, int((wanted_time - self.time) / FIRMWARE_TICK_S)) if self.speed > 0 else 0
+        if self.speed <= 0 or factor >= self.speed * BEHIND_FACTOR:
+            return
+        now = _time.monotonic()
+        if now - self._last_behind_warning >= BEHIND_WARNING_PERIOD_S:
+            self._last_behind_warning = now
+            _log.warning("the simulated world runs behind real time: %.2fx instead of %.2fx with %d vehicle(s) "
+                         "(%d overrun(s)); rates that follow the firmware's clock are %.0f %% low "
+                         "(the machine is busy, or the world has too many vehicles for it)",
+                         factor, self.speed, len(self._order), self.overruns, 100.0 * (1.0 - factor / self.speed))
