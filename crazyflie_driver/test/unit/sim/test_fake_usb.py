@@ -10,7 +10,7 @@ import usb.util
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
-from radio_doubles import AirReply, FakeClock, ScriptedMedium
+from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 from support.cflib_find_patch import install_find_patch
 
 VENDOR_OUT = 0x40

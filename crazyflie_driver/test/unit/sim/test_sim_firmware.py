@@ -11,7 +11,7 @@ from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.firmware.ports import boot_text
 
-from sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle
 
 ADDR = b"\xe7\xe7\xe7\xe7\x01"
 

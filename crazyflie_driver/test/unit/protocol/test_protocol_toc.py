@@ -12,7 +12,7 @@ from crazyflie_driver.errors import ProtocolError, UnknownName
 from crazyflie_driver.protocol.toc import TocEntry, TocFetcher, parse_item
 from crazyflie_driver.protocol.toccache import TocCache, default_cache_dir
 
-from scripted_link import ScriptedLink, make_crazyflie
+from support.scripted_link import ScriptedLink, make_crazyflie
 
 
 def table_link(replies):

@@ -2,7 +2,7 @@
 
 A world server runs in this process (ephemeral TCP port, UDP endpoints on ephemeral ports) with two
 simulated Crazyflies: radio://0/80/2M/E7E7E7E701 (current firmware) and ...02 (2016.02 firmware,
-V1 TOCs). `cflib_peer/cflib_session.py` runs in cflib's own virtual environment (created by
+V1 TOCs). `support/cflib_session.py` runs in cflib's own virtual environment (created by
 `tools/bootstrap.sh --with-cflib`), wraps `usb.core.find` so cflib's Crazyradio driver lands on our
 fake dongle, and drives a whole session with cflib's API. The tests check cflib's report and what
 the simulated Crazyflie saw.
@@ -20,10 +20,10 @@ import pytest
 
 from crazyflie_driver.sim.air.server import WorldServer
 
-HERE = pathlib.Path(__file__).resolve().parent
-REPO = HERE.parent.parent
-SRC = HERE.parent / "src"
-SESSION = HERE / "cflib_peer" / "cflib_session.py"
+TEST = pathlib.Path(__file__).resolve().parents[2]        # crazyflie_driver/test
+REPO = TEST.parent.parent
+SRC = TEST.parent / "src"
+SESSION = TEST / "support" / "cflib_session.py"
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"
 SESSION_TIMEOUT_S = 25.0
@@ -73,7 +73,7 @@ def served():
 
 def run_session(python, server, uri, *args):
     env = dict(os.environ)
-    env.update(PYTHONPATH=os.pathsep.join((str(SRC), str(HERE))), CRAZYFLIE_SIM_ADDRESS=server.address, PYTHONUNBUFFERED="1")
+    env.update(PYTHONPATH=os.pathsep.join((str(SRC), str(TEST))), CRAZYFLIE_SIM_ADDRESS=server.address, PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
     proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

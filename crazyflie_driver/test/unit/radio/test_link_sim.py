@@ -13,7 +13,7 @@ from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.crtp.uri import parse_uri
 
-from sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle
 
 URI = "radio://0/80/2M/E7E7E7E701"
 

@@ -16,7 +16,7 @@ from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import parse_address
 
-from radio_doubles import AirReply, FakeClock, ScriptedMedium
+from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 
 
 @pytest.fixture

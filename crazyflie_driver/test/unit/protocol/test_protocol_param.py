@@ -10,7 +10,7 @@ from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyPara
 from crazyflie_driver.protocol.param import ParamClient, convert_value
 from crazyflie_driver.protocol.toc import Toc, TocEntry
 
-from scripted_link import ScriptedLink, make_crazyflie
+from support.scripted_link import ScriptedLink, make_crazyflie
 
 ROLL_KP = TocEntry(0, "pid_rate", "roll_kp", "float")
 EFFECT = TocEntry(1, "ring", "effect", "uint8_t")

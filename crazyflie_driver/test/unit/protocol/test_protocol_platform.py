@@ -8,7 +8,7 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
 from crazyflie_driver.protocol.platform import Platform, toc_version
 
-from scripted_link import ScriptedFirmware, ScriptedLink
+from support.scripted_link import ScriptedFirmware, ScriptedLink
 
 
 def test_asks_source_then_version_current_firmware():

@@ -15,7 +15,7 @@ from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
-from radio_doubles import AirReply, NrfPeer, ScriptedMedium
+from support.radio_doubles import AirReply, NrfPeer, ScriptedMedium
 
 URI = "radio://0/80/2M/E7E7E7E701"
 

@@ -2,6 +2,7 @@
 """One simulated Crazyflie behind crazyflie_server: topics, rates, params, cmd_vel, custom logs, emergency."""
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import time
@@ -17,7 +18,8 @@ from std_srvs.srv import Empty
 from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import UpdateParams
 
-from rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
 
 NS = "/crazyflie1"
 

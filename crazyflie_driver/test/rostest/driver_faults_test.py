@@ -2,6 +2,7 @@
 """Faults never take the server down and never disturb the other Crazyflies."""
 from __future__ import annotations
 
+import os
 import sys
 import time
 import unittest
@@ -14,8 +15,9 @@ from sensor_msgs.msg import Imu
 from crazyflie_driver.msg import LogBlock
 from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest, UpdateParams
 
-from rostest_support import (RosoutRecorder, TopicRecorder, rates_per_world_second, wait_for_crazyflie,
-                             wait_until, world)
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import (  # noqa: E402
+    RosoutRecorder, TopicRecorder, rates_per_world_second, wait_for_crazyflie, wait_until, world)
 
 NAMES = ("crazyflie1", "crazyflie2", "crazyflie3")
 

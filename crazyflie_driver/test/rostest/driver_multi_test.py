@@ -2,6 +2,7 @@
 """Three Crazyflies, two dongles: every one served at full rate, each cmd_vel reaches only its own."""
 from __future__ import annotations
 
+import os
 import sys
 import time
 import unittest
@@ -12,7 +13,8 @@ import tf2_ros
 from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Imu
 
-from rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
 
 CRAZYFLIES = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702",
               "crazyflie3": "radio://1/90/2M/E7E7E7E703"}

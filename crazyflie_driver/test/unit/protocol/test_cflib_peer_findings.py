@@ -8,7 +8,7 @@ import struct
 
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 
-from sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle
 
 ADDRESS = bytes.fromhex("E7E7E7E701")
 LOG_CONTROL = 0x51   # port 5, channel 1

@@ -8,7 +8,7 @@ import pytest
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LogConfigError, ProtocolError, UnknownName
 
-from scripted_link import make_crazyflie
+from support.scripted_link import make_crazyflie
 
 
 def control_packets(link):

@@ -4,6 +4,7 @@ converted to Z-up, tf, tracker name cleaning, staleness on /diagnostics, server 
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 import unittest
@@ -16,7 +17,8 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 
 from crazyflie_driver.mocap.vrpn_server import VrpnTestServer
 
-from rostest_support import TopicRecorder, wait_until
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import TopicRecorder, wait_until  # noqa: E402
 
 YAW = math.radians(40.0)
 TRUTH_Q = (0.0, 0.0, math.sin(YAW / 2), math.cos(YAW / 2))     # Z-up truth, streamed Y-up

@@ -9,7 +9,7 @@ import pytest
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
 
-from scripted_link import make_crazyflie
+from support.scripted_link import make_crazyflie
 
 
 def test_console_joins_packets_into_lines():

@@ -1,6 +1,6 @@
 """Port 4/6/7/8/9 packets, byte for byte against what Bitcraze's cflib builds for the same calls.
 
-cflib runs in its own interpreter (``cflib_peer/cflib_encoders.py``), once for the whole module;
+cflib runs in its own interpreter (``support/cflib_encoders.py``), once for the whole module;
 skipped with the reason when cflib is not installed (tools/bootstrap.sh --with-cflib).
 """
 from __future__ import annotations
@@ -20,9 +20,9 @@ from crazyflie_driver.protocol import setpoints as sp
 from crazyflie_driver.protocol import supervisor as sup
 from crazyflie_driver.protocol.memory import chunks, write_packet
 from crazyflie_driver.protocol.trajectory import make_piece, pack_compressed, pack_poly4d
-from test_cflib_peer import HERE, cflib_python
+from test_cflib_peer import TEST, cflib_python
 
-ENCODERS = HERE / "cflib_peer" / "cflib_encoders.py"
+ENCODERS = TEST / "support" / "cflib_encoders.py"
 
 _rng = random.Random(14)
 

@@ -24,7 +24,7 @@ pytest.importorskip("rospy")
 if shutil.which("rosmaster") is None:
     pytest.skip("rosmaster is not installed", allow_module_level=True)
 
-SRC = pathlib.Path(__file__).resolve().parent.parent / "src"
+SRC = pathlib.Path(__file__).resolve().parents[3] / "src"
 CHILD = r"""
 import rospy
 from crazyflie_driver.nodes.ros_signals import init_node

@@ -10,7 +10,7 @@ from crazyflie_driver.errors import RadioNotFound, UnknownName
 from crazyflie_driver.server.log_plan import LogBlockSpec
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerState
 
-from worker_doubles import LOG_VARS, FakeCrazyflie, Recorder, started, wait_for
+from support.worker_doubles import LOG_VARS, FakeCrazyflie, Recorder, started, wait_for
 
 
 def test_connect_sequence_order_blocks_and_params():

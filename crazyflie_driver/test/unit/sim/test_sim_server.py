@@ -16,14 +16,14 @@ from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air.medium import RemoteMedium, WorldNotRunning
 from crazyflie_driver.sim.air.server import WorldServer, load_vehicle_config, main
 
-from sim_doubles import FakeWorld
+from support.sim_doubles import FakeWorld
 
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"
 A1 = bytes.fromhex("E7E7E7E701")
 A2 = bytes.fromhex("E7E7E7E702")
-HERE = pathlib.Path(__file__).resolve().parent
-SRC = HERE.parent / "src"
+TEST = pathlib.Path(__file__).resolve().parents[2]        # crazyflie_driver/test
+SRC = TEST.parent / "src"
 
 
 @pytest.fixture
@@ -180,7 +180,7 @@ def test_cli_refuses_bad_arguments(capsys):
 _LAUNCHER = """
 import sys, types
 sys.path[:0] = [{src!r}, {test!r}]
-import sim_doubles
+from support import sim_doubles
 mod = types.ModuleType("crazyflie_driver.sim.world.world")
 class World(sim_doubles.FakeWorld):
     def __init__(self, speed=1.0, seed=None):
@@ -194,7 +194,7 @@ sys.exit(main(sys.argv[1:]))
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_cli_serves_and_stops_cleanly_on_signals(sig):
-    code = _LAUNCHER.format(src=str(SRC), test=str(HERE))
+    code = _LAUNCHER.format(src=str(SRC), test=str(TEST))
     proc = subprocess.Popen([sys.executable, "-c", code, "--uri", URI1, "--uri", URI2, "--address", "127.0.0.1:0",
                              "--udp", "--dongles", "2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -226,7 +226,7 @@ def test_shipped_example_vehicle_config_loads():
     import os
     from crazyflie_driver.sim.air.server import load_vehicle_config
     from crazyflie_driver.crtp.uri import parse_uri
-    path = os.path.join(os.path.dirname(__file__), "..", "config", "sim_vehicles.yaml")
+    path = str(TEST.parent / "config" / "sim_vehicles.yaml")
     vehicles = load_vehicle_config(path)
     assert [v["name"] for v in vehicles] == ["crazyflie1", "crazyflie2", "crazyflie3"]
     assert [parse_uri(v["uri"]).index for v in vehicles] == [0, 0, 1]

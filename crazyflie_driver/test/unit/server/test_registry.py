@@ -10,7 +10,7 @@ from crazyflie_driver.errors import LinkTimeout
 from crazyflie_driver.server.registry import CrazyflieRegistry, DuplicateCrazyflie
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
 
-from worker_doubles import FakeCrazyflie
+from support.worker_doubles import FakeCrazyflie
 
 
 def test_registry_refuses_duplicates_and_serves_others_while_one_times_out():

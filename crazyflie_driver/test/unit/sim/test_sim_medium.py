@@ -6,7 +6,7 @@ import pytest
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium, RemoteMedium, WorldNotRunning, parse_address
 
-from sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle
 
 ADDR = b"\xe7\xe7\xe7\xe7\x01"
 

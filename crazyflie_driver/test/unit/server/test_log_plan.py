@@ -7,7 +7,7 @@ from crazyflie_driver.errors import LogConfigError, UnknownName
 from crazyflie_driver.server.log_plan import (LogBlockSpec, PlannedBlock, log_packet_rate, plan_log_blocks,
                                        validate_log_block_specs)
 
-from worker_doubles import LOG_VARS
+from support.worker_doubles import LOG_VARS
 
 
 def test_log_plan_keeps_topics_whole_and_under_26_bytes():
