@@ -16,7 +16,8 @@ import threading
 from typing import Optional
 
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.radio.shared_radio import RadioManager, default_manager
+from crazyflie_driver.radio.crazyradio import Crazyradio
+from crazyflie_driver.radio.shared_radio import RadioManager
 
 ENV_BACKEND = "CRAZYFLIE_BACKEND"
 ENV_SIM_ADDRESS = "CRAZYFLIE_SIM_ADDRESS"
@@ -25,7 +26,7 @@ DEFAULT_SIM_ADDRESS = "127.0.0.1:19840"
 _lock = threading.Lock()
 _override = None
 _sim_backends: dict = {}
-_managers: dict = {}
+_manager: Optional[RadioManager] = None
 
 
 def get_backend():
@@ -84,14 +85,17 @@ def current_override() -> Optional[object]:
     return _override
 
 
+def open_radio(index: int) -> Crazyradio:
+    """Crazyradio ``index`` on the backend chosen now (the simulated world is looked up only here)."""
+    return Crazyradio(index, backend=get_backend())
+
+
 def radio_manager() -> RadioManager:
-    """The process-wide ``RadioManager`` on ``get_backend()``, so every Crazyflie of the process
-    shares its dongles (one manager per backend)."""
-    backend = get_backend()
-    if backend is None:
-        return default_manager()
+    """The process-wide ``RadioManager`` of an entry point: every Crazyflie of the process shares
+    its dongles, each opened through ``open_radio`` when a link first needs it (a simulated world
+    that is still starting is then retried by the caller, as a dongle not plugged in yet)."""
+    global _manager
     with _lock:
-        manager = _managers.get(backend)
-        if manager is None:
-            manager = _managers[backend] = RadioManager(backend=backend)
-        return manager
+        if _manager is None:
+            _manager = RadioManager(radio_factory=open_radio)
+        return _manager

@@ -10,7 +10,6 @@ import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
 from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, list_radios
-from crazyflie_driver.radio.shared_radio import default_manager
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
@@ -202,12 +201,11 @@ def test_backend_choice(monkeypatch, medium):
     with usb_backend.use_backend(fake):
         assert usb_backend.get_backend() is fake
         manager = usb_backend.radio_manager()
-        assert manager.backend is fake and usb_backend.radio_manager() is manager   # one per backend
-        shared = manager.acquire(0)
+        assert usb_backend.radio_manager() is manager        # one per process
+        shared = manager.acquire(0)                          # opened on the backend chosen now
         assert shared.radio.serial == fake.dongles[0].serial
         manager.release(shared)
     assert usb_backend.get_backend() is None
-    assert usb_backend.radio_manager() is default_manager()     # libusb: the radio layer's own default
     monkeypatch.setenv("CRAZYFLIE_BACKEND", "bogus")
     with pytest.raises(CrazyflieError, match="CRAZYFLIE_BACKEND='bogus'"):
         usb_backend.get_backend()
