@@ -2,7 +2,7 @@
 """Goal changes with the chapter's gains: the original controller, the previous defaults and the fixed one.
 
 Flies crazyflie_controller's PositionController against the simulated world (sim.world, fast mode,
-in process, no ROS; see crazyflie_controller.world_flight): cmd_vel → crazyflie_server's RPYT
+in process, no ROS; see crazyflie_controller/test/controller_support/world_flight.py): cmd_vel → crazyflie_server's RPYT
 mapping → Vehicle.set_rpyt; pose from a 100 Hz motion-capture model with 10 ms latency and
 0.5 mm noise; controller at 50 Hz; 32 g Crazyflie. Each variant takes off to (0, 0, 0.5), hovers,
 then flies, each from a settled hover:
@@ -36,6 +36,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
+sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "test"))   # controller_support.world_flight
 
 from chapter_gains import chapter_gains  # noqa: E402
 from crazyflie_controller.position_controller import ControllerConfig, PositionController, State  # noqa: E402
@@ -61,7 +62,7 @@ def make_controller(variant: str, extra: dict) -> PositionController:
 
 def hovering(variant: str, extra: dict, seed: int, goal=(0.0, 0.0, 0.5), settle: float = 12.0):
     """A flight that took off to ``goal`` and has hovered there for ``settle`` s after lift-off."""
-    from crazyflie_controller.world_flight import WorldFlight
+    from controller_support.world_flight import WorldFlight
 
     c = make_controller(variant, extra)
     f = WorldFlight(c, mass=0.032, seed=seed)
@@ -111,7 +112,7 @@ def move_figures(variant: str, extra: dict, seed: int, seconds: float = 6.0) -> 
 
 
 def mission_figures(variant: str, extra: dict, seed: int) -> dict:
-    from crazyflie_controller.world_flight import DEMO1, WorldFlight, fly_waypoints, goal_segments, hold_rms
+    from controller_support.world_flight import DEMO1, WorldFlight, fly_waypoints, goal_segments, hold_rms
 
     c = make_controller(variant, extra)
     f = WorldFlight(c, mass=0.032, seed=seed)

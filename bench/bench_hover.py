@@ -56,7 +56,7 @@ def figures(errors: np.ndarray) -> dict:
 
 def fly(firmware: str, rate: float, mass: float, windows, hold: float, seed: int, cache_dir: str) -> dict:
     from crazyflie_controller.position_controller import PoseSample, State
-    from crazyflie_controller.world_flight import cmd_vel_to_rpyt
+    from crazyflie_driver.server.setpoint import setpoint_from_twist
 
     rig = RadioRig(firmware=firmware, mass=mass, seed=seed)
     cf = rig.connect(cache_dir=cache_dir)
@@ -69,7 +69,9 @@ def fly(firmware: str, rate: float, mass: float, windows, hold: float, seed: int
         nonlocal unacked
         got = rig.mocap_pose()
         pose = None if got is None else PoseSample.from_quaternion(got[2], tuple(got[0]), tuple(got[1]))
-        if not cf.send_setpoint(*cmd_vel_to_rpyt(c.update(rig.time, pose))):
+        cmd = c.update(rig.time, pose)
+        sp = setpoint_from_twist(cmd.linear_x, cmd.linear_y, cmd.linear_z, cmd.angular_z)
+        if not cf.send_setpoint(sp.roll, sp.pitch, sp.yawrate, sp.thrust):
             unacked += 1
         rig.advance(period)
 

@@ -24,6 +24,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
+sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "test"))   # controller_support.world_flight
 
 from chapter_gains import chapter_gains  # noqa: E402
 from crazyflie_controller.position_controller import ControllerConfig, PositionController  # noqa: E402
@@ -40,7 +41,7 @@ GOAL_Z = 0.5
 
 
 def fly(variant: str, mass: float, seconds: float, seed: int):
-    from crazyflie_controller.world_flight import WorldFlight, takeoff_figures
+    from controller_support.world_flight import WorldFlight, takeoff_figures
 
     c = PositionController(ControllerConfig(X, Y, Z, YAW, **VARIANTS[variant]))
     f = WorldFlight(c, mass=mass, seed=seed)

@@ -1,25 +1,20 @@
-"""Flies a :class:`PositionController` against the simulated world in process (tests, benchmarks).
+"""Flies a :class:`PositionController` against the project's simulated world in process (tests, benchmarks).
 
-No ROS and no radio: the controller's cmd_vel goes through crazyflie_server's cmd_vel → RPYT
-mapping straight into ``Vehicle.set_rpyt``, and the pose comes from a small motion-capture model
-(rate, latency, noise; frames stamped with their capture time, as vicon_bridge does).
+No ROS and no radio: the controller's cmd_vel goes through crazyflie_server's cmd_vel -> RPYT
+mapping (``server.setpoint.setpoint_from_twist``) straight into ``Vehicle.set_rpyt``, and the pose
+comes from the world's motion-capture model (``sim.world.mocap.MocapModel``: rate, latency, noise;
+frames stamped with their capture time, as vicon_bridge does).
 """
 from __future__ import annotations
 
 import math
-import random
-from collections import deque
 from typing import List, NamedTuple, Optional, Tuple
 
-from .position_controller import Command, PositionController, PoseSample, State, yaw_from_quaternion
-
-MAX_THRUST = 60000
-
-
-def cmd_vel_to_rpyt(command: Command, roll_trim: float = 0.0, pitch_trim: float = 0.0) -> Tuple[float, float, float, int]:
-    """crazyflie_server's mapping: roll = y + trim, pitch = −(x + trim), yaw rate = angular.z, thrust clamped."""
-    thrust = int(min(max(command.linear_z, 0.0), MAX_THRUST))
-    return command.linear_y + roll_trim, -(command.linear_x + pitch_trim), command.angular_z, thrust
+from crazyflie_controller.position_controller import Command, PoseSample, PositionController, State
+from crazyflie_driver.mocap.frames import yaw_of
+from crazyflie_driver.server.setpoint import setpoint_from_twist
+from crazyflie_driver.sim.world.mocap import MocapModel
+from crazyflie_driver.sim.world.world import World
 
 
 class Sample(NamedTuple):
@@ -39,34 +34,22 @@ class WorldFlight:
     def __init__(self, controller: PositionController, world=None, name: str = "cf1", mass: float = 0.032,
                  position=(0.0, 0.0, 0.0), yaw: float = 0.0, rate: float = 50.0, mocap_rate: float = 100.0,
                  mocap_latency: float = 0.01, mocap_noise: float = 0.0005, seed: int = 1) -> None:
-        from crazyflie_driver.sim.world.world import World  # the simulator is optional for this package
-
         self.world = world if world is not None else World(speed=0.0, seed=seed)
+        self.name = name
         self.vehicle = self.world.add_vehicle(name, position=position, yaw=yaw, mass=mass)
         self.controller = controller
         self.period_ticks = max(1, int(round(1000.0 / rate)))
-        self.mocap_latency, self.mocap_noise = mocap_latency, mocap_noise
-        self.mocap_enabled = True
-        self.latest_pose: Optional[PoseSample] = None
+        self.mocap = MocapModel(self.world, rate=mocap_rate, position_noise=mocap_noise, orientation_noise=0.0,
+                                latency=mocap_latency, seed=seed).attach()
         self.log: List[Sample] = []
-        self._queue: deque = deque()
-        self._rng = random.Random(seed)
-        self.world.add_tick_listener(self._capture, 1.0 / mocap_rate)
-
-    def _capture(self, now: float) -> None:
-        while self._queue and self._queue[0][0] <= now + 1e-9:
-            self.latest_pose = self._queue.popleft()[1]
-        if not self.mocap_enabled:
-            return
-        p, q = self.vehicle.pose()
-        n = self._rng.gauss
-        s = self.mocap_noise
-        sample = PoseSample(now, float(p[0]) + n(0, s), float(p[1]) + n(0, s), float(p[2]) + n(0, s),
-                            yaw_from_quaternion(*(float(c) for c in q)))
-        self._queue.append((now + self.mocap_latency, sample))
 
     def pose(self) -> Optional[PoseSample]:
-        return self.latest_pose
+        """The latest motion-capture frame of this Crazyflie, or None before the first one."""
+        got = self.mocap.latest_pose(self.name)
+        if got is None:
+            return None
+        p, q, stamp = got
+        return PoseSample(stamp, float(p[0]), float(p[1]), float(p[2]), yaw_of(q))
 
     def true_position(self) -> Tuple[float, float, float]:
         p, _ = self.vehicle.pose()
@@ -74,7 +57,7 @@ class WorldFlight:
 
     def true_yaw(self) -> float:
         _, q = self.vehicle.pose()
-        return yaw_from_quaternion(*(float(c) for c in q))
+        return yaw_of(q)
 
     def run(self, seconds: float) -> None:
         """Controller cycles for ``seconds`` of world time."""
@@ -82,7 +65,8 @@ class WorldFlight:
 
     def _command(self) -> Command:
         cmd = self.controller.update(self.world.time, self.pose())
-        self.vehicle.set_rpyt(*cmd_vel_to_rpyt(cmd))
+        sp = setpoint_from_twist(cmd.linear_x, cmd.linear_y, cmd.linear_z, cmd.angular_z)
+        self.vehicle.set_rpyt(sp.roll, sp.pitch, sp.yawrate, sp.thrust)
         return cmd
 
     def _record(self, cmd: Command) -> None:
@@ -94,7 +78,7 @@ class WorldFlight:
     def wait_for_pose(self, timeout: float = 1.0) -> None:
         """Idles (zero setpoints, which also release the thrust lock) until the first mocap frame."""
         end = self.world.time + timeout
-        while self.latest_pose is None:
+        while self.pose() is None:
             if self.world.time >= end:
                 raise TimeoutError("no motion-capture frame within %.1f s of world time" % timeout)
             self.run(1.0 / (1000.0 / self.period_ticks))

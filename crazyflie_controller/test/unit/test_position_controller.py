@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from controller_test_model import Flight, QuadModel, hover_command
+from controller_support.quad_model import Flight, QuadModel, hover_command
 from crazyflie_controller.pid import PidGains
 from crazyflie_controller.position_controller import (Command, ControllerConfig, PositionController, PoseSample,
                                                       Safety, State, rotate_to_body, wrap_angle,

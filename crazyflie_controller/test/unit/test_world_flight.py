@@ -1,7 +1,7 @@
 """The controller flying the project's simulated Crazyflie (sim.world) in process, through set_rpyt.
 
-cmd_vel goes through crazyflie_server's mapping (roll = y, pitch = −x, yaw rate = angular.z,
-thrust clamped to 0..60000); the pose comes from a 100 Hz, 10 ms, 0.5 mm motion-capture model.
+cmd_vel goes through crazyflie_server's mapping (server.setpoint.setpoint_from_twist); the pose
+comes from the world's motion-capture model at 100 Hz, 10 ms latency, 0.5 mm noise.
 """
 import math
 
@@ -10,19 +10,13 @@ import pytest
 from crazyflie_controller.pid import PidGains
 from crazyflie_controller.position_controller import (Command, ControllerConfig, PositionController, State)
 
-world_flight = pytest.importorskip("crazyflie_controller.world_flight")
 pytest.importorskip("crazyflie_driver.sim.world.world")
+from controller_support import world_flight  # noqa: E402
 
 X = PidGains(40, 20, 2, -10, 10, -0.1, 0.1)
 Y = PidGains(-40, -20, -2, -10, 10, -0.1, 0.1)
 Z = PidGains(5000, 6000, 3500, 10000, 60000, -1000, 1000)
 YAW = PidGains(-200, -20, 0, -200, 200, 0, 0)
-
-
-def test_cmd_vel_to_rpyt_mapping():
-    assert world_flight.cmd_vel_to_rpyt(Command(2.0, 3.0, 70000.0, 5.0), roll_trim=1.0, pitch_trim=0.5) == \
-        (4.0, -2.5, 5.0, 60000)
-    assert world_flight.cmd_vel_to_rpyt(Command(0, 0, -5.0, 0))[3] == 0
 
 
 def fly(config, seconds):
