@@ -153,7 +153,7 @@ class LaunchFiles(unittest.TestCase):
             log.close()
 
     def test_every_launch_file_starts_in_the_simulator(self):
-        launches = sorted(f for f in os.listdir(os.path.join(os.path.dirname(__file__), "..", "launch"))
+        launches = sorted(f for f in os.listdir(os.path.join(os.path.dirname(__file__), "..", "..", "launch"))
                           if f.endswith(".launch"))
         self.assertEqual(sorted(EXPECTED), launches, "the test must know every launch file")
         jobs = list(enumerate(launches))

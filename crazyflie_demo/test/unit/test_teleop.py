@@ -9,7 +9,7 @@ import pytest
 
 from crazyflie_demo.teleop import AxisMapping, TeleopConfig, TeleopConfigError, TwistCommand
 
-LAUNCH = os.path.join(os.path.dirname(__file__), "..", "launch")
+LAUNCH = os.path.join(os.path.dirname(__file__), "..", "..", "launch")
 
 
 def launch_params(name: str) -> dict:

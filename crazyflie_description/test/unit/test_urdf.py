@@ -13,7 +13,7 @@ from typing import Dict, List, Optional, Tuple
 
 import pytest
 
-PKG = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+PKG = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
 REPO = os.path.dirname(PKG)
 URDF = os.path.join(PKG, "urdf")
 LAUNCH = os.path.join(PKG, "launch")

@@ -8,6 +8,7 @@ k+1 the vehicle must be at waypoint k (within the demo's 0.3 m per axis). Privat
 """
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -17,7 +18,8 @@ import rospy
 import rostest
 from std_msgs.msg import Bool, Int32
 
-from flight_support import Track, WorldProbe, wait_until
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.flight_support import Track, WorldProbe, wait_until  # noqa: E402
 
 
 class MultiWaypoint(unittest.TestCase):

@@ -8,6 +8,7 @@ motion-capture names the poses must come through.
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
 import unittest
@@ -17,7 +18,8 @@ import rostest
 import tf2_ros
 from geometry_msgs.msg import PoseStamped, TransformStamped
 
-from flight_support import WorldProbe, hold_errors, wait_until
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.flight_support import WorldProbe, hold_errors, wait_until  # noqa: E402
 
 
 class Hover(unittest.TestCase):

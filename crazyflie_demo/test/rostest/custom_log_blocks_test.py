@@ -14,6 +14,7 @@ Private params: ``sim_address``, ``measure_s`` (wall seconds to count over, 4).
 """
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import threading
@@ -25,7 +26,8 @@ import rospy
 import rostest
 from crazyflie_driver.msg import GenericLogData
 
-from flight_support import WorldProbe, wait_until
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.flight_support import WorldProbe, wait_until  # noqa: E402
 
 NAME = "crazyflie"
 PERIOD_MS = {"log1": 10, "log2": 100}         # as customLogBlocks.launch asks

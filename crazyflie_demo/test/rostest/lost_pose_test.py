@@ -5,6 +5,7 @@ take its safe action, visible on its state topic, and the vehicle must come down
 was, not fly away, and end with its motors stopped. Judged by the world's true state."""
 from __future__ import annotations
 
+import os
 import math
 import sys
 import threading
@@ -16,7 +17,8 @@ import rostest
 import rostopic
 from std_srvs.srv import SetBool
 
-from flight_support import Track, WorldProbe, wait_until
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.flight_support import Track, WorldProbe, wait_until  # noqa: E402
 
 NAME = "crazyflie"
 HOVER = (0.0, 0.0, 0.5)

@@ -11,7 +11,7 @@ import pytest
 from crazyflie_demo.waypoint_demo import Demo, check_goals, follower_for
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-SCRIPTS = os.path.join(os.path.dirname(HERE), "scripts")
+SCRIPTS = os.path.join(os.path.dirname(os.path.dirname(HERE)), "scripts")
 IMPORT_ONLY = "from demo import Demo; d = Demo([[0, 0, 0.5, 0, 2]]); print(type(d).__name__, d.goalIndex)"
 
 

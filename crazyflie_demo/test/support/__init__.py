@@ -1,0 +1,1 @@
+"""What the rostests of crazyflie_demo share: the world probe, tracks and waits."""
