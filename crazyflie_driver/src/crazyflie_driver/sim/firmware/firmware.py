@@ -100,8 +100,8 @@ class SimulatedCrazyflie:
             3: ports.commander_port(state, hook),
             4: ports.memory_port(self.send),
             5: self.logs.handle,
-            6: ports.localization_port(state, hook, self.emergency_stop, self.now),
-            7: ports.generic_setpoint_port(state, hook),
+            6: ports.localization_port(state, hook, self.emergency_stop, self.now, self.address[-1]),
+            7: ports.generic_setpoint_port(state, hook, self.halt),
             9: ports.supervisor_port(state, self.send, self.supervisor_bits, self.emergency_stop, self.now),
             13: ports.platform_port(state, self.send, profile.protocol_version, profile.firmware_version,
                                     profile.device_type, profile.device_type_query),
@@ -244,7 +244,7 @@ class SimulatedCrazyflie:
         self._dispatch(raw)
 
     def _dispatch(self, raw: bytes) -> None:
-        if not raw or len(raw) > MAX_PAYLOAD + 1:
+        if not raw or len(raw) > MAX_PAYLOAD + 1 or self.state.halted:
             return
         header = raw[0]
         port, channel = header >> 4, header & 0x03
@@ -314,7 +314,7 @@ class SimulatedCrazyflie:
         with self.lock:
             due = float("inf")
             try:
-                if not self.state.powered:
+                if not self.state.powered or self.state.halted:
                     return
                 wd = self.state.estop_watchdog
                 if wd is not None and not self.state.emergency:
@@ -344,6 +344,22 @@ class SimulatedCrazyflie:
                 self.timer_due = due
 
     # --- safety ----------------------------------------------------------------------------------
+    def halt(self, reason: str, packet: bytes) -> None:
+        """An assert tripped: the STM stops (motors off, no more CRTP answers) until a reboot."""
+        with self.lock:
+            if self.state.halted:
+                return
+            self.state.halted = reason
+            self._tx.clear()
+            _log.error("simulated Crazyflie %s halted on a firmware assert: %s; packet %s. A real Crazyflie "
+                       "stops the same way: fix the host's packet. Reboot it to fly again.",
+                       self.address.hex().upper(), reason, packet.hex())
+            try:
+                hook = getattr(self.vehicle, "halt", None)
+                hook() if hook is not None else self.vehicle.emergency_stop()
+            except Exception:
+                _log.exception("halting the vehicle failed")
+
     def emergency_stop(self, reason: str = "emergency stop") -> None:
         with self.lock:
             self.state.emergency = True
@@ -364,6 +380,8 @@ class SimulatedCrazyflie:
                 "powered": s.powered,
                 "emergency": s.emergency,
                 "emergency_reason": s.emergency_reason,
+                "halted": s.halted,
+                "external_measurements": s.external_measurements,
                 "armed": s.armed,
                 "last_setpoint": list(s.last_setpoint) if s.last_setpoint is not None else None,
                 "setpoints": s.setpoints,

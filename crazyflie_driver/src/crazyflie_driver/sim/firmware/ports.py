@@ -11,6 +11,8 @@ import logging
 import struct
 from typing import Any, Callable, List
 
+from crazyflie_driver.sim.firmware import localization_decode as loc
+from crazyflie_driver.sim.firmware.setpoint_decode import FirmwareAssert, decode_meta, decode_setpoint
 from crazyflie_driver.sim.firmware.state import SimState
 
 _log = logging.getLogger(__name__)
@@ -88,20 +90,30 @@ def commander_port(state: SimState, hook: VehicleHook) -> Handler:
     return handle
 
 
-def generic_setpoint_port(state: SimState, hook: VehicleHook) -> Handler:
-    """Port 7: type 0 stops the motors; other types are recorded and offered to the vehicle."""
+def generic_setpoint_port(state: SimState, hook: VehicleHook, halt: Callable[[str, bytes], None]) -> Handler:
+    """Port 7: generic setpoints (ch 0) and notify-setpoints-stop (ch 1). No reply.
+
+    A packet whose length the firmware asserts calls `halt(reason, packet)`, as the assert halts
+    the real Crazyflie.
+    """
     def handle(header: int, channel: int, data: bytes) -> None:
-        if channel != 0 or not data:
-            return
-        kind = data[0]
-        state.last_generic = (kind, bytes(data[1:]))
-        if kind == 0:
-            state.setpoints += 1
-            state.last_setpoint = (0.0, 0.0, 0.0, 0)
-            if not hook("stop_motors"):
-                hook("set_rpyt", 0.0, 0.0, 0.0, 0)
-        else:
-            hook("set_generic_setpoint", kind, bytes(data[1:]))
+        try:
+            if channel == 0:
+                sp = decode_setpoint(data)
+                state.last_generic = (sp.kind, bytes(data[1:]))
+                state.setpoints += 1
+                if sp.is_stop:          # stop and unknown types: the zeroed setpoint, motors off
+                    state.last_setpoint = (0.0, 0.0, 0.0, 0)
+                    if not hook("stop_motors"):
+                        hook("set_rpyt", 0.0, 0.0, 0.0, 0)
+                else:
+                    hook("set_setpoint", sp)
+            elif channel == 1:
+                if decode_meta(data) is not None:
+                    state.setpoint_stop_notices += 1
+                    hook("notify_setpoint_stop")
+        except FirmwareAssert as e:
+            halt("port 7 channel %d: %s" % (channel, e), bytes([header]) + bytes(data))
     return handle
 
 
@@ -121,17 +133,30 @@ def memory_port(send: Send) -> Handler:
 
 
 def localization_port(state: SimState, hook: VehicleHook, emergency_stop: Callable[[str], None],
-                      now: Callable[[], float]) -> Handler:
-    """Port 6: external position (recorded) and the emergency stop (ch 1 types 3 and 4)."""
+                      now: Callable[[], float], my_id: int) -> Handler:
+    """Port 6: external position/pose (single, and packed items matched by `my_id`, the radio
+    address's low byte) for the onboard estimator; the emergency stop and its watchdog (ch 1 types
+    3 and 4). No reply."""
     def handle(header: int, channel: int, data: bytes) -> None:
-        if channel == 0 and len(data) >= 12:
-            state.external_position = struct.unpack_from("<fff", data)
-            hook("set_external_position", *state.external_position)
-        elif channel == 1 and data:
-            if data[0] == 3:
+        measurement = None
+        if channel == loc.CH_POSITION:
+            measurement = loc.decode_position(data)
+        elif channel == loc.CH_POSITION_PACKED:
+            measurement, _ = loc.decode_packed_positions(data, my_id)
+        elif channel == loc.CH_GENERIC and data:
+            kind = data[0]
+            if kind == loc.EMERGENCY_STOP:
                 emergency_stop("localization emergency stop")
-            elif data[0] == 4:
+            elif kind == loc.EMERGENCY_STOP_WATCHDOG:
                 state.estop_watchdog = now()
+            elif kind == loc.EXT_POSE:
+                measurement = loc.decode_pose(data[1:])
+            elif kind == loc.EXT_POSE_PACKED:
+                measurement, _ = loc.decode_packed_poses(data[1:], my_id)
+        if measurement is not None:
+            state.external_position = measurement.position
+            state.external_measurements += 1
+            hook("external_measurement", measurement.position, measurement.quaternion)
     return handle
 
 

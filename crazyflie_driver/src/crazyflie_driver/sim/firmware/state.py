@@ -17,6 +17,9 @@ class SimState:
     setpoints: int = 0
     last_generic: Optional[Tuple[int, bytes]] = None
     external_position: Optional[Tuple[float, float, float]] = None
+    external_measurements: int = 0
+    setpoint_stop_notices: int = 0
+    halted: str = ""                        # why the STM stopped on an assert ('' while it runs)
     estop_watchdog: Optional[float] = None
     packets_by_port: Dict[int, int] = field(default_factory=dict)
     tx_dropped: int = 0

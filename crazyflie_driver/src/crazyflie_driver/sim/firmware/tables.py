@@ -163,7 +163,12 @@ LOG_TABLE: Tuple[LogVar, ...] = tuple(
     + _lv("stabilizer", "roll pitch yaw", "float")
     + _lv("stabilizer", "thrust", "float", _CUR)
     + _lv("stabilizer", "thrust", "uint16_t", _OLD)
-    + _lv("stateEstimate", "x y z vx vy vz roll pitch yaw", "float", _CUR)
+    + _lv("stateEstimate", "x y z vx vy vz roll pitch yaw qx qy qz qw", "float", _CUR)
+    + _lv("stateEstimateZ", "x y z vx vy vz", "int16_t", _CUR)
+    + _lv("locSrv", "x y z qx qy qz qw", "float", _CUR)
+    + _lv("locSrvZ", "tick", "uint16_t", _CUR)
+    + _lv("ctrltarget", "x y z vx vy vz ax ay az", "float", _CUR)
+    + _lv("posCtl", "targetVX targetVY targetVZ", "float", _CUR)
     + _lv("motor", "m1 m2 m3 m4", "uint16_t", _CUR)
     + _lv("motor", "m1 m2 m3 m4", "int32_t", _OLD)
     + _lv("radio", "rssi", "uint8_t")
@@ -211,7 +216,22 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
        ParamVar("system", "forceArm", "int8_t", 0, generations=_CUR)]
     + [ParamVar("health", "startPropTest", "uint8_t", 0, generations=_CUR)]
     + [ParamVar("kalman", "resetEstimation", "uint8_t", 0, generations=_CUR),
-       ParamVar("kalman", "pNAcc_xy", "float", 0.5, generations=_CUR)]
+       ParamVar("kalman", "pNAcc_xy", "float", 0.5, generations=_CUR),
+       ParamVar("kalman", "pNAcc_z", "float", 1.0, generations=_CUR)]
+    + [ParamVar("kalman", n, "float", 0.0, generations=_CUR) for n in ("initialX", "initialY", "initialZ", "initialYaw")]
+    + [ParamVar("kalman", "maxPos", "float", 100.0, generations=_CUR),
+       ParamVar("kalman", "maxVel", "float", 10.0, generations=_CUR)]
+    + [ParamVar("locSrv", "extPosStdDev", "float", 0.01, generations=_CUR),
+       ParamVar("locSrv", "extQuatStdDev", "float", 4.5e-3, generations=_CUR)]
+    # onboard estimator and position controller: the world's vehicle supplies the firmware's defaults
+    + [ParamVar("posCtlPid", "%s%s" % (axis, term), "float", 0.0, persistent=True, generations=_CUR)
+       for axis in "xyz" for term in ("Kp", "Ki", "Kd", "Kff")]
+    + [ParamVar("posCtlPid", "thrustBase", "uint16_t", 36000, persistent=True, generations=_CUR),
+       ParamVar("posCtlPid", "thrustMin", "uint16_t", 20000, persistent=True, generations=_CUR)]
+    + [ParamVar("posCtlPid", n, "float", 0.0, persistent=True, generations=_CUR)
+       for n in ("rLimit", "pLimit", "xVelMax", "yVelMax", "zVelMax")]
+    + [ParamVar("velCtlPid", "%s%s" % (axis, term), "float", 0.0, persistent=True, generations=_CUR)
+       for axis in ("vx", "vy", "vz") for term in ("Kp", "Ki", "Kd", "KFF")]
     + [ParamVar("imu_tests", "MPU6500", "uint8_t", 1, readonly=True, generations=_OLD),
        ParamVar("imu_sensors", "AK8963", "uint8_t", 1, readonly=True),
        ParamVar("imu_sensors", "LPS25H", "uint8_t", 1, readonly=True)]

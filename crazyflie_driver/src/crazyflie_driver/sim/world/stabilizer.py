@@ -37,9 +37,9 @@ TUMBLE_TILT_S = 1.0
 TUMBLE_UPSIDE_DOWN_S = 0.1
 
 # lock reasons (why the motors are held off until a reboot)
-LOCK_NONE, LOCK_EMERGENCY, LOCK_WATCHDOG, LOCK_TUMBLE, LOCK_BATTERY = 0, 1, 2, 3, 4
+LOCK_NONE, LOCK_EMERGENCY, LOCK_WATCHDOG, LOCK_TUMBLE, LOCK_BATTERY, LOCK_ASSERT = 0, 1, 2, 3, 4, 5
 LOCK_NAMES = {LOCK_NONE: "", LOCK_EMERGENCY: "emergency stop", LOCK_WATCHDOG: "setpoint watchdog",
-              LOCK_TUMBLE: "tumbled", LOCK_BATTERY: "battery empty"}
+              LOCK_TUMBLE: "tumbled", LOCK_BATTERY: "battery empty", LOCK_ASSERT: "firmware assert"}
 
 AXES = ("roll", "pitch", "yaw")
 TERMS = ("kp", "ki", "kd")

@@ -18,7 +18,8 @@ import numpy as np
 
 from crazyflie_driver.sim.world import battery as _battery
 from crazyflie_driver.sim.world import sensors as _sensors
-from crazyflie_driver.sim.world.stabilizer import GEN_CURRENT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE, LOCK_TUMBLE, OnboardController, \
+from crazyflie_driver.sim.world import flight as _flight
+from crazyflie_driver.sim.world.stabilizer import GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE, LOCK_TUMBLE, OnboardController, \
     check_generation, default_params
 from crazyflie_driver.sim.world.physics import BodyStates, RigidBodyBackend, VehicleParams, quat_to_matrix
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
@@ -47,8 +48,6 @@ class Vehicle:
         self._row = -1
         self._cache: Dict[str, Dict[str, float]] = {}
         self._cache_tick = -1
-        self.external_position: Optional[Tuple[float, float, float]] = None
-        self.last_generic_setpoint: Optional[Tuple[int, bytes]] = None
 
     @property
     def removed(self) -> bool:
@@ -75,18 +74,23 @@ class Vehicle:
             return float(values.get(name, 0.0))
 
     def param_defaults(self) -> Dict[str, float]:
-        return default_params(self.firmware)
+        out = default_params(self.firmware)
+        if self.firmware == GEN_CURRENT:          # the 2016.02 firmware had no onboard position control
+            out.update(_flight.default_params())
+        return out
 
     def write_param(self, name: str, value: float) -> None:
         w = self._world
         with w._lock:
-            if self._row >= 0:
-                w.onboard.set_param(self._row, str(name), float(value))
+            i = self._row
+            if i >= 0 and not w.onboard.set_param(i, str(name), float(value)):
+                w.flight.set_param(i, str(name), float(value), w.bodies.position[i].copy(), w.time)
 
     def set_rpyt(self, roll: float, pitch: float, yaw: float, thrust: int) -> None:
         w = self._world
         with w._lock:
             if self._row >= 0:
+                w.flight.release(self._row)
                 w.onboard.set_rpyt(self._row, roll, pitch, yaw, thrust, w.time)
 
     def emergency_stop(self) -> None:
@@ -111,18 +115,43 @@ class Vehicle:
                 yaw = w.onboard.s.attitude[self._row, 2]
                 w.onboard.s.boot(self._row, self.firmware, w.time, float(yaw))
                 w.onboard.dirty = True
+                w.flight.boot(self._row, w.bodies.position[self._row].copy(), w.time)
 
     def stop_motors(self) -> None:
         """Generic setpoint type 0 (stop): the same as a zero RPYT setpoint."""
         self.set_rpyt(0.0, 0.0, 0.0, 0)
 
-    def set_external_position(self, x: float, y: float, z: float) -> None:
-        with self._world._lock:
-            self.external_position = (float(x), float(y), float(z))
+    def set_setpoint(self, setpoint) -> None:
+        """A decoded generic setpoint (`setpoint_decode.Setpoint`) at the CRTP priority."""
+        if setpoint.is_stop:
+            self.stop_motors()
+            return
+        w = self._world
+        with w._lock:
+            i = self._row
+            if i >= 0:
+                w.flight.setpoint(i, setpoint)
+                w.onboard.s.sp_time[i] = w.time
+                w.onboard.dirty = True
 
-    def set_generic_setpoint(self, kind: int, data: bytes) -> None:
-        with self._world._lock:
-            self.last_generic_setpoint = (int(kind), bytes(data))
+    def notify_setpoint_stop(self) -> None:
+        """Streaming setpoints end: with no high-level plan the null setpoint stops the motors."""
+        self.stop_motors()
+
+    def external_measurement(self, position, quaternion=None) -> bool:
+        """External position (m) and optional quaternion (x, y, z, w) for the onboard estimator."""
+        w = self._world
+        with w._lock:
+            i = self._row
+            return i >= 0 and w.flight.measure(i, position, quaternion, w.bodies, w.time)
+
+    def halt(self) -> None:
+        """The STM32 stopped on an assert: motors off until a reboot."""
+        w = self._world
+        with w._lock:
+            if self._row >= 0:
+                w.flight.release(self._row)
+                w.onboard.lock(self._row, LOCK_ASSERT)
 
     # --- inspection and test helpers ---------------------------------------------------------
     def state(self) -> Dict[str, object]:
@@ -187,6 +216,7 @@ class World:
         self.onboard = OnboardController()
         self.sensors = _sensors.SensorStates()
         self.battery = _battery.BatteryStates()
+        self.flight = _flight.OnboardFlight()
         self.rng = np.random.default_rng(seed)
         self._lock = threading.RLock()
         self._vehicles: Dict[str, Vehicle] = {}
@@ -228,6 +258,7 @@ class World:
             self.onboard.s.add(firmware, self.time, math.degrees(float(yaw)))
             self.sensors.add(self.rng)
             self.battery.add(battery_charge)
+            self.flight.add(self.rng, pos, self.time)
             self._vehicles[name] = v
             self._order.append(v)
             self._drive = None
@@ -240,7 +271,7 @@ class World:
             if v is None:
                 raise KeyError("no vehicle called %r in the world" % name)
             i = v._row
-            for model in (self.bodies, self.onboard.s, self.sensors, self.battery):
+            for model in (self.bodies, self.onboard.s, self.sensors, self.battery) + self.flight.models:
                 model.delete_row(i)
             self._order.pop(i)
             for k, other in enumerate(self._order):
@@ -300,6 +331,8 @@ class World:
         if len(self._order):
             b = self.bodies
             onboard = self.onboard
+            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl):
+                onboard.dirty = True
             if k % CONTROL_TICKS == 0:
                 thrust_fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
                 gyro = _sensors.gyro_measured(self.sensors, b.omega, thrust_fraction, self.rng)
@@ -336,13 +369,8 @@ class World:
             att = o.attitude[i]
             return {"stabilizer.roll": float(att[0]), "stabilizer.pitch": float(att[1]),
                     "stabilizer.yaw": float(att[2]), "stabilizer.thrust": float(o.thrust[i])}
-        if group == "stateEstimate":
-            att = o.attitude[i]
-            p, v = b.position[i], b.velocity[i]
-            return {"stateEstimate.x": float(p[0]), "stateEstimate.y": float(p[1]), "stateEstimate.z": float(p[2]),
-                    "stateEstimate.vx": float(v[0]), "stateEstimate.vy": float(v[1]),
-                    "stateEstimate.vz": float(v[2]), "stateEstimate.roll": float(att[0]),
-                    "stateEstimate.pitch": float(att[1]), "stateEstimate.yaw": float(att[2])}
+        if group in _flight.GROUPS:
+            return self.flight.readings(i, group, b, o.attitude[i], self.ground_asl)
         if group == "motor":
             m = o.motors[i]
             return {"motor.m%d" % (k + 1): float(int(m[k])) for k in range(4)}
