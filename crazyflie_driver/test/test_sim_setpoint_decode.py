@@ -8,7 +8,8 @@ import struct
 import pytest
 
 from crazyflie_driver.sim.firmware import localization_decode as loc
-from crazyflie_driver.sim.firmware.quat import compress_quat, decompress_quat
+from crazyflie_driver.crtp.quaternion import compress_quaternion as compress_quat, decompress_quaternion as decompress_quat
+from crazyflie_driver.errors import CommandValueError
 from crazyflie_driver.sim.firmware.setpoint_decode import (
     EXPECTED_LENGTH, MODE_ABS, MODE_DISABLE, MODE_VELOCITY, FirmwareAssert, decode_meta, decode_setpoint)
 
@@ -99,6 +100,7 @@ def test_notify_setpoints_stop():
 
 
 def test_quaternion_compression_round_trip():
+    """The host's encoder and the decoder the simulated firmware uses agree."""
     rng = random.Random(3)
     for _ in range(500):
         q = [rng.gauss(0, 1) for _ in range(4)]
@@ -109,7 +111,7 @@ def test_quaternion_compression_round_trip():
         assert [sign * c for c in back] == pytest.approx(q, abs=3e-3)
         assert sum(c * c for c in back) == pytest.approx(1.0, abs=1e-9)
     assert decompress_quat(3 << 30) == (0.0, 0.0, 0.0, 1.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(CommandValueError):
         compress_quat((0, 0, 0, 0))
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import struct
 from typing import List, NamedTuple, Optional, Tuple
 
-from crazyflie_driver.sim.firmware.quat import decompress_quat
+from crazyflie_driver.crtp.quaternion import decompress_quaternion as decompress_quat
 
 CH_POSITION, CH_GENERIC, CH_POSITION_PACKED = 0, 1, 2
 EMERGENCY_STOP, EMERGENCY_STOP_WATCHDOG, EXT_POSE, EXT_POSE_PACKED = 3, 4, 8, 9

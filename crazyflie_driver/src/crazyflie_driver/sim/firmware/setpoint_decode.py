@@ -14,7 +14,7 @@ import struct
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Optional, Tuple
 
-from crazyflie_driver.sim.firmware.quat import decompress_quat
+from crazyflie_driver.crtp.quaternion import decompress_quaternion as decompress_quat
 
 # modes of one setpoint axis (the firmware's stab_mode_t)
 MODE_DISABLE, MODE_ABS, MODE_VELOCITY = 0, 1, 2
