@@ -107,6 +107,7 @@ class FakeCrazyflie:
         self.lock = threading.Lock()
         self.radio_missing_for = 0           # connect attempts that find no dongle
         self.downlink: List[tuple] = []     # queued log packets, one fetched per null packet
+        self.inject: List[BaseException] = []   # raised by the next packets, one each (a bug's stand-in)
 
     def connect(self):
         self.calls.append("connect")
@@ -125,6 +126,8 @@ class FakeCrazyflie:
         if self.unplugged:
             raise RadioUnplugged("dongle 0 unplugged")
         with self.lock:
+            if self.inject:
+                raise self.inject.pop(0)
             self.packets.append((time.monotonic(), kind, args))
             self.link.stats.record(self.acking)
         return self.acking
@@ -155,6 +158,7 @@ class Recorder(WorkerListener):
         self.quality: List[tuple] = []
         self.lost: List[str] = []
         self.restored = 0
+        self.worker_errors: List[tuple] = []    # (message, gave_up)
 
     def on_params(self, values):
         self.params = values
@@ -173,6 +177,9 @@ class Recorder(WorkerListener):
 
     def on_link_restored(self):
         self.restored += 1
+
+    def on_worker_error(self, message, gave_up):
+        self.worker_errors.append((message, gave_up))
 
 
 def wait_for(cond, timeout=2.0):

@@ -3,7 +3,10 @@
 Global services ``/add_crazyflie`` and ``/remove_crazyflie``; per Crazyflie, under its tf_prefix:
 ``cmd_vel`` (sub), ``emergency`` and ``update_params`` (services), ``imu``, ``temperature``,
 ``magnetic_field``, ``pressure``, ``battery``, ``rssi`` and one GenericLogData topic per custom
-log block (pubs); its parameters mirrored to ``/<tf_prefix>/<group>/<name>``.
+log block (pubs); its parameters mirrored to ``/<tf_prefix>/<group>/<name>``; ``status``
+(``diagnostic_msgs/DiagnosticStatus``, latched, on every change) and one entry per Crazyflie on
+``/diagnostics`` every second. A Crazyflie whose worker gave up is removed (its topics and
+services go) and stays on ``/diagnostics`` as an error until it is added again.
 ``magnetic_field`` carries the firmware's ``mag.x/y/z`` values unscaled, as the original did.
 """
 from __future__ import annotations
@@ -12,9 +15,11 @@ import logging
 import math
 import os
 import threading
-from typing import Any, Dict, List, Optional
+import time
+from typing import Any, Callable, Dict, List, Optional
 
 import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from std_msgs.msg import Float32
@@ -27,12 +32,14 @@ from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCraz
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
 from crazyflie_driver.server.registry import CrazyflieRegistry
+from crazyflie_driver.server.status import ERROR, CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
 XMLRPC_INT_MAX = 2 ** 31 - 1
+DIAGNOSTICS_PERIOD = 1.0        # s between /diagnostics messages
 
 
 def namespace(tf_prefix: str) -> str:
@@ -48,11 +55,19 @@ def param_server_value(value: Any) -> Any:
     return value
 
 
+def diagnostic_status(status: CrazyflieStatus, tf_prefix: str, uri: str) -> DiagnosticStatus:
+    msg = DiagnosticStatus(name="crazyflie_server: %s" % (tf_prefix or uri), hardware_id=uri)
+    msg.level, msg.message = status.level, status.message
+    msg.values = [KeyValue(k, v) for k, v in status.values]
+    return msg
+
+
 class RosCrazyflie(WorkerListener):
     """The ROS face of one Crazyflie: publishers, the cmd_vel subscriber, its services."""
 
-    def __init__(self, config: WorkerConfig) -> None:
+    def __init__(self, config: WorkerConfig, on_gave_up: Optional[Callable[[], None]] = None) -> None:
         self.config = config
+        self._on_gave_up = on_gave_up       # the server removes a Crazyflie whose worker gave up
         self.ns = namespace(config.tf_prefix)
         self.frame_id = (config.tf_prefix.strip("/") + "/base_link") if config.tf_prefix.strip("/") else "base_link"
         self.worker: Optional[CrazyflieWorker] = None
@@ -63,6 +78,9 @@ class RosCrazyflie(WorkerListener):
         self._pubs: Dict[str, rospy.Publisher] = {}
         self._rssi_pub: Optional[rospy.Publisher] = None
         self._custom: Dict[str, rospy.Publisher] = {}
+        self._status_pub: Optional[rospy.Publisher] = None
+        self._status_lock = threading.Lock()
+        self._last_status: Optional[CrazyflieStatus] = None
 
     # -- after the Crazyflie answered --------------------------------------------------------------
     def attach(self, worker: CrazyflieWorker) -> None:
@@ -79,18 +97,41 @@ class RosCrazyflie(WorkerListener):
         self._custom = {b.topic_name: rospy.Publisher(name(b.topic_name), GenericLogData, queue_size=10)
                         for b in config.log_blocks}
         self._rssi_pub = rospy.Publisher(name("rssi"), Float32, queue_size=10)
+        self._status_pub = rospy.Publisher(name("status"), DiagnosticStatus, queue_size=10, latch=True)
         self._pubs = pubs       # one assignment: the worker thread reads it meanwhile
         self._subscribers.append(rospy.Subscriber(name("cmd_vel"), Twist, self._on_cmd_vel, queue_size=1,
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
+        self.publish_status()
+
+    def status(self) -> CrazyflieStatus:
+        return worker_status(self.worker)
+
+    def diagnostic(self) -> DiagnosticStatus:
+        return diagnostic_status(self.status(), self.config.tf_prefix, self.config.uri)
+
+    def publish_status(self, force: bool = False) -> None:
+        """On the latched ``status`` topic when level or message changed (or ``force``)."""
+        if self.worker is None:
+            return
+        status = self.status()
+        with self._status_lock:
+            pub = self._status_pub
+            last, self._last_status = self._last_status, status
+            if pub is None or (not force and last is not None and (last.level, last.message) ==
+                                                                  (status.level, status.message)):
+                return
+            publish_unless_shutting_down(pub, diagnostic_status(status, self.config.tf_prefix, self.config.uri))
 
     def detach(self) -> None:
         for s in self._subscribers:
             s.unregister()
         for s in self._services:
             s.shutdown("Crazyflie %s removed" % self.config.uri)
-        pubs = list(self._pubs.values()) + list(self._custom.values()) + [self._rssi_pub]
+        with self._status_lock:
+            status_pub, self._status_pub = self._status_pub, None
+        pubs = list(self._pubs.values()) + list(self._custom.values()) + [self._rssi_pub, status_pub]
         self._pubs, self._custom, self._rssi_pub = {}, {}, None
         for p in pubs:
             if p is not None:
@@ -182,10 +223,19 @@ class RosCrazyflie(WorkerListener):
             pub.publish(Float32(rssi))
 
     def on_link_lost(self, reason: str) -> None:
-        pass    # logged by the worker through the forwarded logger
+        self.publish_status()       # the worker logged it through the forwarded logger
+
+    def on_link_restored(self) -> None:
+        self.publish_status()
 
     def on_emergency(self) -> None:
-        pass
+        self.publish_status()
+
+    def on_worker_error(self, message: str, gave_up: bool) -> None:
+        self.publish_status(force=True)
+        if gave_up and self._on_gave_up is not None:
+            # not in the worker's own thread: removing joins it
+            threading.Thread(target=self._on_gave_up, name="remove %s" % self.config.uri, daemon=True).start()
 
 
 class RosLogHandler(logging.Handler):
@@ -222,9 +272,51 @@ class CrazyflieServer:
         self.registry = registry
         self.add_timeout = add_timeout
         self._ros: Dict[str, RosCrazyflie] = {}
+        self._gone: Dict[str, DiagnosticStatus] = {}    # removed after their worker gave up, until added again
         self._lock = threading.Lock()
+        self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         rospy.Service("/add_crazyflie", AddCrazyflie, self._on_add)
         rospy.Service("/remove_crazyflie", RemoveCrazyflie, self._on_remove)
+        threading.Thread(target=self._diagnostics_loop, name="diagnostics", daemon=True).start()
+
+    def diagnostics(self) -> DiagnosticArray:
+        arr = DiagnosticArray()
+        arr.header.stamp = rospy.Time.now()
+        with self._lock:
+            served = list(self._ros.values())
+            arr.status.extend(self._gone.values())
+        for ros in served:
+            arr.status.append(ros.diagnostic())
+        return arr
+
+    def _diagnostics_loop(self) -> None:
+        while not shutting_down():
+            time.sleep(DIAGNOSTICS_PERIOD)
+            try:
+                with self._lock:
+                    served = list(self._ros.values())
+                for ros in served:
+                    ros.publish_status()    # changes the worker did not announce (e.g. quality)
+                publish_unless_shutting_down(self._diag_pub, self.diagnostics())
+            except Exception as e:  # never let bookkeeping end the node
+                rospy.logerr("crazyflie_server: diagnostics failed: %r", e)
+
+    def _remove_failed(self, key: str) -> None:
+        """The worker of ``key`` gave up: take its topics and services away, keep it on /diagnostics."""
+        with self._lock:
+            ros = self._ros.pop(key, None)
+        if ros is None:
+            return
+        final = ros.diagnostic()
+        final.message = "removed: " + final.message
+        with self._lock:
+            self._gone[key] = final
+        try:
+            self.registry.remove(key)
+        except KeyError:
+            pass
+        ros.detach()
+        rospy.logerr("%s removed: its worker failed repeatedly (see the errors above); add it again to fly it", key)
 
     def _on_add(self, req) -> AddCrazyflieResponse:
         try:
@@ -242,7 +334,7 @@ class CrazyflieServer:
         rospy.loginfo("adding %s as %r", key, config.tf_prefix)
         ros = None
         try:
-            ros = RosCrazyflie(config)
+            ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key))
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
         except Exception as e:
             if ros is not None:
@@ -253,6 +345,7 @@ class CrazyflieServer:
         ros.attach(worker)
         with self._lock:
             self._ros[key] = ros
+            self._gone.pop(key, None)
         rospy.loginfo("%s ready (%s%s)", key, "logging: %s" % ", ".join(worker.log_topics)
                       if worker.log_topics else "no logging",
                       "; no %s on this Crazyflie" % ", ".join(worker.missing_fixed_topics)
@@ -291,22 +384,32 @@ def make_factory(timeout: float):
     return factory
 
 
-def main() -> None:
-    init_node("crazyflie_server")
-    handler = RosLogHandler()
+def forward_library_log() -> None:
+    """The library's Python log records go to rosout (once per process)."""
     lib_log = logging.getLogger("crazyflie_driver")
-    lib_log.addHandler(handler)
+    if not any(isinstance(h, RosLogHandler) for h in lib_log.handlers):
+        lib_log.addHandler(RosLogHandler())
     lib_log.setLevel(logging.INFO)
     lib_log.propagate = False
+
+
+def start_server(timeout: float, add_timeout: float) -> CrazyflieServer:
+    """The services and the diagnostics of a server in this (already initialised) node."""
+    forward_library_log()
+    server = CrazyflieServer(CrazyflieRegistry(make_factory(timeout)), add_timeout)
+    rospy.on_shutdown(server.shutdown)
+    return server
+
+
+def main() -> None:
+    init_node("crazyflie_server")
     timeout = float(rospy.get_param("~timeout", 1.0))
     add_timeout = float(rospy.get_param("~add_timeout", 30.0))
     try:
-        registry = CrazyflieRegistry(make_factory(timeout))
+        start_server(timeout, add_timeout)
     except Exception as e:       # e.g. no usable USB backend
         rospy.logfatal("crazyflie_server cannot start: %s", e)
         raise SystemExit(1)
-    server = CrazyflieServer(registry, add_timeout)
-    rospy.on_shutdown(server.shutdown)
     rospy.loginfo("crazyflie_server ready (backend: %s)", os.environ.get("CRAZYFLIE_BACKEND", "usb"))
     rospy.spin()
 

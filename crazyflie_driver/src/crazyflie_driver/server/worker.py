@@ -14,7 +14,11 @@ object with the same methods) and is the only thread that streams to it:
   dongle for the others; when it answers again its log blocks are set up again;
 * :meth:`CrazyflieWorker.emergency` works from any thread, at once, and is idempotent: no
   setpoint is sent after it returns, the e-stop packet goes out, then only zero-thrust
-  setpoints, until the worker is removed.
+  setpoints, until the worker is removed;
+* an unexpected error in the loop never ends the thread silently: it is logged once with its
+  traceback, the setpoint stream stops (nothing is replayed, so the firmware's watchdog levels and
+  then stops the Crazyflie unless new setpoints come), the listener is told, and the loop restarts;
+  after ``MAX_RESTARTS`` errors within ``RESTART_WINDOW`` the worker gives up and closes the link.
 
 The ROS side (``nodes/crazyflie_server.py``) subclasses :class:`WorkerListener` to turn the
 callbacks into messages; everything here is testable with a fake Crazyflie object.
@@ -37,6 +41,10 @@ from crazyflie_driver.server.setpoint import Setpoint, setpoint_from_twist
 from crazyflie_driver.protocol.toc import toc_types
 
 LOG = logging.getLogger("crazyflie_driver.server")
+
+MAX_RESTARTS = 5            # unexpected loop errors within RESTART_WINDOW before the worker gives up
+RESTART_WINDOW = 30.0       # s
+RESTART_DELAY = 0.05        # s, pause before the loop restarts after an unexpected error
 
 
 @dataclass(frozen=True)
@@ -76,11 +84,15 @@ class WorkerListener:
     def on_emergency(self) -> None:
         """Emergency was triggered (runs in the caller's thread)."""
 
+    def on_worker_error(self, message: str, gave_up: bool) -> None:
+        """An unexpected error stopped the loop: it restarts, or (``gave_up``) the link is closed."""
+
 
 class WorkerState:
     CONNECTING = "connecting"
     RUNNING = "running"
     LOST = "lost"
+    RESTARTING = "restarting"   # after an unexpected error, before the loop runs again
     FAILED = "failed"
     STOPPED = "stopped"
 
@@ -110,6 +122,9 @@ class CrazyflieWorker:
         self.log_topics: List[str] = []          # topics whose blocks were started
         self.missing_fixed_topics: List[str] = []
         self.param_types: Dict[str, str] = {}
+        self.restarts = 0                        # loop restarts after unexpected errors
+        self.last_unexpected_error = ""          # "Type: message" of the latest one
+        self.listener_errors = 0                 # log packets a listener failed to handle
 
         self._cond = threading.Condition()
         self._pending: Optional[Setpoint] = None
@@ -127,6 +142,8 @@ class CrazyflieWorker:
         self._downlink_packets = 0
         self._pacer = PollPacer(keepalive_period, now=clock())
         self._log_plan: List[PlannedBlock] = []
+        self._error_times: List[float] = []
+        self._errors_seen: Dict[Tuple[str, str], int] = {}   # (type, where) -> count, for "traceback once"
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -250,13 +267,60 @@ class CrazyflieWorker:
         self._last_ack = self._clock()
         self._ready.set()
         try:
-            self._loop()
-        except Exception:               # never let the thread die silently
-            LOG.exception("%s: worker stopped by an unexpected error", self.uri)
-            self.state = WorkerState.FAILED
+            while not self._stopping:
+                try:
+                    self._loop()
+                    return
+                except Exception as e:      # never let the thread die silently
+                    if not self._recover_from(e):
+                        return
         finally:
             if self._stopping:
                 self._close()
+
+    def _recover_from(self, error: Exception) -> bool:
+        """After an unexpected error in the loop: log (traceback once per kind), stop the setpoint
+        stream, tell the listener; True to run the loop again, False when the worker gave up."""
+        now = self._clock()
+        self._error_times = [t for t in self._error_times if now - t < RESTART_WINDOW] + [now]
+        tb = error.__traceback__
+        while tb is not None and tb.tb_next is not None:
+            tb = tb.tb_next
+        where = "%s:%d" % (tb.tb_frame.f_code.co_filename, tb.tb_lineno) if tb is not None else "?"
+        kind = (type(error).__name__, where)
+        seen = self._errors_seen.get(kind, 0)
+        self._errors_seen[kind] = seen + 1
+        self.last_unexpected_error = "%s: %s" % (type(error).__name__, error)
+        with self._cond:
+            self._pending = None        # never replay the setpoint that was in flight
+        gave_up = len(self._error_times) > MAX_RESTARTS
+        if gave_up:
+            action = ("%d unexpected errors within %.0f s: giving up on this Crazyflie (link closed, nothing "
+                      "is sent: its watchdog stops the motors within 2 s); remove and add it again"
+                      % (len(self._error_times), RESTART_WINDOW))
+        else:
+            action = ("setpoints stopped (its watchdog levels it after 0.5 s and stops the motors after 2 s "
+                      "unless new setpoints come); worker restarted")
+        text = "%s: worker loop failed: %s; %s" % (self.uri, self.last_unexpected_error, action)
+        if seen == 0:
+            LOG.error(text, exc_info=error)
+        else:
+            LOG.error("%s (same error as before, %d times)", text, seen + 1)
+        self.state = WorkerState.FAILED if gave_up else WorkerState.RESTARTING
+        try:
+            self.listener.on_worker_error(text, gave_up)
+        except Exception:
+            LOG.exception("%s: worker error listener failed", self.uri)
+        if gave_up:
+            self._close()
+            return False
+        self.restarts += 1
+        with self._cond:
+            if not self._stopping:
+                self._cond.wait(RESTART_DELAY)
+        if self.state == WorkerState.RESTARTING:
+            self.state = WorkerState.RUNNING
+        return True
 
     def _connect_sequence(self) -> None:
         cfg, cf = self.config, self.cf
@@ -340,10 +404,16 @@ class CrazyflieWorker:
                 part = list(values[start:stop])
                 if len(part) != stop - start:
                     continue        # a truncated packet: never publish a partial message
-                if topic == RADIO_RSSI_TOPIC:
-                    listener.on_rssi(float(part[0]))
-                else:
-                    listener.on_log(topic, onboard_timestamp_ms, part)
+                try:
+                    if topic == RADIO_RSSI_TOPIC:
+                        listener.on_rssi(float(part[0]))
+                    else:
+                        listener.on_log(topic, onboard_timestamp_ms, part)
+                except Exception:   # one bad message must not stop the setpoint stream
+                    self.listener_errors += 1
+                    if self.listener_errors == 1:
+                        LOG.exception("%s: publishing %s failed (counted in the status from now on)",
+                                      self.uri, topic)
         return on_packet
 
     def _release_thrust_lock(self) -> None:

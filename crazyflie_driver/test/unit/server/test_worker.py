@@ -8,7 +8,8 @@ import pytest
 
 from crazyflie_driver.errors import RadioNotFound, UnknownName
 from crazyflie_driver.server.log_plan import LogBlockSpec
-from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerState
+from crazyflie_driver.server.setpoint import Setpoint
+from crazyflie_driver.server.worker import MAX_RESTARTS, CrazyflieWorker, WorkerConfig, WorkerState
 
 from support.worker_doubles import LOG_VARS, FakeCrazyflie, Recorder, started, wait_for
 
@@ -246,5 +247,69 @@ def test_update_params_applies_known_and_reports_unknown():
         assert cf.params.values["ring.headlightEnable"] == 1
         assert cf.params.values["pid_rate.roll_kp"] == 300.0
         assert len(errors) == 1 and "nope.x" in errors[0]
+    finally:
+        w.stop()
+
+
+def test_unexpected_error_in_the_loop_is_logged_once_stops_setpoints_and_restarts(caplog):
+    w, cf, rec = started()
+    try:
+        w.set_setpoint(Setpoint(1.0, 2.0, 3.0, 30000))
+        assert wait_for(lambda: len(cf.of_kind("setpoint")) >= 2)
+        cf.inject.append(OverflowError("int too large to convert"))
+        w.set_setpoint(Setpoint(5.0, 5.0, 5.0, 40000))       # the one whose send fails
+        assert wait_for(lambda: rec.worker_errors)
+        failed_at = time.monotonic()
+        message, gave_up = rec.worker_errors[0]
+        assert not gave_up and "OverflowError" in message and cf.uri in message
+        # the loop runs again: keep-alives flow, the failed setpoint is never replayed
+        assert wait_for(lambda: w.state == WorkerState.RUNNING and
+                        len([p for p in cf.of_kind("null") if p[0] > failed_at]) >= 5)
+        assert all(p[2] != (5.0, 5.0, 5.0, 40000) for p in cf.of_kind("setpoint"))
+        assert w.restarts == 1 and "OverflowError" in w.last_unexpected_error
+        # and it still flies: the next setpoint goes out
+        w.set_setpoint(Setpoint(0.0, 0.0, 0.0, 20000))
+        assert wait_for(lambda: cf.of_kind("setpoint")[-1][2] == (0.0, 0.0, 0.0, 20000))
+        # the same error again: logged, but the traceback only the first time
+        cf.inject.append(OverflowError("int too large to convert"))
+        w.set_setpoint(Setpoint(5.0, 5.0, 5.0, 40000))
+        assert wait_for(lambda: len(rec.worker_errors) == 2 and w.state == WorkerState.RUNNING)
+        records = [r for r in caplog.records if "worker loop failed" in r.getMessage()]
+        assert len(records) == 2
+        assert records[0].exc_info is not None and records[1].exc_info is None
+        assert "2 times" in records[1].getMessage()
+    finally:
+        w.stop()
+    assert cf.closed
+
+
+def test_a_worker_that_keeps_failing_gives_up_and_closes_the_link():
+    w, cf, rec = started()
+    cf.inject.extend(RuntimeError("bug %d" % i) for i in range(MAX_RESTARTS + 1))
+    assert wait_for(lambda: w.state == WorkerState.FAILED, 5.0)
+    assert [g for _, g in rec.worker_errors] == [False] * MAX_RESTARTS + [True]
+    assert "remove and add it again" in rec.worker_errors[-1][0]
+    assert cf.closed
+    n = len(cf.packets)
+    time.sleep(0.1)
+    assert len(cf.packets) == n         # nothing is sent once it gave up
+    w.stop()
+    assert w.state == WorkerState.FAILED
+
+
+def test_a_failing_log_listener_does_not_stop_the_worker(caplog):
+    class Failing(Recorder):
+        def on_log(self, topic, ts, values):
+            raise ValueError("cannot publish")
+    w, cf, rec = started(listener=Failing())
+    try:
+        imu = next(b for b in cf.log.blocks if b.period_ms == 10)
+        for i in range(3):
+            cf.downlink.append((imu, i, [0.0] * 6))
+        assert wait_for(lambda: w.listener_errors == 3)
+        assert w.state == WorkerState.RUNNING and not rec.worker_errors
+        assert len([r for r in caplog.records if "publishing imu failed" in r.getMessage()]) == 1
+        n = len(cf.of_kind("null"))
+        assert wait_for(lambda: len(cf.of_kind("null")) > n + 5)
     finally:
         w.stop()

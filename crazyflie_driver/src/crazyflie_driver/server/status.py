@@ -1,0 +1,53 @@
+"""One Crazyflie's health in a few words and numbers, for its ``status`` topic and ``/diagnostics``.
+
+ROS-free: the node turns a :class:`CrazyflieStatus` into a ``diagnostic_msgs/DiagnosticStatus``;
+the levels are the same numbers as that message's (OK 0, WARN 1, ERROR 2, STALE 3).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Tuple
+
+from crazyflie_driver.server.worker import WorkerState
+
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class CrazyflieStatus:
+    level: int
+    message: str
+    values: Tuple[Tuple[str, str], ...]
+
+
+def worker_status(worker: Any) -> CrazyflieStatus:
+    """The status of a :class:`~crazyflie_driver.server.worker.CrazyflieWorker` right now."""
+    state = worker.state
+    quality, samples = worker.link_quality()
+    if state == WorkerState.FAILED:
+        level, message = ERROR, "worker gave up: %s" % (worker.last_unexpected_error or "connect failed")
+    elif worker.emergency_active:
+        level, message = ERROR, "emergency: motors stopped, remove and add it again to fly"
+    elif state == WorkerState.RESTARTING:
+        level, message = ERROR, "worker restarting after: %s" % worker.last_unexpected_error
+    elif state == WorkerState.LOST:
+        level, message = ERROR, "link lost: retrying"
+    elif state in (WorkerState.CONNECTING, WorkerState.STOPPED):
+        level, message = STALE, state
+    elif worker.restarts:
+        level, message = WARN, "running; worker restarted %d time(s), last after: %s" % (
+            worker.restarts, worker.last_unexpected_error)
+    else:
+        level, message = OK, "running"
+    values = (
+        ("uri", worker.uri),
+        ("state", state),
+        ("emergency", str(bool(worker.emergency_active))),
+        ("link_quality", "%.3f" % quality if samples else "n/a"),
+        ("setpoints_sent", str(worker.setpoints_sent)),
+        ("keepalives_sent", str(worker.keepalives_sent)),
+        ("restarts", str(worker.restarts)),
+        ("last_error", worker.last_unexpected_error),
+        ("listener_errors", str(worker.listener_errors)),
+    )
+    return CrazyflieStatus(level, message, values)
