@@ -3,6 +3,7 @@
 the worker restarts and flies on; an error that keeps coming removes the Crazyflie."""
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import unittest
@@ -15,7 +16,8 @@ from geometry_msgs.msg import Twist
 from crazyflie_driver.nodes.crazyflie_server import start_server
 from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
 
-from rostest_support import TopicRecorder, wait_until, world
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import TopicRecorder, wait_until, world  # noqa: E402
 
 URI = "radio://0/80/2M/E7E7E7E701"
 THRUST = 20000.0        # below hover: the vehicle stays on the floor
