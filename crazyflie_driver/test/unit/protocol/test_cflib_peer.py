@@ -14,38 +14,18 @@ import math
 import os
 import pathlib
 import subprocess
-import sys
 
 import pytest
 
 from crazyflie_driver.sim.air.server import WorldServer
+from support.cflib_python import cflib_python
 
 TEST = pathlib.Path(__file__).resolve().parents[2]        # crazyflie_driver/test
-REPO = TEST.parent.parent
 SRC = TEST.parent / "src"
 SESSION = TEST / "support" / "cflib_session.py"
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"
 SESSION_TIMEOUT_S = 25.0
-
-
-def cflib_python() -> str:
-    """cflib's interpreter ($CFLIB_PYTHON, else the bootstrap's venv); skips with the reason."""
-    explicit = os.environ.get("CFLIB_PYTHON")
-    python = pathlib.Path(explicit) if explicit else REPO / ".ws" / "cflib-venv" / "bin" / "python3"
-    if not python.exists():
-        if sys.version_info < (3, 10):
-            pytest.skip("cflib needs Python >= 3.10 (this is %d.%d)" % sys.version_info[:2])
-        pytest.skip("cflib is not installed: run tools/bootstrap.sh --with-cflib")
-    probe = subprocess.run([str(python), "-c", "import sys, cflib; print('%d.%d' % sys.version_info[:2])"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, timeout=30)
-    if probe.returncode != 0:
-        version = subprocess.run([str(python), "-c", "import sys; print(sys.version_info >= (3, 10))"],
-                                 stdout=subprocess.PIPE, universal_newlines=True, timeout=30).stdout.strip()
-        if version == "False":
-            pytest.skip("cflib needs Python >= 3.10 (%s is older)" % python)
-        pytest.skip("cflib is not importable by %s: run tools/bootstrap.sh --with-cflib" % python)
-    return str(python)
 
 
 def make_world():

@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Bitcraze's cflib flies a simulated Crazyflie with onboard estimation and control; JSON on stdout.
+
+Run like `cflib_session.py` (cflib's interpreter, `crazyflie_driver/src` and this test directory on
+PYTHONPATH, CRAZYFLIE_SIM_ADDRESS naming the world server). cflib's public API only:
+
+  connect -> stabilizer.estimator / stabilizer.controller -> motion capture streamed with
+  `extpos.send_extpos` (or `send_extpose`) at 100 Hz, positions taken from the world's true state
+  as a motion-capture system would measure them -> position setpoints -> hover setpoints ->
+  velocity-world setpoints -> notify-setpoint-stop -> disconnect.
+
+The world's true position is sampled through the world server's control API during every phase and
+reported per phase, so the test judges the flight on the truth.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+
+
+from support.cflib_session import RESULT, Step, emit, install_fake_dongle, start_watchdog  # noqa: E402
+
+MOCAP_PERIOD_S = 0.01
+SETPOINT_PERIOD_S = 0.02
+
+
+class Mocap(threading.Thread):
+    """Streams the world's true pose to the Crazyflie at 100 Hz and keeps the samples."""
+
+    def __init__(self, cf, control, uri: str, pose: bool) -> None:
+        super().__init__(daemon=True)
+        self.cf, self.control, self.uri, self.pose = cf, control, uri, pose
+        self.samples: list = []
+        self.sent = 0
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        while not self.stop.is_set():
+            t0 = time.monotonic()
+            state = self.control.control("vehicle_state", uri=self.uri)
+            p, q = state["position"], state["quaternion"]
+            self.samples.append([state["time"]] + list(p) + [max(state["motors"])])
+            if self.pose:
+                self.cf.extpos.send_extpose(p[0], p[1], p[2], q[0], q[1], q[2], q[3])
+            else:
+                self.cf.extpos.send_extpos(p[0], p[1], p[2])
+            self.sent += 1
+            self.stop.wait(max(0.0, MOCAP_PERIOD_S - (time.monotonic() - t0)))
+
+
+def phase(name: str, seconds: float, send, mocap: Mocap, out: dict) -> None:
+    start = len(mocap.samples)
+    with Step(name):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            send()
+            time.sleep(SETPOINT_PERIOD_S)
+    out[name] = mocap.samples[start:]
+
+
+def run(args: argparse.Namespace) -> None:
+    import cflib.crtp
+    from cflib.crazyflie import Crazyflie
+    from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+    from crazyflie_driver.sim.air.medium import RemoteMedium
+
+    if args.uri.startswith("radio://"):
+        install_fake_dongle(1)
+    cflib.crtp.init_drivers()
+    control = RemoteMedium()
+    cf = Crazyflie(rw_cache=None)
+    scf = SyncCrazyflie(args.uri, cf=cf)
+    with Step("connect"):
+        scf.open_link()
+        scf.wait_for_params()
+    for name, value in (("stabilizer.estimator", args.estimator), ("stabilizer.controller", args.controller)):
+        cf.param.set_value(name, str(value))
+    mocap = Mocap(cf, control, args.sim_uri, args.pose)
+    mocap.start()
+    time.sleep(0.5)                       # the estimator settles on the first measurements
+    x, y, z = args.goal
+    phases: dict = {}
+    phase("position", args.seconds, lambda: cf.commander.send_position_setpoint(x, y, z, 0.0), mocap, phases)
+    if not args.trap:
+        phase("hover", 2.0, lambda: cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, z), mocap, phases)
+        phase("velocity", 2.0, lambda: cf.commander.send_velocity_world_setpoint(0.3, 0.0, 0.0, 0.0), mocap, phases)
+        phase("hold", 1.0, lambda: cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, z), mocap, phases)
+    cf.commander.send_notify_setpoint_stop()
+    phase("after_stop", 0.5, lambda: None, mocap, phases)
+    mocap.stop.set()
+    mocap.join(1.0)
+    RESULT["phases"] = phases
+    RESULT["extpos_sent"] = mocap.sent
+    RESULT["params"] = {n: cf.param.get_value(n) for n in ("stabilizer.estimator", "stabilizer.controller")}
+    with Step("disconnect"):
+        scf.close_link()
+    control.close()
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--uri", required=True, help="cflib's URI (radio:// through the fake Crazyradio, or udp://)")
+    p.add_argument("--sim-uri", required=True, help="the Crazyflie's radio URI in the world server")
+    p.add_argument("--estimator", type=int, default=2)
+    p.add_argument("--controller", type=int, default=1)
+    p.add_argument("--pose", action="store_true", help="send extpose instead of extpos")
+    p.add_argument("--goal", type=float, nargs=3, default=(0.0, 0.0, 0.5))
+    p.add_argument("--seconds", type=float, default=6.0, help="duration of the position phase")
+    p.add_argument("--trap", action="store_true", help="position phase only (estimator-1 trap)")
+    p.add_argument("--timeout", type=float, default=40.0)
+    args = p.parse_args()
+    logging_level = os.environ.get("CFLIB_PEER_LOG")
+    if logging_level:
+        import logging
+        logging.basicConfig(level=logging_level)
+    start_watchdog(args.timeout)
+    try:
+        run(args)
+    except Exception as e:
+        import traceback
+        traceback.print_exc()
+        RESULT["error"] = "%s: %s" % (type(e).__name__, e)
+        emit(2)
+    emit(0)
+
+
+if __name__ == "__main__":
+    main()

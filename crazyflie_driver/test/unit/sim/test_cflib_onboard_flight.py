@@ -1,0 +1,118 @@
+"""Bitcraze's cflib 0.1.34, unmodified, flies the simulated Crazyflie the current way: motion capture
+streamed to the onboard estimator (extpos / extpose at 100 Hz), onboard PID position control,
+position, hover and velocity-world setpoints; and the complementary-estimator trap.
+
+A world server runs in this process (real time, ephemeral ports); `support/cflib_onboard_session.py`
+runs in cflib's own interpreter over the fake Crazyradio or udp://. The flight is judged on the
+world's true positions, which the session samples through the server's control API.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+from crazyflie_driver.sim.air.server import WorldServer
+from support.cflib_python import cflib_python
+
+TEST = pathlib.Path(__file__).resolve().parents[2]
+SESSION = TEST / "support" / "cflib_onboard_session.py"
+SRC = TEST.parent / "src"
+URI_HOLD = "radio://0/80/2M/E7E7E7E703"          # starts at the origin
+URI_TRAP = "radio://0/80/2M/E7E7E7E704"          # starts away from the origin
+TRAP_START = (1.0, 0.5)
+SESSION_TIMEOUT_S = 45.0
+
+
+@pytest.fixture(scope="module")
+def python():
+    return cflib_python()
+
+
+@pytest.fixture(scope="module")
+def served():
+    from crazyflie_driver.sim.world.world import World
+    world = World(speed=1.0, seed=5)
+    server = WorldServer(world, dongles=1, port=0, seed=5, udp_base_port=0)
+    server.add_crazyflie(URI_HOLD, "cf3", (0.0, 0.0, 0.0), "current")
+    server.add_crazyflie(URI_TRAP, "cf4", (TRAP_START[0], TRAP_START[1], 0.0), "current")
+    server.start()
+    world.start()
+    yield server
+    server.stop()
+    world.stop()
+
+
+def fly(python, server, uri, sim_uri, *args):
+    env = dict(os.environ)
+    env.update(PYTHONPATH=os.pathsep.join((str(SRC), str(TEST))), CRAZYFLIE_SIM_ADDRESS=server.address,
+               PYTHONUNBUFFERED="1")
+    env.pop("CRAZYFLIE_BACKEND", None)
+    cmd = [python, str(SESSION), "--uri", uri, "--sim-uri", sim_uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
+    proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
+                          timeout=SESSION_TIMEOUT_S + 15)
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
+    assert lines, "no JSON from the cflib session (exit %d)\nstderr:\n%s" % (proc.returncode, proc.stderr[-3000:])
+    result = json.loads(lines[-1])
+    assert proc.returncode == 0 and result["error"] is None, \
+        "cflib session failed: %s\nstderr:\n%s" % (result["error"], proc.stderr[-3000:])
+    return result
+
+
+def settle(server, uri):
+    """Back on the floor, motors off, firmware rebooted: the next flight starts from rest."""
+    server.crazyflie(uri).reboot()
+    name = [e for e in server.entries() if e.uri == uri][0].name
+    vehicle = server.world.vehicle(name)
+    start = vehicle.state()["position"]
+    vehicle.place((start[0], start[1], 0.0))
+
+
+def last_seconds(samples, seconds):
+    t_end = samples[-1][0]
+    return [s for s in samples if s[0] >= t_end - seconds]
+
+
+def distance(sample, goal):
+    return math.sqrt(sum((a - b) ** 2 for a, b in zip(sample[1:4], goal)))
+
+
+@pytest.mark.parametrize("link,pose", [("radio", False), ("udp", True)])
+def test_cflib_streams_mocap_and_flies_onboard_setpoints(python, served, link, pose):
+    entry = [e for e in served.entries() if e.uri == URI_HOLD][0]
+    uri = URI_HOLD if link == "radio" else entry.udp.uri
+    args = ["--pose"] if pose else []
+    r = fly(python, served, uri, URI_HOLD, *args)
+    settle(served, URI_HOLD)
+    assert r["params"] == {"stabilizer.estimator": "2", "stabilizer.controller": "1"}
+    phases = r["phases"]
+    # 100 Hz motion capture for the whole flight (counted on the world's clock)
+    world_span = phases["after_stop"][-1][0] - phases["position"][0][0]
+    assert r["extpos_sent"] >= 0.7 * 100 * world_span
+    # position setpoint (0, 0, 0.5): holds it at the end of the phase
+    hold = last_seconds(phases["position"], 1.5)
+    assert max(distance(s, (0.0, 0.0, 0.5)) for s in hold) < 0.06, hold[-1]
+    # hover at 0.5 m with zero velocity: stays there
+    assert all(abs(s[3] - 0.5) < 0.08 for s in phases["hover"])
+    # velocity world 0.3 m/s along x for 2 s: moves about 0.6 m in x, keeps y and z
+    v = phases["velocity"]
+    moved = v[-1][1] - v[0][1]
+    assert 0.35 < moved < 0.85 and abs(v[-1][2] - v[0][2]) < 0.15 and abs(v[-1][3] - 0.5) < 0.15
+    # notify-setpoint-stop with no high-level plan: the motors stop
+    assert phases["after_stop"][-1][4] == 0.0
+
+
+def test_cflib_complementary_estimator_trap(python, served):
+    """Estimator 1 ignores extpos: the position setpoint at the start point is chased against an
+    estimate that stays at x = y = 0, so the Crazyflie leaves instead of hovering."""
+    goal = (TRAP_START[0], TRAP_START[1], 0.5)
+    r = fly(python, served, URI_TRAP, URI_TRAP, "--estimator", "1", "--trap", "--seconds", "3",
+            "--goal", *[str(g) for g in goal])
+    settle(served, URI_TRAP)
+    assert r["params"]["stabilizer.estimator"] == "1"
+    end = r["phases"]["position"][-1]
+    assert distance(end, goal) > 0.8 and abs(end[3] - 0.5) < 0.2
