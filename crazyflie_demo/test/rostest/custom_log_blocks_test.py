@@ -10,7 +10,7 @@ resting on the ground:
 - log1's single value is a plausible LiPo voltage and agrees with the world's true battery;
 - log2's three values are in g, in the requested order: about (0, 0, 1) at rest.
 
-Private params: ``sim_address``, ``measure_s`` (wall seconds to count over, 4).
+Private params: ``sim_address``, ``measure_s`` (seconds of world time to count over, 4).
 """
 from __future__ import annotations
 
@@ -73,9 +73,9 @@ class CustomLogBlocks(unittest.TestCase):
             raise AssertionError("custom log topics silent after 30 s: %s"
                                  % {n: r.count() for n, r in cls.rec.items()})
         # one measurement window shared by the tests: (wall t0, t1), world seconds elapsed
-        w0, t0 = cls.probe.medium.ping(), time.monotonic()
-        time.sleep(cls.measure_s)
-        t1, w1 = time.monotonic(), cls.probe.medium.ping()
+        w0, t0 = cls.probe.clock.now(), time.monotonic()
+        w1 = cls.probe.clock.wait_until(lambda: False, cls.measure_s, start=w0)[1]
+        t1 = time.monotonic()
         cls.window = (t0, t1)
         cls.world_s = max(w1 - w0, 1e-3)
         cls.msgs: Dict[str, List[Any]] = {n: r.between(t0, t1) for n, r in cls.rec.items()}

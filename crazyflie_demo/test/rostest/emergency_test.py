@@ -36,9 +36,9 @@ class EmergencyMidFlight(unittest.TestCase):
     def test_emergency_stops_the_motors_and_the_vehicle_falls(self):
         self.assertTrue(self.probe.wait_near(NAME, (0.0, 0.0, 0.5), 0.05, 40.0),
                         "never hovered: %s" % (self.probe.position(NAME),))
-        time.sleep(1.0)
+        self.probe.sleep(1.0)
         before = self.probe.state(NAME)
-        self.assertGreater(min(before["motors"]), 10000, "motors should be spinning while hovering")
+        self.assertGreater(min(before["motors"]), 10000, "motors should be spinning while hovering: %s" % (before,))
         rospy.wait_for_service("/%s/emergency" % NAME, 5.0)
         t0 = time.monotonic()
         rospy.ServiceProxy("/%s/emergency" % NAME, Empty)()

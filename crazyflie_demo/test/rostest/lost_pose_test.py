@@ -54,7 +54,7 @@ class LostPose(unittest.TestCase):
     def test_lost_pose_leads_to_a_landing_in_place(self):
         self.assertTrue(self.probe.wait_near(NAME, HOVER, 0.05, 40.0),
                         "never hovered: %s" % (self.probe.position(NAME),))
-        time.sleep(1.0)
+        self.probe.sleep(1.0)
         track = Track(self.probe, [NAME], period=0.02)
         rospy.wait_for_service("/crazyflie_sim/%s/set_mocap" % NAME, 5.0)
         t0 = time.monotonic()

@@ -120,16 +120,16 @@ class TeleopXbox360(unittest.TestCase):
         cls.pad.close()
 
     def hold(self, axis: int, deflection: float, seconds: float) -> dict:
-        """Deflect a stick for a while; the true state before and after."""
+        """Deflect a stick for ``seconds`` of flight (world time); the true state before and after."""
         before = self.probe.state(NAME)
         self.pad.stick(axis, deflection)
-        time.sleep(seconds)
+        self.probe.sleep(seconds)
         self.pad.stick(axis, 0.0)
         return {"before": before, "after": self.probe.state(NAME)}
 
     def test_each_stick_moves_the_vehicle_the_right_way(self):
         # resting on the ground with the sticks centred: nothing moves
-        time.sleep(1.0)
+        self.probe.sleep(1.0)
         s = self.probe.state(NAME)
         self.assertTrue(s["on_ground"])
         self.assertEqual(max(s["motors"]), 0)

@@ -2,7 +2,9 @@
 
 Flight tests judge the vehicles by the world's ground truth (``vehicle_state`` over the world
 server's control API), not by what the stack under test believes, so a wrong pose or frame in
-the stack cannot hide a bad flight.
+the stack cannot hide a bad flight. Flight times (settling, holding, "within N s") are measured
+on the world's clock: on a busy machine the world may fall behind real time, and N wall seconds
+are then fewer seconds of flight.
 """
 from __future__ import annotations
 
@@ -57,9 +59,15 @@ class WorldProbe:
 
     def __init__(self, address: str) -> None:
         from crazyflie_driver.sim.air.medium import RemoteMedium
+        from crazyflie_driver.sim.world_clock import WorldClock
 
         host, _, port = address.rpartition(":")
         self.medium = RemoteMedium(host, int(port))
+        self.clock = WorldClock(self.medium.ping)
+
+    def sleep(self, world_s: float) -> None:
+        """Until ``world_s`` seconds of world time have passed."""
+        self.clock.sleep(world_s)
 
     def wait_ready(self, names: Sequence[str], timeout: float = 30.0) -> None:
         """Until the world server answers for every vehicle (it starts with the launch file)."""
@@ -91,17 +99,28 @@ class WorldProbe:
         return self.medium.crazyflie_state(name)
 
     def sample(self, names: Sequence[str], duration: float, period: float = 0.02) -> Dict[str, List[Vec3]]:
-        """Positions of each vehicle every ``period`` s for ``duration`` s."""
+        """Positions of each vehicle over ``duration`` s of world time, one per ``period`` s of world time.
+
+        Each sample is taken at a distinct world time at least ``period`` after the previous one,
+        so every stretch of flight weighs the same in a figure (RMS) however the world's pace varies.
+        """
         out: Dict[str, List[Vec3]] = {n: [] for n in names}
-        end = time.monotonic() + duration
-        while time.monotonic() < end:
+        last: Dict[str, float] = {n: -math.inf for n in names}
+        start = self.clock.now()
+        end = start + duration
+        while True:
             for n in names:
-                out[n].append(self.position(n))
-            time.sleep(period)
-        return out
+                s = self.state(n)
+                if s["time"] - last[n] >= period - 1e-9 and start <= s["time"] <= end:
+                    out[n].append(tuple(s["position"]))
+                    last[n] = s["time"]
+            if min(last.values()) >= end - period or self.clock.now() >= end:
+                return out
+            time.sleep(period / 2)
 
     def wait_near(self, name: str, target: Sequence[float], tolerance: float, timeout: float) -> bool:
-        return bool(wait_until(lambda: distance(self.position(name), target) < tolerance, timeout))
+        """Whether the vehicle comes within ``tolerance`` m of ``target`` within ``timeout`` s of world time."""
+        return bool(self.clock.wait_until(lambda: distance(self.position(name), target) < tolerance, timeout)[0])
 
 
 class Track:

@@ -19,7 +19,8 @@ from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import (TopicRecorder, rates_per_world_second, wait_for_crazyflie, wait_until,
+                                     world, world_window)  # noqa: E402
 
 NS = "/crazyflie1"
 
@@ -53,6 +54,16 @@ class DriverSingle(unittest.TestCase):
             self.cmd_vel.publish(msg)
             time.sleep(0.02)
 
+    def send_until(self, msg: Twist, cond, timeout: float):
+        """Publishes ``msg`` every 20 ms until cond() is true (its value) or ``timeout`` s passed."""
+        end = time.monotonic() + timeout
+        while True:
+            self.cmd_vel.publish(msg)
+            v = cond()
+            if v or time.monotonic() >= end:
+                return v
+            time.sleep(0.02)
+
     def test_a_topics_have_the_right_types(self):
         expected = {NS + "/imu": "sensor_msgs/Imu", NS + "/temperature": "sensor_msgs/Temperature",
                     NS + "/magnetic_field": "sensor_msgs/MagneticField", NS + "/pressure": "std_msgs/Float32",
@@ -67,8 +78,9 @@ class DriverSingle(unittest.TestCase):
             rospy.wait_for_message(topic, msg_type, timeout=3.0)
 
     def test_b_sensor_rates_and_units(self):
-        imu_rate = self.imu.rate(3.0)
-        battery = len(self.battery.since(time.monotonic() - 3.0)) / 3.0
+        # per second of world time: the firmware's log timers set these rates, not the wall clock
+        rates = rates_per_world_second({"imu": self.imu, "battery": self.battery}, self.world, 3.0)
+        imu_rate, battery = rates["imu"], rates["battery"]
         self.assertGreater(imu_rate, 85.0)
         self.assertLess(imu_rate, 115.0)
         self.assertGreater(battery, 8.0)
@@ -110,12 +122,12 @@ class DriverSingle(unittest.TestCase):
         self.send_for(twist(), 0.2)
 
     def test_f_custom_log_blocks_at_their_period(self):
-        t0 = time.monotonic()
-        time.sleep(2.0)
-        log1 = [m for _, m in self.log1.since(t0)]
-        motors = [m for _, m in self.motors.since(t0)]
-        self.assertTrue(15 <= len(log1) <= 25, len(log1))          # 100 ms
-        self.assertTrue(80 <= len(motors) <= 120, len(motors))     # 20 ms
+        window = world_window(self.world, 2.0)                     # 2 s of the firmware's (world) time
+        log1 = self.log1.between(window.t0, window.t1)
+        motors = self.motors.between(window.t0, window.t1)
+        per_2s = 2.0 / window.world_s
+        self.assertTrue(15 <= len(log1) * per_2s <= 25, (len(log1), window.world_s))          # 100 ms
+        self.assertTrue(80 <= len(motors) * per_2s <= 120, (len(motors), window.world_s))     # 20 ms
         periods = [b.onboard_timestamp - a.onboard_timestamp for a, b in zip(log1, log1[1:])]
         self.assertEqual(statistics.median(periods), 100)
         periods = [b.onboard_timestamp - a.onboard_timestamp for a, b in zip(motors, motors[1:])]
@@ -127,9 +139,10 @@ class DriverSingle(unittest.TestCase):
         self.assertLess(abs(stamp_age.to_sec()), 1.0)
 
     def test_g_emergency_stops_the_motors_for_good(self):
-        self.send_for(twist(z=30000.0), 0.5)
-        spinning = self.motors.latest().values
-        self.assertTrue(all(v > 0 for v in spinning), spinning)
+        # precondition: the motors spin, as reported by the motors log block (wait for it, the
+        # setpoint and the next 20 ms log packet take a moment on a busy machine)
+        spinning = self.send_until(twist(z=30000.0), lambda: self.motors.latest() is not None and all(v > 0 for v in self.motors.latest().values), 5.0)
+        self.assertTrue(spinning, self.motors.latest().values)
         rospy.ServiceProxy(NS + "/emergency", Empty)()
         self.assertTrue(self.state()["emergency"])
         rospy.ServiceProxy(NS + "/emergency", Empty)()            # idempotent

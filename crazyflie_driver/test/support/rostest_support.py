@@ -9,6 +9,7 @@ import rospy
 from rosgraph_msgs.msg import Log
 
 from crazyflie_driver.sim.air.medium import RemoteMedium
+from crazyflie_driver.sim.world_clock import WorldClock
 
 
 def wait_until(cond: Callable[[], Any], timeout: float, period: float = 0.02) -> Any:
@@ -38,11 +39,10 @@ class TopicRecorder:
         with self._lock:
             return [m for m in self.messages if m[0] >= t0]
 
-    def rate(self, duration: float) -> float:
-        """Messages per second over the next ``duration`` seconds."""
-        t0 = time.monotonic()
-        time.sleep(duration)
-        return len(self.since(t0)) / duration
+    def between(self, t0: float, t1: float) -> List[Any]:
+        """Messages that arrived in [t0, t1) (monotonic)."""
+        with self._lock:
+            return [m for t, m in self.messages if t0 <= t < t1]
 
     def latest(self) -> Optional[Any]:
         with self._lock:
@@ -74,23 +74,36 @@ class RosoutRecorder:
 
 def rates_per_world_second(recorders: Dict[str, "TopicRecorder"], medium: RemoteMedium,
                            seconds: float, during: Optional[Callable[[], Any]] = None) -> Dict[str, float]:
-    """Messages per second of simulated time, per recorder, over ``seconds`` of wall time.
+    """Messages per second of simulated time, per recorder, over ``seconds`` of world time.
 
     The firmware's log timers run on world time; on a busy machine the world thread may fall
-    behind real time (it lets go after 0.25 s), and then a 10 ms log block yields fewer than 100
-    packets per wall second however well the driver serves it. Dividing by the world time that
-    passed asks the driver for exactly what the firmware produced. ``during()``, if given, is
-    called repeatedly until the time is up (the load to measure under).
+    behind real time, and then a 10 ms log block yields fewer than 100 packets per wall second
+    however well the driver serves it. Counting over a window of world time asks the driver for
+    exactly what the firmware produced (and the window holds the same number of periods however
+    slow the world is). ``during()``, if given, is called repeatedly until the time is up (the
+    load to measure under).
     """
-    w0, t0 = medium.ping(), time.monotonic()
-    while time.monotonic() - t0 < seconds and not rospy.is_shutdown():
-        if during is not None:
-            during()
-        else:
-            time.sleep(min(0.05, max(0.0, seconds - (time.monotonic() - t0))))
-    t1, w1 = time.monotonic(), medium.ping()
-    elapsed = max(w1 - w0, 1e-3)
-    return {name: len([m for m in r.since(t0) if m[0] < t1]) / elapsed for name, r in recorders.items()}
+    window = world_window(medium, seconds, during)
+    return {name: len(r.between(window.t0, window.t1)) / window.world_s for name, r in recorders.items()}
+
+
+class Window:
+    """A measurement window: wall (monotonic) bounds t0, t1 and the world seconds between them."""
+
+    def __init__(self, t0: float, t1: float, world_s: float) -> None:
+        self.t0, self.t1, self.world_s = t0, t1, world_s
+
+
+def world_window(medium: RemoteMedium, seconds: float, during: Optional[Callable[[], Any]] = None) -> Window:
+    """Waits ``seconds`` of world time (calling ``during()`` meanwhile, if given); the window it took."""
+    clock = WorldClock(medium.ping)
+    w0, t0 = clock.now(), time.monotonic()
+    if during is None:
+        w1 = clock.sleep(seconds)[1]
+    else:
+        w1 = clock.wait_until(lambda: during() and False, seconds, start=w0)[1]
+    t1 = time.monotonic()
+    return Window(t0, t1, max(w1 - w0, 1e-3))
 
 
 def world(address: str) -> RemoteMedium:
