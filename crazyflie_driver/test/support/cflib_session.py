@@ -96,6 +96,18 @@ def world_time() -> float:
         control.close()
 
 
+def sleep_world(seconds: float) -> None:
+    """Until ``seconds`` of world time passed: the log block's samples follow the firmware's clock,
+    which on a busy machine runs slower than the host's."""
+    from crazyflie_driver.sim.air.medium import RemoteMedium
+    from crazyflie_driver.sim.world_clock import WorldClock
+    control = RemoteMedium()
+    try:
+        WorldClock(control.ping).sleep(seconds)
+    finally:
+        control.close()
+
+
 def session(uri: str, param: str, sim_name: str, args: argparse.Namespace, out: dict) -> None:
     """One Crazyflie from connect to disconnect; fills `out`."""
     from cflib.crazyflie import Crazyflie
@@ -153,7 +165,7 @@ def session(uri: str, param: str, sim_name: str, args: argparse.Namespace, out: 
         cf.log.add_config(conf)
         world_times.append(world_time())
         conf.start()
-        time.sleep(args.log_seconds)
+        sleep_world(args.log_seconds)
         conf.stop()
         world_times.append(world_time())
     out["log"] = {"period_ms": args.period_ms, "seconds": args.log_seconds, "valid": conf.valid,
@@ -233,7 +245,7 @@ def main() -> None:
                    help="name=value to write and read back (one per --uri, in order)")
     p.add_argument("--log", default="acc.z,pm.vbat", help="comma-separated log variables")
     p.add_argument("--period-ms", type=int, default=50)
-    p.add_argument("--log-seconds", type=float, default=1.0)
+    p.add_argument("--log-seconds", type=float, default=1.0, help="seconds of world time to log for")
     p.add_argument("--setpoint", default="1.5,2.5,-3.0,12000", help="roll,pitch,yawrate,thrust")
     p.add_argument("--setpoints", type=int, default=20)
     p.add_argument("--sim-name", action="append", default=[],
