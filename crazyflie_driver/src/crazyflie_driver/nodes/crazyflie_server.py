@@ -6,7 +6,8 @@ Global services ``/add_crazyflie`` and ``/remove_crazyflie``; per Crazyflie, und
 log block (pubs); its parameters mirrored to ``/<tf_prefix>/<group>/<name>``; ``status``
 (``diagnostic_msgs/DiagnosticStatus``, latched, on every change) and one entry per Crazyflie on
 ``/diagnostics`` every second. A Crazyflie whose worker gave up is removed (its topics and
-services go) and stays on ``/diagnostics`` as an error until it is added again.
+services go) and stays on ``/diagnostics`` as an error until it is added again. Also per Crazyflie:
+crazyflie_ros HEAD's setpoint topics and high-level services (``nodes/onboard_ros.py``).
 ``magnetic_field`` carries the firmware's ``mag.x/y/z`` values unscaled, as the original did.
 """
 from __future__ import annotations
@@ -34,7 +35,9 @@ from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import ERROR, CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+from crazyflie_driver.nodes.onboard_ros import RosOnboardCommands
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
+from crazyflie_driver.server.onboard_commands import OnboardCommands
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -81,6 +84,7 @@ class RosCrazyflie(WorkerListener):
         self._status_pub: Optional[rospy.Publisher] = None
         self._status_lock = threading.Lock()
         self._last_status: Optional[CrazyflieStatus] = None
+        self._onboard: Optional[RosOnboardCommands] = None
 
     # -- after the Crazyflie answered --------------------------------------------------------------
     def attach(self, worker: CrazyflieWorker) -> None:
@@ -103,6 +107,8 @@ class RosCrazyflie(WorkerListener):
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
+        self._onboard = RosOnboardCommands(self.ns, config.uri, OnboardCommands(
+            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri))
         self.publish_status()
 
     def status(self) -> CrazyflieStatus:
@@ -125,6 +131,9 @@ class RosCrazyflie(WorkerListener):
             publish_unless_shutting_down(pub, diagnostic_status(status, self.config.tf_prefix, self.config.uri))
 
     def detach(self) -> None:
+        if self._onboard is not None:
+            self._onboard.close()
+            self._onboard = None
         for s in self._subscribers:
             s.unregister()
         for s in self._services:

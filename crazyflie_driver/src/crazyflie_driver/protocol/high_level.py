@@ -212,6 +212,13 @@ class HighLevelCommander:
 
     def start_trajectory(self, trajectory_id: int, timescale: float = 1.0, reversed_: bool = False,
                          relative: bool = False, relative_yaw: bool = False, group_mask: int = 0) -> None:
+        self.command(self.start_trajectory_packet(trajectory_id, timescale, reversed_, relative, relative_yaw,
+                                                  group_mask))
+
+    def start_trajectory_packet(self, trajectory_id: int, timescale: float = 1.0, reversed_: bool = False,
+                                relative: bool = False, relative_yaw: bool = False,
+                                group_mask: int = 0) -> CRTPPacket:
+        """The start packet, checked against what was uploaded (TrajectoryError for an unknown id)."""
         packet = start_trajectory_packet(trajectory_id, self.protocol_version, timescale, reversed_, relative,
                                          relative_yaw, group_mask)
         info = self.trajectories.get(trajectory_id)
@@ -221,7 +228,7 @@ class HighLevelCommander:
         if info.compressed and (timescale != 1.0 or reversed_):
             raise TrajectoryError("trajectory %d is compressed: the firmware plays compressed trajectories only "
                                   "forwards at timescale 1" % trajectory_id)
-        self.command(packet)
+        return packet
 
     def upload_trajectory(self, trajectory_id: int, pieces: Sequence[Piece], piece_offset: int = 0,
                           compressed: bool = False) -> TrajectoryInfo:

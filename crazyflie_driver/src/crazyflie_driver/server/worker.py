@@ -31,6 +31,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
@@ -203,6 +204,14 @@ class CrazyflieWorker:
             self._pending = setpoint
             self._cond.notify_all()
         return True
+
+    def set_packet_setpoint(self, packet: Optional[CRTPPacket]) -> bool:
+        """A prepared setpoint packet (port 7) streamed like an RPYT one; None drops a pending one."""
+        if packet is None:
+            with self._cond:
+                self._pending = None
+            return True
+        return self.set_setpoint(packet)
 
     def cmd_vel(self, linear_x: float, linear_y: float, linear_z: float, angular_z: float) -> bool:
         """A cmd_vel message mapped with this Crazyflie's trims (see :func:`setpoint_from_twist`)."""
@@ -458,6 +467,10 @@ class CrazyflieWorker:
             with self._send_lock:
                 if self._emergency:
                     return bool(self.cf.send_setpoint(0.0, 0.0, 0.0, 0))
+                if isinstance(setpoint, CRTPPacket):
+                    acked = bool(self.cf.link.send(setpoint))
+                    self.setpoints_sent += 1
+                    return acked
                 if setpoint is not None:
                     acked = bool(self.cf.send_setpoint(setpoint.roll, setpoint.pitch,
                                                        setpoint.yawrate, setpoint.thrust))

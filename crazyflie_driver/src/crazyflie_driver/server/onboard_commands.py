@@ -1,0 +1,132 @@
+"""crazyflie_ros HEAD's per-Crazyflie setpoint topics and high-level services, without ROS.
+
+Streaming setpoints (``cmd_position``, ``cmd_hover``, ``cmd_full_state``, ``cmd_velocity_world``,
+``cmd_stop``) become port-7 packets handed to the worker, which sends the latest one in its next
+round trip, like cmd_vel. ``external_position`` / ``external_pose`` go out at once (port 6).
+High-level services run in the caller's thread and wait for the Crazyflie's answer.
+
+Where this differs from crazyflie_ros HEAD (see the package README):
+* ``go_to`` yaw is radians, the firmware's unit (HEAD's comment says degrees);
+* ``cmd_hover`` / ``cmd_velocity_world`` yaw rates mean the same on every firmware (HEAD passes
+  them raw into the legacy types, whose yaw rate the firmware negates);
+* a high-level command after low-level setpoints (the zero setpoints every connect sends included)
+  is preceded by notify-setpoints-stop, because the firmware ignores the high-level commander
+  while low-level setpoints hold the priority; HEAD leaves that to the user.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Callable, Optional, Sequence
+
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.protocol import high_level, setpoints
+from crazyflie_driver.protocol.commander import stop_packet
+from crazyflie_driver.protocol.localization import external_pose_packet, external_position_packet
+from crazyflie_driver.protocol.trajectory import make_piece
+
+Quaternion = Sequence[float]
+
+
+class OnboardCommands:
+    """The HEAD API for one Crazyflie. ``cf`` is a connected ``Crazyflie`` (its ``high_level``,
+    ``link``, ``protocol_version``); ``stream(packet) -> bool`` hands a setpoint to the worker
+    (False after emergency); ``emergency_active()`` tells whether the worker is in emergency."""
+
+    def __init__(self, cf, stream: Callable[[CRTPPacket], bool], emergency_active: Callable[[], bool],
+                 label: str = "") -> None:
+        self.cf = cf
+        self._stream = stream
+        self._emergency_active = emergency_active
+        self.label = label or str(getattr(cf, "uri", ""))
+        self._lock = threading.Lock()
+        self._low_level_active = True    # connect sends zero setpoints: assume low level owns it
+
+    # -- streaming setpoints --------------------------------------------------------------------
+    def _set(self, packet: CRTPPacket) -> bool:
+        self._low_level_active = True
+        return self._stream(packet)
+
+    def cmd_position(self, x: float, y: float, z: float, yaw_deg: float) -> bool:
+        return self._set(setpoints.position_packet(x, y, z, yaw_deg))
+
+    def cmd_hover(self, vx: float, vy: float, yawrate_deg: float, z: float) -> bool:
+        return self._set(setpoints.hover_packet(vx, vy, yawrate_deg, z, self.cf.protocol_version))
+
+    def cmd_velocity_world(self, vx: float, vy: float, vz: float, yawrate_deg: float) -> bool:
+        return self._set(setpoints.velocity_world_packet(vx, vy, vz, yawrate_deg, self.cf.protocol_version))
+
+    def cmd_full_state(self, position: Sequence[float], quaternion: Quaternion, velocity: Sequence[float],
+                       body_rates: Sequence[float], acceleration: Sequence[float]) -> bool:
+        return self._set(setpoints.full_state_packet(position, velocity, acceleration, quaternion, body_rates))
+
+    def cmd_stop(self) -> bool:
+        return self._set(stop_packet(self.cf.protocol_version))
+
+    # -- motion capture (unicast, sent at once) -------------------------------------------------
+    def external_position(self, x: float, y: float, z: float) -> bool:
+        if self._emergency_active():
+            return False
+        return self.cf.link.send(external_position_packet(x, y, z))
+
+    def external_pose(self, x: float, y: float, z: float, quaternion: Quaternion) -> bool:
+        if self._emergency_active():
+            return False
+        return self.cf.link.send(external_pose_packet(x, y, z, quaternion))
+
+    # -- high-level services --------------------------------------------------------------------
+    def _fly(self, what: str, packet: CRTPPacket, idempotent: bool = True) -> None:
+        """Send a checked high-level packet; first hand control back from the low-level stream."""
+        with self._lock:
+            if self._emergency_active():
+                raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
+                                     "is restarted, removed and added again)" % (self.label, what))
+            if self._low_level_active:
+                self.notify_setpoints_stop(0)
+            self.cf.high_level.command(packet, idempotent=idempotent)
+
+    def notify_setpoints_stop(self, remain_valid_ms: int = 0) -> None:
+        """Give control back to the high-level commander (stops the worker's low-level stream)."""
+        packet = setpoints.notify_setpoints_stop_packet(remain_valid_ms)
+        self._stream(None)
+        if not self.cf.link.send(packet) and not self.cf.link.send(packet):
+            raise CrazyflieError("%s: notify-setpoints-stop was not acknowledged" % self.label)
+        self._low_level_active = False
+
+    def takeoff(self, group_mask: int, height: float, duration_s: float) -> None:
+        self._fly("takeoff", high_level.takeoff_packet(height, duration_s, self.cf.protocol_version, group_mask))
+
+    def land(self, group_mask: int, height: float, duration_s: float) -> None:
+        self._fly("land", high_level.land_packet(height, duration_s, self.cf.protocol_version, group_mask))
+
+    def stop(self, group_mask: int) -> None:
+        self._fly("stop", high_level.stop_packet(group_mask))
+
+    def go_to(self, group_mask: int, relative: bool, goal: Sequence[float], yaw: float, duration_s: float) -> None:
+        packet = high_level.go_to_packet(goal[0], goal[1], goal[2], yaw, duration_s, self.cf.protocol_version,
+                                         relative=relative, group_mask_=group_mask)
+        self._fly("go_to", packet, idempotent=not relative)
+
+    def start_trajectory(self, group_mask: int, trajectory_id: int, timescale: float, reversed_: bool,
+                         relative: bool) -> None:
+        packet = self.cf.high_level.start_trajectory_packet(trajectory_id, timescale, reversed_, relative,
+                                                            group_mask=group_mask)
+        self._fly("start_trajectory", packet)
+
+    def set_group_mask(self, group_mask: int) -> None:
+        packet = high_level.set_group_mask_packet(group_mask)
+        with self._lock:
+            self.cf.high_level.command(packet)
+
+    def upload_trajectory(self, trajectory_id: int, piece_offset: int, pieces) -> None:
+        """``pieces``: (duration s, poly_x, poly_y, poly_z, poly_yaw) per piece; checked first."""
+        checked = [make_piece(d, x, y, z, yaw, index=i) for i, (d, x, y, z, yaw) in enumerate(pieces)]
+        with self._lock:
+            if self._emergency_active():
+                raise CrazyflieError("%s: upload_trajectory refused: emergency is active" % self.label)
+            self.cf.high_level.upload_trajectory(trajectory_id, checked, piece_offset)
+
+
+def stream_into(worker) -> Callable[[Optional[CRTPPacket]], bool]:
+    """``stream`` for a worker: the packet becomes its pending setpoint (None drops a pending one)."""
+    return worker.set_packet_setpoint
