@@ -11,8 +11,8 @@ from crazyflie_driver.protocol.high_level import HighLevelCommander
 from crazyflie_driver.protocol.memory import MemoryClient
 from crazyflie_driver.server.onboard_commands import OnboardCommands
 
-from test_protocol_swarm_senders import FirmwareDouble, LinkDouble
-from worker_doubles import FakeCrazyflie, started, wait_for
+from support.swarm_doubles import FirmwareDouble, LinkDouble
+from support.worker_doubles import FakeCrazyflie, started, wait_for
 
 
 class Crazyflie:

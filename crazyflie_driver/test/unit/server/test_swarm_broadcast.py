@@ -15,7 +15,7 @@ from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
-from radio_doubles import AirReply, FakeClock, ScriptedMedium
+from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 
 URIS = ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702", "radio://0/80/2M/E7E7E7E703",
         "radio://1/90/2M/E7E7E7E704", "radio://1/90/2M/E7E7E7E705"]

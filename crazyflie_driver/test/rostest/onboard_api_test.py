@@ -5,6 +5,7 @@ a clear error while the server keeps serving."""
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 import unittest
@@ -18,7 +19,8 @@ from std_msgs.msg import Empty as EmptyMsg
 from crazyflie_driver.msg import FullState, Hover, Position, TrajectoryPolynomialPiece, VelocityWorld
 from crazyflie_driver.srv import GoTo, StartTrajectory, UploadTrajectory
 
-from rostest_support import wait_for_crazyflie, wait_until, world
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import wait_for_crazyflie, wait_until, world  # noqa: E402
 
 NS = "/crazyflie1"
 SERVICES = {"takeoff": "Takeoff", "land": "Land", "stop": "Stop", "go_to": "GoTo",
