@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
@@ -131,7 +132,7 @@ def test_repeats_are_paced_and_each_is_its_own_turn():
     assert clock.time() == pytest.approx(0.014)
 
 
-def test_a_burst_is_one_turn_while_unicast_keeps_flowing():
+def test_a_burst_is_one_turn_of_the_dongle_in_arrival_order():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
     link = RadioLink(URI, manager)
@@ -139,25 +140,24 @@ def test_a_burst_is_one_turn_while_unicast_keeps_flowing():
     bc = BroadcastLink(0, 80, manager=manager)
     bc.open()
     burst = packed_position_packets([(i, 0.0, 0.0, 0.0) for i in range(12)])   # 3 packets
-    stop = threading.Event()
-
-    def poll():
-        while not stop.is_set():
-            link.poll()
-
-    poller = threading.Thread(target=poll)
-    poller.start()
+    shared = manager.acquire(0)
+    before = len(medium.transmits)
+    threads = [threading.Thread(target=bc.send_all, args=(burst,)), threading.Thread(target=link.poll),
+               threading.Thread(target=bc.send_all, args=(burst,))]
+    shared.lock.acquire()            # hold the dongle while all three queue up, in this order
     try:
-        for _ in range(30):
-            bc.send_all(burst)
+        for i, t in enumerate(threads):
+            t.start()
+            deadline = time.monotonic() + 5.0
+            while len(shared.lock._waiters) < i + 1 and time.monotonic() < deadline:
+                time.sleep(0.001)
     finally:
-        stop.set()
-        poller.join(5)
-    kinds = "".join("b" if t.address == BROADCAST_ADDRESS else "u" for t in medium.transmits)
-    runs = [r for r in kinds.replace("u", " ").split() if r]
-    assert all(len(r) % 3 == 0 for r in runs)   # a burst is never split by a unicast packet
-    first, last = kinds.index("b"), kinds.rindex("b")
-    assert "u" in kinds[first:last]            # unicast went on between the bursts
+        shared.lock.release()
+    for t in threads:
+        t.join(5.0)
+    kinds = "".join("b" if t.address == BROADCAST_ADDRESS else "u" for t in medium.transmits[before:])
+    assert kinds == "bbbubbb"        # each burst whole, the unicast round trip in its turn between them
+    manager.release(shared)
     bc.close()
     link.close()
 
