@@ -5,10 +5,10 @@ The chapter's position controller (crazyflie_controller.PositionController, gain
 crazyflie2.yaml, default take-off hand-over) reads the world's motion-capture model (MocapModel
 defaults: 100 Hz, 0.5 mm and 0.2 deg white noise, 8 ms latency; seeded) and its cmd_vel goes
 through crazyflie_server's RPYT mapping into Crazyflie.send_setpoint: RadioLink -> Crazyradio ->
-fake USB dongle (instant) -> LocalMedium -> SimulatedCrazyflie -> World (sim.radio_rig.RadioRig).
+fake USB dongle (instant) -> LocalMedium -> SimulatedCrazyflie -> World (crazyflie_driver/test/support/radio_rig.py).
 The benchmark steps the world between setpoints, so the flight is deterministic per seed.
 
-Per run: take-off, then two hold windows of `--hold` s, starting `--early` and `--settle` s after the
+Per run: take-off, then two hold windows of ``--hold`` s, starting ``--early`` and ``--settle`` s after the
 controller's setpoint reached the goal (the chapter's Z loop is still ringing down in the early one);
 for each it reports the RMS and the maximum of the true 3-D position error and per-axis RMS / mean,
 plus the world-time / wall-time factor of the whole loop. The real-time factor of World.step
@@ -18,7 +18,6 @@ Run: /usr/bin/python3 bench/bench_hover.py   (writes bench/results/hover.txt)
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import platform
 import sys
@@ -30,8 +29,9 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
+sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "test"))      # support.radio_rig
 
-from crazyflie_driver.sim.radio_rig import RadioRig  # noqa: E402
+from support.radio_rig import RadioRig  # noqa: E402
 
 GOAL = np.array([0.0, 0.0, 0.5])
 RUNS = (("current", 50.0), ("current", 100.0), ("2016.02", 50.0))   # firmware, controller rate [Hz]

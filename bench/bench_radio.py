@@ -8,18 +8,18 @@ bytes, safelink on) as fast as the dongle takes them, and the run reports:
 * host CPU time per packet = process CPU time (all threads) / packets acked,
 * next to the modelled capacity of the dongle in the same run: 1 / modelled round-trip time, where
   the modelled round trip = bulk OUT+IN time + (control transfers per packet x control-transfer
-  time), both from the fake dongle's `DongleTiming` and its counters. With more than one Crazyflie
+  time), both from the fake dongle's ``DongleTiming`` and its counters. With more than one Crazyflie
   the dongle must be re-addressed (SET_RADIO_ADDRESS) before nearly every packet.
 
-Two ways to drive the dongle: "threads" (each Crazyflie a `RadioLink` sending from its own thread;
-the `SharedRadio` FIFO lock interleaves them, as the driver's per-Crazyflie workers do) and
+Two ways to drive the dongle: "threads" (each Crazyflie a ``RadioLink`` sending from its own thread;
+the ``SharedRadio`` FIFO lock interleaves them, as the driver's per-Crazyflie workers do) and
 "round-robin" (one thread sending to each Crazyflie in turn). Each is run with the default timing
 model (PA: 0.8 ms per bulk round trip, 1.5 ms per control transfer, real sleeps) and with the model
 off (no sleeps: pure host overhead).
 
-The path measured is the real one from `RadioLink.send_bytes` down: safelink bits, `SharedRadio`,
-`Crazyradio` (pyusb `write`/`read`, vendor requests), the fake pyusb backend, `LocalMedium` and the
-simulated nRF + commander port of `SimulatedCrazyflie` (a vehicle that does nothing, so physics does
+The path measured is the real one from ``RadioLink.send_bytes`` down: safelink bits, ``SharedRadio``,
+``Crazyradio`` (pyusb ``write``/``read``, vendor requests), the fake pyusb backend, ``LocalMedium`` and the
+simulated nRF + commander port of ``SimulatedCrazyflie`` (a vehicle that does nothing, so physics does
 not enter the figures), all in this process. Usage:
     PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--out FILE]
 """
@@ -92,7 +92,7 @@ def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
     stop = threading.Event()
 
     def one_link(i: int) -> None:
-        link, send = links[i], links[i].send_bytes
+        send = links[i].send_bytes
         while not stop.is_set():
             if send(SETPOINT):
                 counts[i] += 1

@@ -7,8 +7,8 @@ receives when cmd_vel arrives at 100 Hz per Crazyflie, and the cmd_vel-to-radio 
 moment cmd_vel is handed to the worker until the setpoint's radio round trip is acked; median and
 p99). Also the IMU messages per second each Crazyflie delivers with logging on.
 
-Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.World stepping in real
-time, sim.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
+Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.World stepping
+in real time, sim.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
     PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_server.py [--seconds 3] [--out FILE]
 """
 from __future__ import annotations
@@ -146,7 +146,8 @@ def main() -> int:
                                                     platform.python_version(), os.cpu_count() or 0),
              "",
              "%4s %8s %18s %16s %12s %14s %12s %12s %6s" % ("CFs", "logging", "setpoints/s/CF min", "mean",
-                                                       "IMU/s/CF min", "latency med ms", "p99 ms", "radio RT/s", "world RTF")]
+                                                       "IMU/s/CF min", "latency med ms", "p99 ms", "radio RT/s",
+                                                       "world RTF")]
     print("\n".join(lines), flush=True)
     for n in [int(x) for x in args.counts.split(",")]:
         for logging_on in (False, True):

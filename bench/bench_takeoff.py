@@ -84,7 +84,8 @@ def main() -> int:
             fig = fly(variant, mass, args.seconds, args.seed)
             world_seconds += args.seconds + 0.2
             line = "%-9s %6.3f %8.0f %8.0f %8s %7.3f %9.3f %8.2f %9.2f %9.2f %9.2f" % (
-                variant, mass, fig["liftoff"], fig["preload"], "-" if fig["refined"] is None else "%.0f" % fig["refined"],
+                variant, mass, fig["liftoff"], fig["preload"],
+                "-" if fig["refined"] is None else "%.0f" % fig["refined"],
                 fig["peak_z"], fig["overshoot"], fig["settle_5cm"], fig["early_rms_z"] * 1000,
                 fig["hover_rms_z"] * 1000, fig["hover_rms_xy"] * 1000)
             print(line, flush=True)

@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""CPU cost of the simulated world's `World.step` for 1, 2, 10, 49 and 100 hovering vehicles.
+"""CPU cost of the simulated world's ``World.step`` for 1, 2, 10, 49 and 100 hovering vehicles.
 
 Each vehicle hovers on its hover thrust; setpoints are refreshed at 100 Hz of world time (as a
 radio would) from a tick listener. The figure is the CPU time of the stepping thread
-(`time.thread_time`) per second of world time, so a busy machine does not distort it the way wall
+(``time.thread_time``) per second of world time, so a busy machine does not distort it the way wall
 time would: "real-time factor" is world seconds per CPU second (how fast the world runs on one
-free core), "% of a core at speed 1" is its inverse. With `--mocap` a MocapModel (100 Hz) is
+free core), "% of a core at speed 1" is its inverse. With ``--mocap`` a MocapModel (100 Hz) is
 attached too. Writes the table to bench/results/world.txt.
 Run: /usr/bin/python3 bench/bench_world.py
 """

@@ -66,6 +66,13 @@ if [ "$PLATFORM" = debian ] && [ ! -x "$VENV/bin/xacro" ]; then
   "$VENV/bin/pip" install -q --disable-pip-version-check "xacro==1.13.3"
 fi
 
+# The linter run by tools/run_tests.sh (configuration in ruff.toml), pinned so every machine agrees.
+RUFF_VERSION=0.17.5
+if ! "$VENV/bin/ruff" --version 2>/dev/null | grep -qx "ruff $RUFF_VERSION"; then
+  say "installing ruff $RUFF_VERSION into the venv"
+  "$VENV/bin/pip" install -q --disable-pip-version-check "ruff==$RUFF_VERSION"
+fi
+
 # cflib (Bitcraze's library) is an independent peer for the tests; it needs Python >= 3.10.
 if [ "$WITH_CFLIB" = 1 ]; then
   CFVENV="$WS/cflib-venv"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of the stack on a fresh machine: installs what is missing, builds the
-# workspace, then runs the pytest unit tests and every rostest launch file (simulated
-# Crazyflies, no hardware). Ends with one summary line "N passed, N failed".
+# workspace, then runs the linter, the pytest unit tests and every rostest launch file
+# (simulated Crazyflies, no hardware). Ends with one summary line "N passed, N failed"
+# (the lint counts as one check).
 set -uo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -13,6 +14,9 @@ RESULTS="$REPO/.ws/test_results"
 rm -rf "$RESULTS"; mkdir -p "$RESULTS"
 export ROS_LOG_DIR="$RESULTS/ros_log"
 export CRAZYFLIE_TOC_CACHE="$RESULTS/toc_cache"
+
+echo "== lint (ruff, settings in ruff.toml) =="
+if "$REPO/.ws/venv/bin/ruff" check --no-cache "$REPO"; then lint_pass=1; lint_fail=0; else lint_pass=0; lint_fail=1; fi
 
 echo "== unit tests (pytest) =="
 /usr/bin/python3 -m pytest -q -rs --junitxml="$RESULTS/pytest.xml" "$@"
@@ -45,6 +49,7 @@ for t in $(ls crazyflie_*/test/rostest/*.test 2>/dev/null | sort); do
 done
 
 echo "== summary =="
-echo "pytest: $py_pass passed, $py_fail failed; rostest: $ros_pass passed, $ros_fail failed${failed:+ (failed:$failed)}"
-echo "$((py_pass + ros_pass)) passed, $((py_fail + ros_fail)) failed"
-[ $((py_fail + ros_fail)) -eq 0 ]
+echo "lint: $( [ "$lint_fail" -eq 0 ] && echo clean || echo FAILED ); pytest: $py_pass passed, $py_fail failed;" \
+     "rostest: $ros_pass passed, $ros_fail failed${failed:+ (failed:$failed)}"
+echo "$((lint_pass + py_pass + ros_pass)) passed, $((lint_fail + py_fail + ros_fail)) failed"
+[ $((lint_fail + py_fail + ros_fail)) -eq 0 ]

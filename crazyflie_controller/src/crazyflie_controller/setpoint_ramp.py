@@ -19,7 +19,7 @@ def _norm(v: Sequence[float]) -> float:
 
 
 class SetpointRamp:
-    """Position/velocity of a moving setpoint; :meth:`step` advances it toward a goal."""
+    """Position/velocity of a moving setpoint; :meth:``step`` advances it toward a goal."""
 
     def __init__(self, position: Sequence[float], velocity: Sequence[float], max_speed: float,
                  max_accel: float) -> None:
@@ -35,7 +35,7 @@ class SetpointRamp:
         self.arrived = False
 
     def step(self, goal: Sequence[float], dt: float) -> None:
-        """Moves the setpoint for ``dt`` seconds; sets :attr:`arrived` once it rests on the goal.
+        """Moves the setpoint for ``dt`` seconds; sets :attr:``arrived`` once it rests on the goal.
 
         The velocity changes by at most max_accel·dt per step, except the last step onto the goal
         (at most 2·max_accel·dt).
@@ -51,7 +51,8 @@ class SetpointRamp:
             return
         self.arrived = False
         # Desired velocity: toward the goal, slow enough to brake to rest exactly there.
-        desired_speed = min(self.max_speed, math.sqrt(2.0 * BRAKING_MARGIN * self.max_accel * distance)) if distance > 0 else 0.0
+        braking_speed = math.sqrt(2.0 * BRAKING_MARGIN * self.max_accel * distance) if distance > 0 else 0.0
+        desired_speed = min(self.max_speed, braking_speed)
         desired = [c / distance * desired_speed if distance > 0 else 0.0 for c in to_goal]
         change = [desired[i] - v[i] for i in range(3)]
         change_norm = _norm(change)

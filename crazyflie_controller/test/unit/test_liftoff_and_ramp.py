@@ -1,5 +1,4 @@
 """Hover-thrust estimate from the lift-off climb, the gliding setpoint, and the node's parameter parsing."""
-import math
 
 import pytest
 

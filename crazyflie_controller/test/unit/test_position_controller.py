@@ -108,7 +108,7 @@ def test_original_handover_preloads_the_integrator_with_the_liftoff_thrust_and_r
     for axis in ("x", "y", "yaw"):                 # leftovers from an earlier flight
         c.pids[axis].integral = 0.05
     c.pids["y"]._prev_error = 3.0
-    t = airborne(c)
+    airborne(c)
     assert c.liftoff_thrust == pytest.approx(200.0)
     assert c.preload_thrust == c.liftoff_thrust
     assert c.pids["x"].integral == 0.0 and c.pids["yaw"].integral == 0.0

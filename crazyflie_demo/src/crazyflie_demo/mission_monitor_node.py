@@ -8,7 +8,6 @@ after ~timeout; as a required node it then ends the launch. ``~result_file`` (op
 """
 from __future__ import annotations
 
-import math
 import os
 import threading
 from typing import Dict, List

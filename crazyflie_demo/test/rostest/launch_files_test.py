@@ -78,7 +78,7 @@ def listed_nodes(launch: str, args: List[str]) -> Set[str]:
 
 
 def running_nodes(master: rosgraph.Master) -> Tuple[Set[str], Set[str]]:
-    """(node names, service names) as `rosnode list` / `rosservice list` would show them."""
+    """(node names, service names) as ``rosnode list`` / ``rosservice list`` would show them."""
     pubs, subs, srvs = master.getSystemState()
     nodes = {n for _, ns in pubs + subs + srvs for n in ns}
     return nodes, {s for s, _ in srvs}

@@ -162,8 +162,7 @@ class TeleopXbox360(unittest.TestCase):
 
             # left stick left: counter-clockwise, positive yaw rate
             yaw0 = self.probe.yaw(NAME)
-            r = self.hold(YAW_STICK, 0.5, 0.5)
-            rate = r["after"]["omega"][2] if "omega" in r["after"] else None
+            self.hold(YAW_STICK, 0.5, 0.5)
             dyaw = math.remainder(self.probe.yaw(NAME) - yaw0, 2 * math.pi)
             print("TELEOP yaw left: yaw changed %.1f deg" % math.degrees(dyaw))
             self.assertGreater(math.degrees(dyaw), 10.0, "left stick left should turn counter-clockwise")

@@ -36,7 +36,8 @@ needs_xacro = pytest.mark.skipif(XACRO is None, reason="xacro is not installed (
 def ros_env() -> Dict[str, str]:
     """ROS_PACKAGE_PATH with this repository first, so that $(find crazyflie_description) resolves here."""
     env = dict(os.environ)
-    env["ROS_PACKAGE_PATH"] = os.pathsep.join([REPO] + [p for p in env.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p])
+    others = [p for p in env.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p]
+    env["ROS_PACKAGE_PATH"] = os.pathsep.join([REPO] + others)
     return env
 
 
@@ -53,7 +54,7 @@ def expand(model: str, *args: str) -> ET.Element:
 
 
 def links(robot: ET.Element) -> Dict[str, ET.Element]:
-    return {l.get("name"): l for l in robot.findall("link")}
+    return {link.get("name"): link for link in robot.findall("link")}
 
 
 def joints(robot: ET.Element) -> Dict[str, ET.Element]:
@@ -65,7 +66,7 @@ def xyz(element: ET.Element) -> List[float]:
 
 
 def inertial_links(robot: ET.Element) -> List[ET.Element]:
-    return [l for l in robot.findall("link") if l.find("inertial") is not None]
+    return [link for link in robot.findall("link") if link.find("inertial") is not None]
 
 
 EXPECTED_LINKS = {"base_link", "center_of_mass", "m1", "m2", "m3", "m4", "prop1", "prop2", "prop3", "prop4"}
@@ -134,9 +135,9 @@ def test_front_is_marked_in_red_on_the_plus_x_edge():
     assert len(marks) == 1 and xyz(marks[0])[0] > 0.01
     r, g, b, _ = colours["crazyflie_front"]
     assert r > 0.8 and g < 0.3 and b < 0.3
-    front_props = {l.get("name") for l in robot.findall("link")
-                   if l.find("visual/material") is not None
-                   and l.find("visual/material").get("name") == "crazyflie_prop_front"}
+    front_props = {link.get("name") for link in robot.findall("link")
+                   if link.find("visual/material") is not None
+                   and link.find("visual/material").get("name") == "crazyflie_prop_front"}
     assert front_props == {"prop1", "prop4"}
 
 

@@ -43,7 +43,8 @@ def get_backend():
 
 
 def _sim_backend(address: str):
-    from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address   # lazily: real hardware never loads the sim
+    # Imported here: a process flying real hardware never loads the simulator.
+    from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address
     from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
     try:
         host, port = parse_address(address)

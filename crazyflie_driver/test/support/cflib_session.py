@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """One session of Bitcraze's cflib against the simulated world, reported as JSON on stdout.
 
-Run with cflib's interpreter (cflib >= 0.1.28 needs Python >= 3.10), `crazyflie_driver/src` on
+Run with cflib's interpreter (cflib >= 0.1.28 needs Python >= 3.10), ``crazyflie_driver/src`` on
 PYTHONPATH and CRAZYFLIE_SIM_ADDRESS naming a running world server. For radio URIs this process
-wraps `usb.core.find` so that cflib's own Crazyradio driver talks to our fake Crazyradio
-(`sim.fake_usb.FakeUsbBackend` on a `sim.medium.RemoteMedium`); for udp:// URIs cflib's UDP driver
+wraps ``usb.core.find`` so that cflib's own Crazyradio driver talks to our fake Crazyradio
+(``sim.fake_usb.FakeUsbBackend`` on a ``sim.medium.RemoteMedium``); for udp:// URIs cflib's UDP driver
 talks to the server's UDP endpoint directly. Everything after that is cflib's public API:
 
   scan (radio only) -> SyncCrazyflie connect -> both TOCs -> every parameter value ->
@@ -109,7 +109,7 @@ def sleep_world(seconds: float) -> None:
 
 
 def session(uri: str, param: str, sim_name: str, args: argparse.Namespace, out: dict) -> None:
-    """One Crazyflie from connect to disconnect; fills `out`."""
+    """One Crazyflie from connect to disconnect; fills ``out``."""
     from cflib.crazyflie import Crazyflie
     from cflib.crazyflie.log import LogConfig
     from cflib.crazyflie.syncCrazyflie import SyncCrazyflie

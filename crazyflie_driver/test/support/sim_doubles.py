@@ -42,7 +42,7 @@ class FakeVehicle:
 
 
 class FakeWorld:
-    """World contract without physics: `advance(dt)` moves time and fires tick listeners."""
+    """World contract without physics: ``advance(dt)`` moves time and fires tick listeners."""
 
     def __init__(self) -> None:
         self.time = 0.0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Callable, List, Optional
+from typing import Callable, Optional
 
 from crazyflie_driver import usb_choice
 from crazyflie_driver.protocol.crazyflie import Crazyflie

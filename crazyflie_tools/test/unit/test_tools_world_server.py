@@ -1,5 +1,5 @@
 """The installed-style scripts as separate processes with CRAZYFLIE_BACKEND=sim, against a world
-server in this process: the path a user takes with a running ``crazyflie_sim``.
+server in this process: the path a user takes with a running ``crazyflie_world_server``.
 
 The world is ``sim.world.World`` when it exists, else a still-standing stand-in with a real clock.
 """

@@ -12,7 +12,8 @@ each vehicle's pose as the motion-capture bridges of the original stack did:
 
 Private parameters: ``vehicles`` (list of ``{uri, name, x, y, z}``; ``position: [x, y, z]``,
 ``yaw`` and ``firmware`` also accepted; also as a YAML string holding that list, or the path of a
-YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri`` + ``name`` for one vehicle; ``dongles``
+YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri`` + ``name`` for one vehicle;
+``dongles``
 (simulated Crazyradios, default: enough for the URIs); ``speed`` (1.0); ``seed``; ``mocap``
 (vicon); ``mocap_rate`` (100 Hz); ``mocap_noise`` (position noise, m, standard deviation);
 ``mocap_latency`` (s); ``mocap_dropout`` (fraction of frames lost); ``world_frame`` (world);
@@ -30,7 +31,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional, Sequence
 

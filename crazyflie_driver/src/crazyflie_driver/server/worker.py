@@ -1,18 +1,18 @@
 """One Crazyflie served by one thread: the work behind ``crazyflie_server``, without ROS.
 
-A :class:`CrazyflieWorker` owns one :class:`~crazyflie_driver.protocol.crazyflie.Crazyflie` (or any
+A :class:``CrazyflieWorker`` owns one :class:``~crazyflie_driver.protocol.crazyflie.Crazyflie`` (or any
 object with the same methods) and is the only thread that streams to it:
 
 * a new setpoint wakes the thread at once and is sent in the next radio round trip; only the
   latest setpoint counts (there is no queue that could add delay);
 * when no setpoint comes, null packets keep the link alive (at least every ``keepalive_period``)
   and fetch the log data the Crazyflie has queued, one packet per poll, paced by
-  :class:`~crazyflie_driver.server.poll_pacer.PollPacer`;
+  :class:``~crazyflie_driver.server.poll_pacer.PollPacer``;
 * link quality (acked / sent over a window, from the link's ``LinkStatistics``) is watched per
   Crazyflie, a listener is told when it drops below ``LINK_QUALITY_WARNING``;
 * a Crazyflie that stops answering is reported as lost and retried slowly, without holding the
   dongle for the others; when it answers again its log blocks are set up again;
-* :meth:`CrazyflieWorker.emergency` works from any thread, at once, and is idempotent: no
+* :meth:``CrazyflieWorker.emergency`` works from any thread, at once, and is idempotent: no
   setpoint is sent after it returns, the e-stop packet goes out, then only zero-thrust
   setpoints, until the worker is removed;
 * an unexpected error in the loop never ends the thread silently: it is logged once with its
@@ -20,7 +20,7 @@ object with the same methods) and is the only thread that streams to it:
   then stops the Crazyflie unless new setpoints come), the listener is told, and the loop restarts;
   after ``MAX_RESTARTS`` errors within ``RESTART_WINDOW`` the worker gives up and closes the link.
 
-The ROS side (``nodes/crazyflie_server.py``) subclasses :class:`WorkerListener` to turn the
+The ROS side (``nodes/crazyflie_server.py``) subclasses :class:``WorkerListener`` to turn the
 callbacks into messages; everything here is testable with a fake Crazyflie object.
 """
 from __future__ import annotations
@@ -104,7 +104,8 @@ class CrazyflieWorker:
     def __init__(self, config: WorkerConfig, crazyflie: Any, listener: Optional[WorkerListener] = None,
                  keepalive_period: float = 0.010, link_lost_timeout: float = 1.0,
                  lost_retry_period: float = 0.25, quality_warning_interval: float = 5.0,
-                 rssi_period: float = 0.1, device_retry_window: float = 10.0, clock: Callable[[], float] = time.monotonic) -> None:
+                 rssi_period: float = 0.1, device_retry_window: float = 10.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.config = config
         self.cf = crazyflie
         self.listener = listener or WorkerListener()
@@ -157,7 +158,7 @@ class CrazyflieWorker:
         return self._emergency
 
     def start(self) -> None:
-        """Start the thread; the connect sequence runs in it. See :meth:`wait_ready`."""
+        """Start the thread; the connect sequence runs in it. See :meth:``wait_ready``."""
         if self._thread is not None:
             raise RuntimeError("worker for %s already started" % self.uri)
         self._thread = threading.Thread(target=self._run, name="crazyflie %s" % self.uri, daemon=True)
@@ -214,7 +215,7 @@ class CrazyflieWorker:
         return self.set_setpoint(packet)
 
     def cmd_vel(self, linear_x: float, linear_y: float, linear_z: float, angular_z: float) -> bool:
-        """A cmd_vel message mapped with this Crazyflie's trims (see :func:`setpoint_from_twist`)."""
+        """A cmd_vel message mapped with this Crazyflie's trims (see :func:``setpoint_from_twist``)."""
         sp = setpoint_from_twist(linear_x, linear_y, linear_z, angular_z,
                                  self.config.roll_trim, self.config.pitch_trim)
         return self.set_setpoint(sp)

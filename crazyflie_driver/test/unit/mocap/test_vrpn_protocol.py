@@ -152,7 +152,8 @@ def test_split_time_rounds_into_the_next_second():
 
 
 # -- session (bytes in, reports out) -----------------------------------------------------------
-def _described(types=((4, vp.TYPE_POS_QUAT), (5, vp.TYPE_VELOCITY)), senders=((0, "VRPN Control"), (1, "cf1"), (2, "Rigid Body 2"))):
+def _described(types=((4, vp.TYPE_POS_QUAT), (5, vp.TYPE_VELOCITY)),
+               senders=((0, "VRPN Control"), (1, "cf1"), (2, "Rigid Body 2"))):
     out = b"".join(vp.encode_sender_description(i, n) for i, n in senders)
     return out + b"".join(vp.encode_type_description(i, n) for i, n in types)
 

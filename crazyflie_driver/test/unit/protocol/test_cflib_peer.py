@@ -2,8 +2,8 @@
 
 A world server runs in this process (ephemeral TCP port, UDP endpoints on ephemeral ports) with two
 simulated Crazyflies: radio://0/80/2M/E7E7E7E701 (current firmware) and ...02 (2016.02 firmware,
-V1 TOCs). `support/cflib_session.py` runs in cflib's own virtual environment (created by
-`tools/bootstrap.sh --with-cflib`), wraps `usb.core.find` so cflib's Crazyradio driver lands on our
+V1 TOCs). ``support/cflib_session.py`` runs in cflib's own virtual environment (created by
+``tools/bootstrap.sh --with-cflib``), wraps ``usb.core.find`` so cflib's Crazyradio driver lands on our
 fake dongle, and drives a whole session with cflib's API. The tests check cflib's report and what
 the simulated Crazyflie saw.
 """
@@ -53,7 +53,8 @@ def served():
 
 def run_session(python, server, uri, *args):
     env = dict(os.environ)
-    env.update(PYTHONPATH=os.pathsep.join((str(SRC), str(TEST))), CRAZYFLIE_SIM_ADDRESS=server.address, PYTHONUNBUFFERED="1")
+    env.update(PYTHONPATH=os.pathsep.join((str(SRC), str(TEST))), CRAZYFLIE_SIM_ADDRESS=server.address,
+               PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
     proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

@@ -31,7 +31,7 @@ def test_v2_create_and_start_on_the_wire():
 
 def test_v1_create_uses_8_bit_ids():
     cf, link, fw = make_crazyflie(2)
-    block = cf.log.create_block(["stab.thrust", "radio.rssi"], 10, lambda ts, v: None)
+    cf.log.create_block(["stab.thrust", "radio.rssi"], 10, lambda ts, v: None)
     assert control_packets(link) == ["5d 00 01 22 0b 11 09", "5d 03 01 01"]
     assert fw.blocks[1]["period"] == 10
 

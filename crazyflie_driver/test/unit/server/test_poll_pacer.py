@@ -6,7 +6,7 @@ from crazyflie_driver.server.poll_pacer import PollPacer
 
 
 def fly(pacer: PollPacer, periods, seconds: float, round_trip: float = 0.0023, phase: float = 0.0):
-    """A Crazyflie producing one packet per block period (world starts at `phase`), polled as the
+    """A Crazyflie producing one packet per block period (world starts at ``phase``), polled as the
     pacer says; returns (polls, packets fetched, worst age of a packet when fetched, left queued)."""
     produced = sorted(phase + p * k for p in periods for k in range(1, int(seconds / p) + 1))
     queue, i, now, polls, fetched, worst = [], 0, 0.0, 0, 0, 0.0

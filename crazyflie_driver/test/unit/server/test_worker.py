@@ -102,7 +102,7 @@ def test_queued_log_data_is_drained_without_waiting_for_the_keepalive_period():
         battery = next(b for b in cf.log.blocks if "pm.vbat" in b.variables)
         t0 = time.monotonic()
         cf.downlink.extend((battery, i, [3.7] * len(battery.variables)) for i in range(6))
-        assert wait_for(lambda: len([l for l in rec.logs if l[0] == "battery"]) == 6, 1.0)
+        assert wait_for(lambda: len([entry for entry in rec.logs if entry[0] == "battery"]) == 6, 1.0)
         assert time.monotonic() - t0 < 0.1      # not 6 x 50 ms
     finally:
         w.stop()

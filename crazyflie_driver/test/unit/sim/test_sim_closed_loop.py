@@ -1,9 +1,9 @@
 """Closed-loop flights of a simulated Crazyflie through the fake radio.
 
-Path: `Crazyflie` facade -> RadioLink -> Crazyradio -> FakeUsbBackend -> LocalMedium ->
-SimulatedCrazyflie -> World vehicle (`sim.radio_rig.RadioRig`). A small position PID of this file
+Path: ``Crazyflie`` facade -> RadioLink -> Crazyradio -> FakeUsbBackend -> LocalMedium ->
+SimulatedCrazyflie -> World vehicle (``support.radio_rig.RadioRig``). A small position PID of this file
 reads the world's motion-capture model (default noise and latency, seeded) and sends raw RPYT
-setpoints with `Crazyflie.send_setpoint` every 10 ms of world time. The test steps the world
+setpoints with ``Crazyflie.send_setpoint`` every 10 ms of world time. The test steps the world
 between setpoints (instant dongle, world speed 0), so nothing depends on the wall clock and every
 run flies the same flight.
 """
@@ -17,7 +17,7 @@ import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.sim.world.physics import VehicleParams
-from crazyflie_driver.sim.radio_rig import RadioRig
+from support.radio_rig import RadioRig
 
 MASS = 0.030
 PERIOD = 0.01                      # s between setpoints (100 Hz)
@@ -87,7 +87,7 @@ class Flight:
             self.rig.advance(PERIOD)
 
     def fly(self, seconds: float, goal_at) -> None:
-        """Closed loop for `seconds`; goal_at(t) gives the goal position at world time t."""
+        """Closed loop for ``seconds``; goal_at(t) gives the goal position at world time t."""
         for _ in range(int(round(seconds / PERIOD))):
             pos, quat, stamp = self.rig.mocap_pose()
             assert self.cf.send_setpoint(*self.pid.update(pos, quat, stamp, goal_at(self.rig.time)))
@@ -100,7 +100,7 @@ class Flight:
                  lambda t: np.array([GOAL[0], GOAL[1], min(GOAL[2], climb_rate * (t - start))]))
 
     def hold(self, seconds: float) -> np.ndarray:
-        """Hold GOAL for `seconds`; returns the true position errors (m) of every period."""
+        """Hold GOAL for ``seconds``; returns the true position errors (m) of every period."""
         n = len(self.truth)
         self.fly(seconds, lambda t: GOAL)
         return np.array([np.linalg.norm(p - GOAL) for _, p in self.truth[n:]])

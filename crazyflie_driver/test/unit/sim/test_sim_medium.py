@@ -122,7 +122,8 @@ def test_no_ack_packets_are_delivered_without_a_reply():
 def test_remote_medium_without_a_world_names_the_fix():
     with pytest.raises(WorldNotRunning) as e:
         RemoteMedium("127.0.0.1", 1).dongle_count()
-    assert "no simulated world at 127.0.0.1:1" in str(e.value) and "rosrun crazyflie_driver crazyflie_sim" in str(e.value)
+    assert "no simulated world at 127.0.0.1:1" in str(e.value)
+    assert "rosrun crazyflie_driver crazyflie_world_server" in str(e.value)
 
 
 def test_parse_address():

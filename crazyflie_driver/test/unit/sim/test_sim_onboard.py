@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from crazyflie_driver.sim.world.stabilizer import default_params
@@ -15,7 +14,7 @@ GENERATIONS = ("current", "2016.02")
 
 
 def airborne(firmware="current", z=1.0, seed=1):
-    """A vehicle hovering at `z` (placed there, unlocked, hover thrust for 0.3 s)."""
+    """A vehicle hovering at ``z`` (placed there, unlocked, hover thrust for 0.3 s)."""
     w = World(speed=0, seed=seed)
     v = w.add_vehicle("cf1", position=(0.0, 0.0, z), firmware=firmware)
     v.set_rpyt(0, 0, 0, 0)
@@ -24,7 +23,7 @@ def airborne(firmware="current", z=1.0, seed=1):
 
 
 def fly(w, v, seconds, roll=0.0, pitch=0.0, yaw=0.0, thrust=HOVER, rate_hz=100):
-    """Send the same setpoint at `rate_hz` for `seconds` of world time."""
+    """Send the same setpoint at ``rate_hz`` for ``seconds`` of world time."""
     for _ in range(int(seconds * rate_hz)):
         v.set_rpyt(roll, pitch, yaw, thrust)
         w.step(int(1000 / rate_hz))

@@ -98,7 +98,7 @@ def test_floor_friction_stops_sliding():
 
 
 def spin_up(commands, steps=100):
-    """Body rates after `steps` ms from rest in the air with the given motor commands."""
+    """Body rates after ``steps`` ms from rest in the air with the given motor commands."""
     s = bodies((0, 0, 5.0))
     for _ in range(steps):
         RigidBodyBackend().step(s, np.array([commands], dtype=float), 0.001)

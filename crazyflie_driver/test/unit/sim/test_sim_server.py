@@ -1,7 +1,6 @@
 """World server <-> RemoteMedium round trips in process, control calls, and the CLI's lifecycle."""
 from __future__ import annotations
 
-import os
 import pathlib
 import signal
 import struct
@@ -223,7 +222,6 @@ def test_cli_serves_and_stops_cleanly_on_signals(sig):
 
 def test_shipped_example_vehicle_config_loads():
     """The example file in crazyflie_driver/config is valid: URIs parse, positions are 3-vectors."""
-    import os
     from crazyflie_driver.sim.air.server import load_vehicle_config
     from crazyflie_driver.crtp.uri import parse_uri
     path = str(TEST.parent / "config" / "sim_vehicles.yaml")

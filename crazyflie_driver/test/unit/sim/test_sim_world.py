@@ -1,7 +1,6 @@
 """The simulated world: vehicles, readings, battery, tick listeners, real time, mocap, closed loop."""
 from __future__ import annotations
 
-import math
 import threading
 import time
 

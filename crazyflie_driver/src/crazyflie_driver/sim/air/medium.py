@@ -1,10 +1,10 @@
 """The air between Crazyradio dongles and simulated Crazyflies.
 
-`LocalMedium` lives in the process that owns the world: a registry of `SimulatedCrazyflie` by
+``LocalMedium`` lives in the process that owns the world: a registry of ``SimulatedCrazyflie`` by
 (channel, datarate, address), per-dongle fault injection (packet loss and ack loss in percent of
-round trips, added latency, unplug) and a per-Crazyflie RSSI model. `RemoteMedium` is the same
-interface for another process: it forwards every call to a world server (`sim.server`) over a
-loopback TCP connection with a small binary framing (see `sim.wire`).
+round trips, added latency, unplug) and a per-Crazyflie RSSI model. ``RemoteMedium`` is the same
+interface for another process: it forwards every call to a world server (``sim.server``) over a
+loopback TCP connection with a small binary framing (see ``sim.air.server_framing``).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.sim.air import wire
+from crazyflie_driver.sim.air import server_framing as framing
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 19840
@@ -56,7 +56,7 @@ class WorldNotRunning(CrazyflieError, ConnectionError):
 
 
 def parse_address(text: Optional[str] = None) -> Tuple[str, int]:
-    """`host:port` (default from CRAZYFLIE_SIM_ADDRESS, else 127.0.0.1:19840); loopback only."""
+    """``host:port`` (default from CRAZYFLIE_SIM_ADDRESS, else 127.0.0.1:19840); loopback only."""
     if text is None:
         text = os.environ.get(ENV_ADDRESS, "") or "%s:%d" % (DEFAULT_HOST, DEFAULT_PORT)
     host, sep, port_text = str(text).strip().rpartition(":")
@@ -203,7 +203,7 @@ def _percent(name: str, value: float) -> float:
 
 
 class RemoteMedium:
-    """The `Medium` of a world server in another process (loopback TCP, one request at a time)."""
+    """The ``Medium`` of a world server in another process (loopback TCP, one request at a time)."""
 
     def __init__(self, host: Optional[str] = None, port: Optional[int] = None, timeout: float = 5.0) -> None:
         if host is not None and port is None and ":" in host:
@@ -211,24 +211,25 @@ class RemoteMedium:
         elif host is None and port is None:
             self.host, self.port = parse_address(None)
         else:
-            self.host, self.port = parse_address("%s:%d" % (host or DEFAULT_HOST, DEFAULT_PORT if port is None else port))
+            port = DEFAULT_PORT if port is None else port
+            self.host, self.port = parse_address("%s:%d" % (host or DEFAULT_HOST, port))
         self.timeout = float(timeout)
         self._lock = threading.Lock()
-        self._conn: Optional[wire.Connection] = None
+        self._conn: Optional[framing.Connection] = None
 
     @property
     def address(self) -> str:
         return "%s:%d" % (self.host, self.port)
 
-    def _connect(self) -> wire.Connection:
+    def _connect(self) -> framing.Connection:
         try:
             sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
         except OSError as e:
             raise WorldNotRunning("no simulated world at %s (start one with: rosrun crazyflie_driver "
-                                  "crazyflie_sim --uri radio://0/80/2M/E7E7E7E7E7): %s"
+                                  "crazyflie_world_server --uri radio://0/80/2M/E7E7E7E7E7): %s"
                                   % (self.address, e.strerror or e)) from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        return wire.Connection(sock)
+        return framing.Connection(sock)
 
     def _request(self, op: int, body: bytes) -> Tuple[int, bytes]:
         """One request/response; reconnects once if the connection dropped since the last call."""
@@ -256,17 +257,17 @@ class RemoteMedium:
     # --- Medium ------------------------------------------------------------------------------
     def transmit(self, dongle: int, channel: int, datarate: int, address: bytes,
                  data: bytes, ack_enabled: bool = True, arc: int = 3) -> AirReply:
-        status, body = self._request(wire.OP_TRANSMIT,
-                                     wire.encode_transmit(dongle, channel, datarate, address, data, ack_enabled, arc))
-        if status != wire.STATUS_OK:
+        request = framing.encode_transmit(dongle, channel, datarate, address, data, ack_enabled, arc)
+        status, body = self._request(framing.OP_TRANSMIT, request)
+        if status != framing.STATUS_OK:
             raise CrazyflieError("world server refused a radio packet: %s" % body.decode("utf-8", "replace"))
-        return wire.decode_air_reply(body, AirReply)
+        return framing.decode_air_reply(body, AirReply)
 
     def control(self, op: str, **args) -> Any:
-        """A control call on the world server (see `WorldServer.control`); raises its error text."""
-        status, body = self._request(wire.OP_CONTROL, json.dumps({"op": op, "args": args}).encode("utf-8"))
+        """A control call on the world server (see ``WorldServer.control``); raises its error text."""
+        status, body = self._request(framing.OP_CONTROL, json.dumps({"op": op, "args": args}).encode("utf-8"))
         result = json.loads(body.decode("utf-8")) if body else None
-        if status != wire.STATUS_OK:
+        if status != framing.STATUS_OK:
             raise CrazyflieError("simulated world: %s" % (result,))
         return result
 

@@ -1,10 +1,10 @@
 """The world server: one process owning the simulated world that every tool and node shares.
 
-`WorldServer` owns a world (`sim.world.World`), the `LocalMedium` and one `SimulatedCrazyflie` per
-vehicle; it serves `RemoteMedium` clients on loopback TCP (one thread per connection), runs the
+``WorldServer`` owns a world (``sim.world.World``), the ``LocalMedium`` and one ``SimulatedCrazyflie`` per
+vehicle; it serves ``RemoteMedium`` clients on loopback TCP (one thread per connection), runs the
 firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
 
-CLI: ``rosrun crazyflie_driver crazyflie_sim --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``.
+CLI: ``rosrun crazyflie_driver crazyflie_world_server --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.sim.air import wire
+from crazyflie_driver.sim.air import server_framing as framing
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
 from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
@@ -179,7 +179,7 @@ class WorldServer:
             sock.bind((self.host, self.port))
         except OSError as e:
             sock.close()
-            raise CrazyflieError("cannot serve the simulated world on %s:%d: %s (is another crazyflie_sim "
+            raise CrazyflieError("cannot serve the simulated world on %s:%d: %s (is another crazyflie_world_server "
                                  "running? choose another with --address)" % (self.host, self.port, e.strerror or e))
         sock.listen(16)
         sock.settimeout(0.2)
@@ -212,7 +212,7 @@ class WorldServer:
             self._threads.append(t)
 
     def _serve(self, client: socket.socket) -> None:
-        conn = wire.Connection(client)
+        conn = framing.Connection(client)
         medium = self.medium
         try:
             while self._running.is_set():
@@ -221,22 +221,22 @@ class WorldServer:
                 except (EOFError, OSError):
                     break
                 try:
-                    if code == wire.OP_TRANSMIT:
-                        reply = medium.transmit(*wire.decode_transmit(body))
-                        conn.send(wire.STATUS_OK, wire.encode_air_reply(reply))
+                    if code == framing.OP_TRANSMIT:
+                        reply = medium.transmit(*framing.decode_transmit(body))
+                        conn.send(framing.STATUS_OK, framing.encode_air_reply(reply))
                         continue
-                    if code == wire.OP_CONTROL:
+                    if code == framing.OP_CONTROL:
                         request = json.loads(body.decode("utf-8"))
                         result = self.control(str(request.get("op")), dict(request.get("args") or {}))
-                        conn.send(wire.STATUS_OK, json.dumps(result).encode("utf-8"))
+                        conn.send(framing.STATUS_OK, json.dumps(result).encode("utf-8"))
                         continue
-                    conn.send(wire.STATUS_ERROR, json.dumps("unknown request code %d" % code).encode("utf-8"))
+                    conn.send(framing.STATUS_ERROR, json.dumps("unknown request code %d" % code).encode("utf-8"))
                 except OSError:
                     break
                 except Exception as e:  # a bad request gets an answer, never a dead server
                     text = str(e.args[0]) if isinstance(e, KeyError) and e.args else str(e)
                     try:
-                        conn.send(wire.STATUS_ERROR, json.dumps(text or type(e).__name__).encode("utf-8"))
+                        conn.send(framing.STATUS_ERROR, json.dumps(text or type(e).__name__).encode("utf-8"))
                     except OSError:
                         break
         finally:
@@ -271,7 +271,7 @@ class WorldServer:
 
 # --- command line --------------------------------------------------------------------------------
 def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
-    """Vehicles from YAML: a list (or `vehicles:` list) of {uri, name, position, firmware, yaw}."""
+    """Vehicles from YAML: a list (or ``vehicles:`` list) of {uri, name, position, firmware, yaw}."""
     import yaml
     try:
         with open(path) as f:
@@ -295,11 +295,12 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="crazyflie_sim", description="Run the simulated Crazyflie world.")
+    p = argparse.ArgumentParser(prog="crazyflie_world_server", description="Run the simulated Crazyflie world.")
     p.add_argument("--uri", action="append", default=[], help="radio URI of a simulated Crazyflie (repeatable)")
     p.add_argument("--config", help="YAML file listing vehicles (uri, name, position, firmware, yaw)")
     p.add_argument("--address", default=None,
-                   help="host:port to serve on (default $CRAZYFLIE_SIM_ADDRESS or %s:%d)" % (DEFAULT_HOST, DEFAULT_PORT))
+                   help="host:port to serve on (default $CRAZYFLIE_SIM_ADDRESS or %s:%d)"
+                   % (DEFAULT_HOST, DEFAULT_PORT))
     p.add_argument("--speed", type=float, default=1.0, help="world time per real time (0 = as fast as possible)")
     p.add_argument("--firmware", default="current", choices=sorted(PROFILES), help="firmware of --uri vehicles")
     p.add_argument("--dongles", type=int, default=1, help="number of simulated Crazyradios")
@@ -309,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    logging.basicConfig(level=logging.INFO, format="crazyflie_sim: %(message)s")
+    logging.basicConfig(level=logging.INFO, format="crazyflie_world_server: %(message)s")
     args = build_parser().parse_args(argv)
     try:
         vehicles = [{"uri": u, "firmware": args.firmware} for u in args.uri]
@@ -334,7 +335,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                  float(v.get("yaw") or 0.0))
         server.start()
     except (ValueError, KeyError, CrazyflieError, ImportError) as e:
-        print("crazyflie_sim: error: %s" % (e,), file=sys.stderr)
+        print("crazyflie_world_server: error: %s" % (e,), file=sys.stderr)
         return 2
     stop = threading.Event()
 

@@ -1,12 +1,12 @@
 """The simulated Crazyflie's protocol side: nRF radio link plus the STM's CRTP ports.
 
-`SimulatedCrazyflie` answers the real protocol of one of two firmware generations (CRTP.md
+``SimulatedCrazyflie`` answers the real protocol of one of two firmware generations (CRTP.md
 Decisions 1): "current" (protocol 12, TOC V2, 1-byte empty acks) or "2016.02" (protocol 2, TOC V1,
-3-byte empty acks carrying RSSI). Its flight behaviour lives in the `Vehicle` it is given; this
+3-byte empty acks carrying RSSI). Its flight behaviour lives in the ``Vehicle`` it is given; this
 object only turns packets into vehicle calls and vehicle readings into packets.
 
-Two entry points: `handle_radio_packet` (what the dongle's radio delivers; returns the ack payload)
-and `handle_crtp` + `pop_outgoing` (a packet link such as UDP). `tick(world_time)` runs the log
+Two entry points: ``handle_radio_packet`` (what the dongle's radio delivers; returns the ack payload)
+and ``handle_crtp`` + ``pop_outgoing`` (a packet link such as UDP). ``tick(world_time)`` runs the log
 timers. Every entry point is thread safe and never raises on malformed input.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ import logging
 import threading
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable, Deque, Dict, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Deque, Dict, Optional, Sequence, Union
 
 from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
 from crazyflie_driver.sim.firmware import ports
@@ -299,15 +299,15 @@ class SimulatedCrazyflie:
             return len(self._tx)
 
     def set_tx_listener(self, listener: Optional[Callable[[], None]]) -> None:
-        """`listener()` is called (must not block) whenever a packet is queued."""
+        """``listener()`` is called (must not block) whenever a packet is queued."""
         with self.lock:
             self._tx_listener = listener
 
     # --- time ----------------------------------------------------------------------------------
     def tick(self, now: float) -> None:
-        """Run the firmware timers at world time `now`: log blocks, e-stop watchdog, link loss.
+        """Run the firmware timers at world time ``now``: log blocks, e-stop watchdog, link loss.
 
-        Sets `timer_due`, the world time before which another call has nothing to do (a packet
+        Sets ``timer_due``, the world time before which another call has nothing to do (a packet
         that may change the timers sets it back to 0), so a caller ticking many Crazyflies every
         millisecond skips the idle ones.
         """

@@ -27,9 +27,9 @@ SYS_STM_ON = 0x03
 class NrfLink:
     """Radio link state of one Crazyflie.
 
-    `deliver(bytes)` hands a CRTP packet to the STM; `next_downlink()` pops the next queued
-    downlink packet (or None); `rssi()` is the uplink RSSI in -dBm (positive, as the nRF reports it);
-    `system(cmd)` performs a 0xFE power command.
+    ``deliver(bytes)`` hands a CRTP packet to the STM; ``next_downlink()`` pops the next queued
+    downlink packet (or None); ``rssi()`` is the uplink RSSI in -dBm (positive, as the nRF reports it);
+    ``system(cmd)`` performs a 0xFE power command.
     """
 
     def __init__(self, deliver: Callable[[bytes], None], next_downlink: Callable[[], Optional[bytes]],

@@ -118,7 +118,7 @@ def generic_setpoint_port(state: SimState, hook: VehicleHook, halt: Callable[[st
 
 
 def memory_port(send: Send) -> Handler:
-    """Port 4: a Crazyflie without memories (`[1]` -> `[1, 0]`)."""
+    """Port 4: a Crazyflie without memories (``[1]`` -> ``[1, 0]``)."""
     def handle(header: int, channel: int, data: bytes) -> None:
         if not data:
             return

@@ -61,7 +61,7 @@ LOG_GROUP_STOP = 0x80
 
 
 def convert(value: Number, ctype: CType) -> Number:
-    """Value as a variable of `ctype` holds it: integers truncated toward zero and wrapped like a C
+    """Value as a variable of ``ctype`` holds it: integers truncated toward zero and wrapped like a C
     cast, floats rounded to their width. Non-finite values become 0 for integer types."""
     if ctype.is_float:
         try:
@@ -80,7 +80,7 @@ def convert(value: Number, ctype: CType) -> Number:
 
 
 def clamp(value: Number, ctype: CType) -> Number:
-    """Value saturated to the range of `ctype` (how a physics reading lands in a firmware variable)."""
+    """Value saturated to the range of ``ctype`` (how a physics reading lands in a firmware variable)."""
     if ctype.is_float:
         return convert(value, ctype)
     try:
@@ -247,7 +247,7 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
 
 
 def select(table: Sequence, generation: str) -> list:
-    """Entries of a table that exist in `generation`, grouped as the linker lays them out (first
+    """Entries of a table that exist in ``generation``, grouped as the linker lays them out (first
     appearance of a group decides its position; order inside a group is kept)."""
     entries = [e for e in table if generation in e.generations]
     groups: Dict[str, list] = {}
@@ -279,7 +279,7 @@ def toc_crc(entries: Sequence, type_byte) -> int:
 
 
 def toc_item_name(entry) -> bytes:
-    """`group NUL name NUL` as TOC items carry them."""
+    """``group NUL name NUL`` as TOC items carry them."""
     return entry.group.encode("ascii") + b"\x00" + entry.name.encode("ascii") + b"\x00"
 
 

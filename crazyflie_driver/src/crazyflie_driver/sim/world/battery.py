@@ -3,14 +3,14 @@
 EST model (PHYSICS.md §1.5 gives the anchors): 240 mAh cell; current = idle + k·Σ F_i^1.5 (rotor
 power grows with thrust^1.5), k set so a 27 g hover draws ≈ 2.1 A (≈ 7 min of hover);
 open-circuit voltage from a typical LiPo discharge curve; 0.15 Ω internal resistance (≈ 0.3 V sag at
-hover). Firmware power states as `pm.state`: 0 battery, 3 low power (below 3.2 V for 5 s),
+hover). Firmware power states as ``pm.state``: 0 battery, 3 low power (below 3.2 V for 5 s),
 4 shut down (below 3.0 V for 5 s: the motors stop).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 CAPACITY_MAH = 240.0
 IDLE_CURRENT_A = 0.08
@@ -60,7 +60,7 @@ def supply_current(motor_thrust: np.ndarray) -> np.ndarray:
 
 
 def update(b: BatteryStates, dt: float, motor_thrust: np.ndarray) -> None:
-    """Advance every battery by `dt` seconds under the given motor thrust."""
+    """Advance every battery by ``dt`` seconds under the given motor thrust."""
     if len(b) == 0:
         return
     current = supply_current(motor_thrust)
@@ -75,5 +75,5 @@ def update(b: BatteryStates, dt: float, motor_thrust: np.ndarray) -> None:
 
 
 def battery_level(charge: float) -> int:
-    """`pm.batteryLevel` in percent."""
+    """``pm.batteryLevel`` in percent."""
     return int(round(min(max(charge, 0.0), 1.0) * 100.0))

@@ -1,10 +1,10 @@
 """The motion-capture system of the simulated world, without ROS (PHYSICS.md §4.1).
 
-`MocapModel` samples every vehicle's true pose at `rate` Hz of world time, adds white position
+``MocapModel`` samples every vehicle's true pose at ``rate`` Hz of world time, adds white position
 noise (σ in m) and a small random rotation (σ in rad), drops a body from a frame with probability
-`dropout` (occlusion) and hands the frame out `latency` seconds later, stamped with its capture
+``dropout`` (occlusion) and hands the frame out ``latency`` seconds later, stamped with its capture
 time. A ROS wrapper publishes the frames as tf / PoseStamped; tests read them directly.
-`set_visible(name, False)` hides a body altogether (an occluded or lost marker set) until shown again.
+``set_visible(name, False)`` hides a body altogether (an occluded or lost marker set) until shown again.
 """
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ from typing import Callable, Deque, Dict, List, Optional, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.world.physics import quat_from_rotvec, quat_multiply
-from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 
 @dataclass
@@ -30,7 +29,7 @@ class MocapFrame:
 
 
 class MocapModel:
-    """Samples poses from a world (anything with `poses()` and `add_tick_listener`)."""
+    """Samples poses from a world (anything with ``poses()`` and ``add_tick_listener``)."""
 
     def __init__(self, world, rate: float = 100.0, position_noise: float = 0.0005,
                  orientation_noise: float = math.radians(0.2), latency: float = 0.008, dropout: float = 0.0,
@@ -63,7 +62,7 @@ class MocapModel:
 
     # --- driving -----------------------------------------------------------------------------
     def attach(self) -> "MocapModel":
-        """Run from the world's ticks: a capture every 1/rate s of world time, each delivered `latency` later."""
+        """Run from the world's ticks: a capture every 1/rate s of world time, each delivered ``latency`` later."""
         if not self._attached:
             period = 1.0 / self.rate
             self._next_sample = float(self.world.time) + period

@@ -1,4 +1,4 @@
-"""Rigid-body physics of Crazyflies, all vehicles at once (numpy), behind one `step` call.
+"""Rigid-body physics of Crazyflies, all vehicles at once (numpy), behind one ``step`` call.
 
 Numbers are the Förster identification of the Crazyflie 2.0 (PHYSICS.md §0, §1): thrust per motor
 F(u) = c2·u² + c1·u + c0 for a 16-bit command u (0 for u = 0), a first-order motor lag, yaw
@@ -7,19 +7,19 @@ back-right, M3 back-left, M4 front-left; M1/M3 react −κF about +z, M2/M4 +κF
 
 Frames: world x forward, y left, z up; body the same on the vehicle. Quaternions are (x, y, z, w)
 and rotate body vectors into the world; angular velocity is in the body frame (rad/s).
-Another integrator or vehicle model can replace `RigidBodyBackend`: the world only calls
-`step(states, actions, dt)` and reads `position`, `velocity`, `quaternion`, `omega`, `thrust`,
-`specific_force` and `on_ground` from the states.
+Another integrator or vehicle model can replace ``RigidBodyBackend``: the world only calls
+``step(states, actions, dt)`` and reads ``position``, ``velocity``, ``quaternion``, ``omega``, ``thrust``,
+``specific_force`` and ``on_ground`` from the states.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 GRAVITY = 9.81
 MAX_COMMAND = 65535
@@ -57,7 +57,7 @@ class VehicleParams:
         return c2 * u * u + c1 * u + c0
 
     def command_for_thrust(self, thrust: float) -> float:
-        """Inverse of `thrust`: the command giving `thrust` newtons per motor."""
+        """Inverse of ``thrust``: the command giving ``thrust`` newtons per motor."""
         c2, c1, c0 = self.thrust_coeffs
         disc = c1 * c1 - 4.0 * c2 * (c0 - thrust)
         return (-c1 + math.sqrt(max(disc, 0.0))) / (2.0 * c2)
@@ -208,7 +208,7 @@ class RigidBodyBackend:
         self._blend_value = np.zeros((0, 1))
 
     def drive(self, states: BodyStates, actions: np.ndarray, dt: float) -> Drive:
-        """The per-substep constants of holding motor commands `actions` (N,4, 0..65535) for `dt` s."""
+        """The per-substep constants of holding motor commands ``actions`` (N,4, 0..65535) for ``dt`` s."""
         actions = np.asarray(actions, dtype=float)
         if actions.shape != (len(states), 4):
             raise ValueError("actions must have shape (%d, 4), got %s" % (len(states), actions.shape))
@@ -232,9 +232,9 @@ class RigidBodyBackend:
         return self._blend_value
 
     def step(self, states: BodyStates, actions: np.ndarray, dt: float, drive: Optional[Drive] = None) -> None:
-        """Advance every vehicle by `dt` seconds with motor commands `actions` (N,4, 0..65535).
+        """Advance every vehicle by ``dt`` seconds with motor commands ``actions`` (N,4, 0..65535).
 
-        `drive`: the result of `drive(states, actions, dt)` when the caller keeps it across steps.
+        ``drive``: the result of ``drive(states, actions, dt)`` when the caller keeps it across steps.
         """
         if len(states) == 0:
             return
@@ -366,4 +366,4 @@ _MINUS_ONES4 = -np.ones((4, 1))
 _ONES31 = np.ones((3, 1))
 # Horner coefficients (highest power first) of sin(a/2)/a and cos(a/2) in a²
 _ROTATION_SERIES = np.array([[-1.0 / 645120.0, -1.0 / 46080.0], [1.0 / 3840.0, 1.0 / 384.0],
-                             [-1.0 / 48.0, -1.0 / 8.0], [0.5, 1.0]])                                                      # (9, 3)
+                             [-1.0 / 48.0, -1.0 / 8.0], [0.5, 1.0]])

@@ -13,7 +13,7 @@ from typing import Dict
 
 import numpy as np
 
-from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 GRAVITY = 9.81
 GYRO_NOISE_DPS = 0.1                  # rms at the 98 Hz DLPF
@@ -60,7 +60,7 @@ def vibration(thrust_fraction: np.ndarray) -> np.ndarray:
 
 def gyro_measured(s: SensorStates, omega: np.ndarray, thrust_fraction: np.ndarray,
                   rng: np.random.Generator) -> np.ndarray:
-    """Calibrated gyro (N,3) in deg/s for the controller and `gyro.*` (standard signs)."""
+    """Calibrated gyro (N,3) in deg/s for the controller and ``gyro.*`` (standard signs)."""
     sigma = GYRO_NOISE_DPS + GYRO_VIBRATION_DPS * vibration(thrust_fraction)
     return np.degrees(omega) + s.gyro_bias + rng.standard_normal(omega.shape) * sigma[:, None]
 
@@ -71,13 +71,13 @@ def pressure_hpa(altitude_m: float) -> float:
 
 
 def altitude_m(pressure: float) -> float:
-    """The firmware's altitude from pressure (inverse of `pressure_hpa`)."""
+    """The firmware's altitude from pressure (inverse of ``pressure_hpa``)."""
     return 44330.8 * (1.0 - (max(pressure, 1e-3) / SEA_LEVEL_HPA) ** 0.190263)
 
 
 def imu_readings(s: SensorStates, i: int, specific_force: np.ndarray, omega: np.ndarray,
                  rotation: np.ndarray, thrust_fraction: float, rng: np.random.Generator) -> Dict[str, float]:
-    """acc.*, gyro.*, mag.* (and raw register variants) of vehicle `i`; `rotation` body -> world."""
+    """acc.*, gyro.*, mag.* (and raw register variants) of vehicle ``i``; ``rotation`` body -> world."""
     vib = float(vibration(np.array(thrust_fraction)))
     acc = specific_force / GRAVITY + s.acc_bias[i] + rng.standard_normal(3) * (ACC_NOISE_G + ACC_VIBRATION_G * vib)
     gyro_true = np.degrees(omega)

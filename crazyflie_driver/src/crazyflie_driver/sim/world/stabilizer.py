@@ -17,7 +17,7 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
@@ -67,7 +67,7 @@ def check_generation(firmware: str) -> str:
 
 
 def default_params(firmware: str) -> Dict[str, float]:
-    """The controller's parameters with the firmware's names, e.g. `pid_rate.roll_kp`."""
+    """The controller's parameters with the firmware's names, e.g. ``pid_rate.roll_kp``."""
     out: Dict[str, float] = {}
     for group, per_axis in GAINS[check_generation(firmware)].items():
         for axis, gains in zip(AXES, per_axis):
@@ -123,7 +123,7 @@ class OnboardStates(Rows):
         return i
 
     def boot(self, i: int, firmware: str, now: float, yaw_deg: float = 0.0) -> None:
-        """Row `i` as after power-on: default gains, thrust locked, controller reset."""
+        """Row ``i`` as after power-on: default gains, thrust locked, controller reset."""
         for name in self.FIELDS:
             getattr(self, name)[i] = 0
         self.gen2016[i] = check_generation(firmware) == GEN_2016
@@ -198,13 +198,13 @@ class OnboardController:
     def update(self, tick: int, now: float, body: BodyStates, gyro_deg, battery_empty: np.ndarray) -> np.ndarray:
         """One 1 kHz firmware tick for all vehicles; returns the motor commands (N,4).
 
-        `tick` counts world ticks (decides which loops run: the attitude and rate loops every 2nd
-        tick), `gyro_deg` is the measured body rate (N,3, deg/s, standard signs; needed on even
-        ticks only), `battery_empty` (N,) forces the motors off and locks.
+        ``tick`` counts world ticks (decides which loops run: the attitude and rate loops every 2nd
+        tick), ``gyro_deg`` is the measured body rate (N,3, deg/s, standard signs; needed on even
+        ticks only), ``battery_empty`` (N,) forces the motors off and locks.
 
         Between two runs of the PIDs the motors change only when a setpoint, a lock, a parameter or
-        the setpoint watchdog changes the thrust: `motors_may_change` says whether an odd tick has
-        anything to compute; when it says no, `motors` holds what this call would return.
+        the setpoint watchdog changes the thrust: ``motors_may_change`` says whether an odd tick has
+        anything to compute; when it says no, ``motors`` holds what this call would return.
         """
         s = self.s
         self.dirty = False
@@ -272,7 +272,7 @@ class OnboardController:
     def _tumble(self, tilt_cos: np.ndarray, thrust: np.ndarray) -> bool:
         """Current firmware: tilted over 60° for 1 s or upside down for 0.1 s while flying -> locked.
 
-        `tilt_cos`: cosine of each body's tilt (its z axis against the world's). True when a vehicle
+        ``tilt_cos``: cosine of each body's tilt (its z axis against the world's). True when a vehicle
         was locked by this call.
         """
         s = self.s

@@ -1,8 +1,8 @@
 """The simulated world: Crazyflies stepped together at 1 kHz with numpy, in real time or faster.
 
-`World` owns one row per vehicle in each model's arrays (physics `BodyStates`, onboard controller,
+``World`` owns one row per vehicle in each model's arrays (physics ``BodyStates``, onboard controller,
 sensors, battery) and advances all of them with a handful of numpy expressions per tick, so its
-cost grows slowly with the number of vehicles. `Vehicle` is the per-Crazyflie handle the
+cost grows slowly with the number of vehicles. ``Vehicle`` is the per-Crazyflie handle the
 simulated firmware talks to (see the Vehicle contract in docs/architecture.md); every method takes
 the world lock, so it may be called from any thread while the world steps.
 """
@@ -19,8 +19,8 @@ import numpy as np
 from crazyflie_driver.sim.world import battery as _battery
 from crazyflie_driver.sim.world import sensors as _sensors
 from crazyflie_driver.sim.world import flight as _flight
-from crazyflie_driver.sim.world.stabilizer import GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE, LOCK_TUMBLE, OnboardController, \
-    check_generation, default_params
+from crazyflie_driver.sim.world.stabilizer import (GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE,
+                                                   LOCK_TUMBLE, OnboardController, check_generation, default_params)
 from crazyflie_driver.sim.world.physics import BodyStates, RigidBodyBackend, VehicleParams, quat_to_matrix
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
@@ -239,7 +239,7 @@ class World:
     def add_vehicle(self, name: str, position=(0.0, 0.0, 0.0), yaw: float = 0.0, firmware: str = GEN_CURRENT,
                     mass: Optional[float] = None, params: Optional[VehicleParams] = None,
                     battery_charge: float = 1.0) -> Vehicle:
-        """A Crazyflie at `position` (m) with `yaw` (rad), at rest on the floor when z <= 0."""
+        """A Crazyflie at ``position`` (m) with ``yaw`` (rad), at rest on the floor when z <= 0."""
         name = str(name)
         check_generation(firmware)
         pos = np.asarray(position, dtype=float).reshape(-1)
@@ -298,24 +298,24 @@ class World:
 
     # --- stepping ----------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
-        """Advance `n` firmware ticks (1 ms each) for all vehicles; tick listeners run in between."""
+        """Advance ``n`` firmware ticks (1 ms each) for all vehicles; tick listeners run in between."""
         for _ in range(int(n)):
             with self._lock:
                 self._tick()
                 now = self.time
                 if now < self._listeners_due - 1e-9:
                     continue
-                due = [l for l in self._listeners if now >= l[2] - 1e-9]
-                for l in due:
-                    l[2] += l[1]
-                    if l[2] <= now:
-                        l[2] = now + l[1]
-                self._listeners_due = min((l[2] for l in self._listeners), default=math.inf)
-            for l in due:
+                due = [entry for entry in self._listeners if now >= entry[2] - 1e-9]
+                for entry in due:
+                    entry[2] += entry[1]
+                    if entry[2] <= now:
+                        entry[2] = now + entry[1]
+                self._listeners_due = min((entry[2] for entry in self._listeners), default=math.inf)
+            for entry in due:
                 try:
-                    l[0](now)
+                    entry[0](now)
                 except Exception:
-                    _log.exception("world tick listener %r failed", l[0])
+                    _log.exception("world tick listener %r failed", entry[0])
 
     def _tick(self) -> None:
         """One firmware tick of every vehicle: a fixed pipeline of whole-fleet numpy stages.
@@ -354,7 +354,7 @@ class World:
 
     # --- readings ----------------------------------------------------------------------------
     def _readings(self, i: int, group: str) -> Dict[str, float]:
-        """Log variables of one group for vehicle row `i` (called under the lock)."""
+        """Log variables of one group for vehicle row ``i`` (called under the lock)."""
         b, o = self.bodies, self.onboard.s
         if group in ("acc", "gyro", "mag", "mag_raw"):
             r = quat_to_matrix(b.quaternion[i:i + 1])[0]
@@ -386,9 +386,9 @@ class World:
         return {}
 
     def add_tick_listener(self, fn: Callable[[float], None], period: float, first: Optional[float] = None) -> None:
-        """Call fn(world_time) every `period` seconds of world time (from the stepping thread).
+        """Call fn(world_time) every ``period`` seconds of world time (from the stepping thread).
 
-        The first call is at world time `first` (default: one period from now), on the first tick
+        The first call is at world time ``first`` (default: one period from now), on the first tick
         at or after it.
         """
         if not period > 0:
@@ -400,11 +400,11 @@ class World:
 
     def remove_tick_listener(self, fn: Callable[[float], None]) -> None:
         with self._lock:
-            self._listeners = [l for l in self._listeners if l[0] is not fn]
+            self._listeners = [entry for entry in self._listeners if entry[0] is not fn]
 
     # --- real time ---------------------------------------------------------------------------
     def start(self) -> None:
-        """Step in a background thread at `speed` × real time (speed 0: as fast as possible)."""
+        """Step in a background thread at ``speed`` × real time (speed 0: as fast as possible)."""
         with self._lock:
             if self._thread is not None and self._thread.is_alive():
                 return
@@ -424,7 +424,7 @@ class World:
         return self._thread is not None and self._thread.is_alive()
 
     def _run(self) -> None:
-        """Real-time stepping: wake every WAKE_PERIOD_S of wall time (per `speed`), step what is due."""
+        """Real-time stepping: wake every WAKE_PERIOD_S of wall time (per ``speed``), step what is due."""
         wall0, world0 = _time.monotonic(), self.time
         meter_wall, meter_world = wall0, world0
         wake_ticks = max(1, int(round(WAKE_PERIOD_S / FIRMWARE_TICK_S)))

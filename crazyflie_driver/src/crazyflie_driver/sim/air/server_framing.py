@@ -1,7 +1,7 @@
-"""Binary framing between `RemoteMedium` clients and the world server.
+"""Binary framing between ``RemoteMedium`` clients and the world server.
 
-A frame is `[code u8, length u16 LE, body]`. Requests: OP_TRANSMIT (a radio packet; the hot path,
-a fixed 10-byte head plus the packet) and OP_CONTROL (JSON `{"op": ..., "args": {...}}`). Replies
+A frame is ``[code u8, length u16 LE, body]``. Requests: OP_TRANSMIT (a radio packet; the hot path,
+a fixed 10-byte head plus the packet) and OP_CONTROL (JSON ``{"op": ..., "args": {...}}``). Replies
 carry STATUS_OK or STATUS_ERROR as code. Kept tiny so one loopback round trip stays cheap.
 """
 from __future__ import annotations
@@ -46,7 +46,7 @@ def decode_air_reply(body: bytes, cls):
 
 
 class Connection:
-    """One framed stream socket; `receive` reads whole frames through a small buffer."""
+    """One framed stream socket; ``receive`` reads whole frames through a small buffer."""
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock

@@ -12,7 +12,7 @@ import numpy as np
 
 
 class Rows:
-    """Named arrays sharing their first axis. Subclasses list `FIELDS = {name: (tail shape, dtype)}`."""
+    """Named arrays sharing their first axis. Subclasses list ``FIELDS = {name: (tail shape, dtype)}``."""
 
     FIELDS: Dict[str, Tuple[Tuple[int, ...], Any]] = {}
 

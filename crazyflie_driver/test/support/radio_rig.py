@@ -1,10 +1,10 @@
 """One simulated Crazyflie reachable through the whole radio stack, in one process, stepped by the caller.
 
-The path is the real one: `Crazyflie` facade -> `RadioLink` -> `Crazyradio` -> `FakeUsbBackend`
--> `LocalMedium` -> `SimulatedCrazyflie` -> `World` vehicle, with a `MocapModel` watching the
-world. The fake dongle costs no time (`DongleTiming.instant()`) and the world runs at speed 0 with
+The path is the real one: ``Crazyflie`` facade -> ``RadioLink`` -> ``Crazyradio`` -> ``FakeUsbBackend``
+-> ``LocalMedium`` -> ``SimulatedCrazyflie`` -> ``World`` vehicle, with a ``MocapModel`` watching the
+world. The fake dongle costs no time (``DongleTiming.instant()``) and the world runs at speed 0 with
 nobody stepping it but the caller, so a flight is deterministic for a given seed and runs as fast
-as the machine allows: a closed loop sends a setpoint, calls `advance`, reads `mocap`, and so on.
+as the machine allows: a closed loop sends a setpoint, calls ``advance``, reads ``mocap``, and so on.
 Used by the closed-loop tests and the hover benchmark.
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ class RadioRig:
     def __init__(self, uri: str = DEFAULT_URI, firmware: str = "current", mass: float = 0.030,
                  position: Sequence[float] = (0.0, 0.0, 0.0), yaw: float = 0.0, seed: int = 1,
                  mocap: Optional[Dict[str, Any]] = None, name: str = "cf1") -> None:
-        """`mocap`: keyword arguments for `MocapModel` (default: its own noise, rate and latency)."""
+        """``mocap``: keyword arguments for ``MocapModel`` (default: its own noise, rate and latency)."""
         self.uri = parse_uri(uri)
         self.world = World(speed=0.0, seed=seed)
         self.vehicle = self.world.add_vehicle(name, position=position, yaw=yaw, firmware=firmware, mass=mass)
@@ -49,13 +49,13 @@ class RadioRig:
         self.manager = RadioManager(backend=self.backend)
 
     def connect(self, cache_dir: Optional[str] = None, timeout: float = 1.0) -> Crazyflie:
-        """A connected `Crazyflie` facade for this rig's URI (over the fake dongle)."""
+        """A connected ``Crazyflie`` facade for this rig's URI (over the fake dongle)."""
         cf = Crazyflie(self.uri, radio_manager=self.manager, cache_dir=cache_dir, timeout=timeout)
         cf.connect()
         return cf
 
     def advance(self, seconds: float) -> None:
-        """Step the world (and so the firmware timers and the motion capture) by `seconds`."""
+        """Step the world (and so the firmware timers and the motion capture) by ``seconds``."""
         ticks = int(round(seconds / FIRMWARE_TICK_S))
         if ticks < 0:
             raise ValueError("cannot advance the world by a negative time (%r s)" % (seconds,))
