@@ -33,7 +33,7 @@ from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCraz
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
 from crazyflie_driver.server.registry import CrazyflieRegistry
-from crazyflie_driver.server.status import ERROR, CrazyflieStatus, worker_status
+from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 from crazyflie_driver.nodes.onboard_ros import RosOnboardCommands
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down

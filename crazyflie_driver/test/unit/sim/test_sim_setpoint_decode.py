@@ -8,7 +8,8 @@ import struct
 import pytest
 
 from crazyflie_driver.sim.firmware import localization_decode as loc
-from crazyflie_driver.crtp.quaternion import compress_quaternion as compress_quat, decompress_quaternion as decompress_quat
+from crazyflie_driver.crtp.quaternion import compress_quaternion as compress_quat
+from crazyflie_driver.crtp.quaternion import decompress_quaternion as decompress_quat
 from crazyflie_driver.errors import CommandValueError
 from crazyflie_driver.sim.firmware.setpoint_decode import (
     EXPECTED_LENGTH, MODE_ABS, MODE_DISABLE, MODE_VELOCITY, FirmwareAssert, decode_meta, decode_setpoint)
@@ -57,9 +58,11 @@ def test_full_state_units_and_quaternion():
     data = struct.pack("<hhhhhhhhhIhhh", 1000, -500, 250, 100, 200, -300, 10, 20, 30, compress_quat(q), 1000, 0, -500)
     sp = decode_setpoint(bytes([6]) + data)
     assert len(data) == EXPECTED_LENGTH[6] == 28
-    assert sp.position == (1.0, -0.5, 0.25) and sp.velocity == (0.1, 0.2, -0.3) and sp.acceleration == (0.01, 0.02, 0.03)
+    assert sp.position == (1.0, -0.5, 0.25) and sp.velocity == (0.1, 0.2, -0.3)
+    assert sp.acceleration == (0.01, 0.02, 0.03)
     assert sp.mode_quat == MODE_ABS and sp.mode_yaw == MODE_DISABLE
-    assert sp.attitude_rate[0] == pytest.approx(math.degrees(1.0)) and sp.attitude_rate[2] == pytest.approx(-28.6479, 1e-4)
+    assert sp.attitude_rate[0] == pytest.approx(math.degrees(1.0))
+    assert sp.attitude_rate[2] == pytest.approx(-28.6479, 1e-4)
     assert sp.quaternion == pytest.approx(q, abs=2e-3)
 
 

@@ -44,7 +44,7 @@ def decode_pose(data: bytes) -> Optional[Measurement]:
 
 
 def decode_packed_positions(data: bytes, my_id: int) -> Tuple[Optional[Measurement], List[int]]:
-    """Channel 2: up to 4 items; (the item for `my_id` or None, ids of the other items)."""
+    """Channel 2: up to 4 items; (the item for ``my_id`` or None, ids of the other items)."""
     mine, others = None, []
     n = min(len(data) // PACKED_POSITION_ITEM.size, MAX_PACKED_POSITIONS)
     for k in range(n):

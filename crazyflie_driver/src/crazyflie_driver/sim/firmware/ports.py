@@ -93,7 +93,7 @@ def commander_port(state: SimState, hook: VehicleHook) -> Handler:
 def generic_setpoint_port(state: SimState, hook: VehicleHook, halt: Callable[[str, bytes], None]) -> Handler:
     """Port 7: generic setpoints (ch 0) and notify-setpoints-stop (ch 1). No reply.
 
-    A packet whose length the firmware asserts calls `halt(reason, packet)`, as the assert halts
+    A packet whose length the firmware asserts calls ``halt(reason, packet)``, as the assert halts
     the real Crazyflie.
     """
     def handle(header: int, channel: int, data: bytes) -> None:
@@ -134,7 +134,7 @@ def memory_port(send: Send) -> Handler:
 
 def localization_port(state: SimState, hook: VehicleHook, emergency_stop: Callable[[str], None],
                       now: Callable[[], float], my_id: int) -> Handler:
-    """Port 6: external position/pose (single, and packed items matched by `my_id`, the radio
+    """Port 6: external position/pose (single, and packed items matched by ``my_id``, the radio
     address's low byte) for the onboard estimator; the emergency stop and its watchdog (ch 1 types
     3 and 4). No reply."""
     def handle(header: int, channel: int, data: bytes) -> None:

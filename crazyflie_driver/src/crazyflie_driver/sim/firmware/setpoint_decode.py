@@ -3,7 +3,7 @@
 Every decoder starts from an all-zero setpoint (all modes disabled, thrust 0), as the firmware
 memsets its setpoint before decoding, and fills in the modes and values of its type. Most
 decoders check the exact data length with an assert: on a real Crazyflie a wrong length halts the
-STM32, so here they raise `FirmwareAssert` and the caller halts the simulated Crazyflie. Unknown
+STM32, so here they raise ``FirmwareAssert`` and the caller halts the simulated Crazyflie. Unknown
 types give the all-zero setpoint (motors off). The facts are written down in docs/protocol.md
 ("Generic setpoints").
 """
@@ -196,7 +196,7 @@ EXPECTED_LENGTH: Dict[int, Optional[int]] = {
 
 
 def decode_setpoint(payload: bytes) -> Setpoint:
-    """Port 7 channel 0 payload (type byte + data) -> `Setpoint`; raises `FirmwareAssert`."""
+    """Port 7 channel 0 payload (type byte + data) -> ``Setpoint``; raises ``FirmwareAssert``."""
     if not payload:
         raise FirmwareAssert("generic setpoint: empty packet (the decoder asserts a type byte)")
     kind, data = payload[0], bytes(payload[1:])

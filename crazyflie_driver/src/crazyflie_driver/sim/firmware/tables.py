@@ -218,7 +218,8 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
     + [ParamVar("kalman", "resetEstimation", "uint8_t", 0, generations=_CUR),
        ParamVar("kalman", "pNAcc_xy", "float", 0.5, generations=_CUR),
        ParamVar("kalman", "pNAcc_z", "float", 1.0, generations=_CUR)]
-    + [ParamVar("kalman", n, "float", 0.0, generations=_CUR) for n in ("initialX", "initialY", "initialZ", "initialYaw")]
+    + [ParamVar("kalman", n, "float", 0.0, generations=_CUR)
+       for n in ("initialX", "initialY", "initialZ", "initialYaw")]
     + [ParamVar("kalman", "maxPos", "float", 100.0, generations=_CUR),
        ParamVar("kalman", "maxVel", "float", 10.0, generations=_CUR)]
     + [ParamVar("locSrv", "extPosStdDev", "float", 0.01, generations=_CUR),

@@ -1,6 +1,6 @@
 """The onboard state estimate of every vehicle (numpy rows): what the firmware believes, not the truth.
 
-`stabilizer.estimator` 2 (Kalman) fuses external position/pose; 1 (complementary, also what 0
+``stabilizer.estimator`` 2 (Kalman) fuses external position/pose; 1 (complementary, also what 0
 "auto" and an unbuilt 3 fall back to) ignores them: it knows no x/y position at all and takes
 its height from the barometer. That is the trap users hit when they stream motion capture
 without switching estimators, and it is kept.
@@ -8,7 +8,7 @@ without switching estimators, and it is kept.
 The Kalman model is the honest reduced one of docs/simulation.md ("Onboard estimator"): attitude
 is the truth; the position estimate is truth + e, and at each measurement m the error follows a
 scalar Kalman gain K per axis, e <- (1-K)·e + K·(m - truth), with K from the measurement's
-standard deviation, the process noise `kalman.pNAcc_*` over the time since the last measurement
+standard deviation, the process noise ``kalman.pNAcc_*`` over the time since the last measurement
 and the firmware's variance floor. While flying, a tilt-estimate error makes the horizontal
 velocity estimate drift (and an accelerometer bias the vertical one), so without measurements
 the estimate runs away quadratically; measurements pull the velocity error back.
@@ -20,7 +20,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 COMPLEMENTARY, KALMAN = 1, 2
 GRAVITY = 9.81                      # m/s²
@@ -42,7 +42,7 @@ DEFAULTS: Dict[str, float] = {
 
 
 def estimator_kind(param_value: float) -> int:
-    """`stabilizer.estimator` value -> the estimator that runs (auto and unbuilt ones: complementary)."""
+    """``stabilizer.estimator`` value -> the estimator that runs (auto and unbuilt ones: complementary)."""
     return KALMAN if int(param_value) == KALMAN else COMPLEMENTARY
 
 
@@ -136,7 +136,7 @@ class Estimator:
     # --- measurements -----------------------------------------------------------------------------
     def measure(self, i: int, position: Sequence[float], quaternion: Optional[Sequence[float]],
                 truth: np.ndarray, now: float) -> bool:
-        """An external position (and quaternion) for row `i`; False when the estimator ignores it."""
+        """An external position (and quaternion) for row ``i``; False when the estimator ignores it."""
         s = self.s
         m = np.asarray(position, dtype=float)
         s.ext_pos[i] = m

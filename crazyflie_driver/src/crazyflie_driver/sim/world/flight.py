@@ -1,7 +1,7 @@
 """Onboard flight of every vehicle: the estimator and the position controller, hooked into the world tick.
 
-One object so that the world needs a single call per tick (`step`) and a single place to ask for
-the log variables of these stages (`readings`). It runs before the stabilizer's attitude and rate
+One object so that the world needs a single call per tick (``step``) and a single place to ask for
+the log variables of these stages (``readings``). It runs before the stabilizer's attitude and rate
 controllers, whose setpoint row it writes for vehicles flown by generic setpoints.
 """
 from __future__ import annotations
@@ -13,7 +13,8 @@ import numpy as np
 from crazyflie_driver.sim.firmware.setpoint_decode import Setpoint
 from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, Estimator
 from crazyflie_driver.sim.world.physics import BodyStates
-from crazyflie_driver.sim.world.position_control import POSITION_EVERY, PositionControl, default_params as control_defaults
+from crazyflie_driver.sim.world.position_control import POSITION_EVERY, PositionControl
+from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")
 

@@ -1,11 +1,11 @@
-"""The firmware's PID position controller (`stabilizer.controller` 1) for every vehicle (numpy rows).
+"""The firmware's PID position controller (``stabilizer.controller`` 1) for every vehicle (numpy rows).
 
 Runs at the firmware's 100 Hz position rate on the onboard estimate: a position PID (absolute
 axes only; x/y in the yaw-rotated body frame) gives a velocity setpoint, a velocity PID gives
 roll/pitch (legacy signs: pitch = -vx output, roll = -vy output) and thrust
 (1000·vz output + thrustBase, floored at thrustMin). Axes whose mode is disabled take roll,
 pitch or thrust straight from the setpoint. The result feeds the attitude and rate controllers
-of `stabilizer.py` through their setpoint row, so those stay exactly as they are. Facts and
+of ``stabilizer.py`` through their setpoint row, so those stay exactly as they are. Facts and
 gains: docs/simulation.md ("Onboard position control").
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Dict, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, MODE_DISABLE, MODE_VELOCITY, Setpoint
-from crazyflie_driver.sim.world.arrays import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 POSITION_EVERY = 10                 # ticks: the position controller runs at 100 Hz
 DT = POSITION_EVERY * 1e-3          # s
@@ -38,7 +38,7 @@ VEL_MAX = 1.0                       # m/s per axis
 
 
 def default_params() -> Dict[str, float]:
-    """`posCtlPid.*` and `velCtlPid.*` with the firmware's names and defaults."""
+    """``posCtlPid.*`` and ``velCtlPid.*`` with the firmware's names and defaults."""
     out: Dict[str, float] = {}
     for axis, gains in zip("xyz", POS_GAINS):
         for term, value in zip(TERMS + ("Kff",), gains):
@@ -56,7 +56,7 @@ _PARAMS = default_params()
 
 
 def _param_slot(name: str) -> Tuple[str, Tuple[int, ...]]:
-    """Parameter name -> (field, index within the row) of `PositionStates`."""
+    """Parameter name -> (field, index within the row) of ``PositionStates``."""
     group, _, field = name.partition(".")
     if group == "posCtlPid":
         if field[:1] in "xyz" and field[1:] in ("Kp", "Ki", "Kd", "Kff"):
@@ -148,8 +148,8 @@ class PositionControl:
                stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, thrust_on: np.ndarray) -> None:
         """100 Hz: new roll, pitch, yaw and thrust setpoints for the active rows of the stabilizer.
 
-        `stab_sp` (N,4: roll, pitch, yaw rate as the wire has it, thrust) and `stab_yaw_sp` (N,)
-        are the stabilizer's own setpoint arrays, written in place. `thrust_on` (N,) is False
+        ``stab_sp`` (N,4: roll, pitch, yaw rate as the wire has it, thrust) and ``stab_yaw_sp`` (N,)
+        are the stabilizer's own setpoint arrays, written in place. ``thrust_on`` (N,) is False
         where the motors were off at the last tick (the firmware then resets the PIDs).
         """
         s = self.s
@@ -217,7 +217,7 @@ class PositionControl:
 
     def _pid(self, rows: np.ndarray, desired: np.ndarray, measured: np.ndarray, gains: np.ndarray, which: str,
              limit: np.ndarray, run: np.ndarray) -> np.ndarray:
-        """The firmware's PID update (D on error, integral limit, output limit) where `run` is True."""
+        """The firmware's PID update (D on error, integral limit, output limit) where ``run`` is True."""
         s = self.s
         integ_name, prev_name = which + "_integ", which + "_prev"
         integ_all, prev_all = getattr(s, integ_name), getattr(s, prev_name)
@@ -231,7 +231,7 @@ class PositionControl:
         return out
 
     def targets(self, i: int) -> Dict[str, float]:
-        """`ctrltarget.*` log variables of row `i`."""
+        """``ctrltarget.*`` log variables of row ``i``."""
         s = self.s
         names = ("x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az")
         values = list(s.pos[i]) + list(s.vel[i]) + list(s.acc[i])

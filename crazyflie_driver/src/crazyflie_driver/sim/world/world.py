@@ -122,7 +122,7 @@ class Vehicle:
         self.set_rpyt(0.0, 0.0, 0.0, 0)
 
     def set_setpoint(self, setpoint) -> None:
-        """A decoded generic setpoint (`setpoint_decode.Setpoint`) at the CRTP priority."""
+        """A decoded generic setpoint (``setpoint_decode.Setpoint``) at the CRTP priority."""
         if setpoint.is_stop:
             self.stop_motors()
             return
