@@ -110,13 +110,15 @@ def main() -> int:
     p.add_argument("--out", default=os.path.join(HERE, "results", "onboard.txt"))
     args = p.parse_args()
     lines = ["onboard hover at (0, 0, 0.5): estimator 2 + PID position controller (controller 1), firmware defaults",
-             "mocap: MocapModel (0.5 mm / 0.2 deg noise, 8 ms latency) sent as port-6 extpos; setpoints type 7 at 50 Hz",
+             "mocap: MocapModel (0.5 mm / 0.2 deg noise, 8 ms latency) sent as port-6 extpos; "
+             "setpoints type 7 at 50 Hz",
              "errors of the true position over %.0f s, from %.0f s after the first setpoint; seed %d"
              % (HOLD_S, SETTLE_S, args.seed),
              "%-8s %-12s %9s %9s %9s %9s" % ("mocap Hz", "extPosStdDev", "mean_mm", "rms_mm", "max_mm", "world/wall")]
     for rate, std in ((100.0, 0.01), (100.0, 0.001), (10.0, 0.01), (2.0, 0.01)):
         r = flight(rate, std, args.seed)
-        lines.append("%-8g %-12g %9.2f %9.2f %9.2f %8.2fx" % (rate, std, r["mean_mm"], r["rms_mm"], r["max_mm"], r["rtf"]))
+        lines.append("%-8g %-12g %9.2f %9.2f %9.2f %8.2fx"
+                     % (rate, std, r["mean_mm"], r["rms_mm"], r["max_mm"], r["rtf"]))
         print(lines[-1], flush=True)
     lines.append("mocap outage while hovering (100 Hz before and after): horizontal error of the true position")
     lines.append("%-8s %16s %16s %22s" % ("outage s", "max during mm", "at its end mm", "max from +3 s after mm"))
@@ -124,7 +126,8 @@ def main() -> int:
         r = flight(100.0, 0.01, args.seed, outage)
         lines.append("%-8g %16.1f %16.1f %22.1f" % (outage, r["outage_max_mm"], r["outage_end_mm"], r["recovered_mm"]))
         print(lines[-1], flush=True)
-    lines.append("World.step real-time factor (no radio; onboard: extpos for every vehicle at 100 Hz via the Vehicle API)")
+    lines.append("World.step real-time factor "
+                 "(no radio; onboard: extpos for every vehicle at 100 Hz via the Vehicle API)")
     lines.append("%-9s %10s %10s" % ("vehicles", "RPYT", "onboard PID"))
     for n in (1, 10, 49):
         lines.append("%-9d %9.2fx %9.2fx" % (n, fleet_rtf(n, False), fleet_rtf(n, True)))

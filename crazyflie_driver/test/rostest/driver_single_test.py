@@ -141,7 +141,8 @@ class DriverSingle(unittest.TestCase):
     def test_g_emergency_stops_the_motors_for_good(self):
         # precondition: the motors spin, as reported by the motors log block (wait for it, the
         # setpoint and the next 20 ms log packet take a moment on a busy machine)
-        spinning = self.send_until(twist(z=30000.0), lambda: self.motors.latest() is not None and all(v > 0 for v in self.motors.latest().values), 5.0)
+        spinning = self.send_until(twist(z=30000.0), lambda: self.motors.latest() is not None
+                                   and all(v > 0 for v in self.motors.latest().values), 5.0)
         self.assertTrue(spinning, self.motors.latest().values)
         rospy.ServiceProxy(NS + "/emergency", Empty)()
         self.assertTrue(self.state()["emergency"])

@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Bitcraze's cflib flies a simulated Crazyflie with onboard estimation and control; JSON on stdout.
 
-Run like `cflib_session.py` (cflib's interpreter, `crazyflie_driver/src` and this test directory on
+Run like ``cflib_session.py`` (cflib's interpreter, ``crazyflie_driver/src`` and this test directory on
 PYTHONPATH, CRAZYFLIE_SIM_ADDRESS naming the world server). cflib's public API only:
 
   connect -> stabilizer.estimator / stabilizer.controller -> motion capture streamed with
-  `extpos.send_extpos` (or `send_extpose`) at 100 Hz, positions taken from the world's true state
+  ``extpos.send_extpos`` (or ``send_extpose``) at 100 Hz, positions taken from the world's true state
   as a motion-capture system would measure them -> position setpoints -> hover setpoints ->
   velocity-world setpoints -> notify-setpoint-stop -> disconnect.
 
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import threading
 import time
 

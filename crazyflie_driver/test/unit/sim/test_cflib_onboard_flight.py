@@ -2,7 +2,7 @@
 streamed to the onboard estimator (extpos / extpose at 100 Hz), onboard PID position control,
 position, hover and velocity-world setpoints; and the complementary-estimator trap.
 
-A world server runs in this process (real time, ephemeral ports); `support/cflib_onboard_session.py`
+A world server runs in this process (real time, ephemeral ports); ``support/cflib_onboard_session.py``
 runs in cflib's own interpreter over the fake Crazyradio or udp://. The flight is judged on the
 world's true positions, which the session samples through the server's control API.
 """
