@@ -69,7 +69,8 @@ class OnboardApi(unittest.TestCase):
         full.pose.orientation.w = 1.0
         for topic, kind, msg, wire_type in (("cmd_position", Position, position, 7), ("cmd_hover", Hover, hover, 10),
                                             ("cmd_velocity_world", VelocityWorld, velocity, 8),
-                                            ("cmd_full_state", FullState, full, 6), ("cmd_stop", EmptyMsg, EmptyMsg(), 0)):
+                                            ("cmd_full_state", FullState, full, 6),
+                                            ("cmd_stop", EmptyMsg, EmptyMsg(), 0)):
             before = self.port_count(7)
             arrived = self.publish_until(topic, kind, msg, lambda: self.state()["last_generic_type"] == wire_type
                                          and self.port_count(7) > before)
