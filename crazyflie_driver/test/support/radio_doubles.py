@@ -56,7 +56,8 @@ class ScriptedMedium:
 
 
 class NrfPeer:
-    """The Crazyflie's nRF side as CRTP.md §P2/§R4.5 describe it: safelink, downlink queue, empty acks.
+    """The Crazyflie's nRF side as docs/protocol.md ("Safelink, empty acks and RSSI") describes it: safelink,
+    downlink queue, empty acks.
 
     ``received`` holds every uplink packet accepted (duplicates dropped in safelink mode).
     ``lose_uplink`` / ``lose_ack``: sets of transmit numbers (0-based, counting every packet that

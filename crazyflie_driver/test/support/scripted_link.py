@@ -1,5 +1,5 @@
 """Test doubles for the protocol layer: a link that records every uplink packet and a
-scripted Crazyflie that answers with byte-exact firmware replies (CRTP.md Part P).
+scripted Crazyflie that answers with byte-exact firmware replies (docs/protocol.md).
 
 ``ScriptedLink`` follows the link contract of docs/architecture.md, minus the radio:
 each ``send`` hands the packet to the firmware double, and each round trip delivers at

@@ -1,4 +1,4 @@
-"""A small VRPN tracker server: for tests, and as a fake motion-capture system on a desk.
+"""A fake motion-capture system: a small VRPN tracker server, for a desk or a test (see docs/mocap.md).
 
 Speaks the wire format of a real VRPN server over TCP (clients that connect to it directly, as
 ours does): cookie, sender and type descriptions (ids deliberately offset so that no client can

@@ -1,7 +1,7 @@
 """The Crazyradio dongle over pyusb: vendor requests and bulk transfers, nothing else.
 
-Facts in CRTP.md §R1-§R3. Channel, address and data rate are cached so that a caller may set them
-before every packet and only pay for a control transfer (about 1-2.5 ms) when one changes.
+Facts in docs/protocol.md, "The Crazyradio dongle". Channel, address and data rate are cached so that a caller may
+set them before every packet and only pay for a control transfer (about 1-2.5 ms) when one changes.
 """
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ _GONE_ERRNOS = (errno.ENODEV, errno.EIO, errno.ENOENT, errno.ESHUTDOWN)
 
 
 class RadioAck(NamedTuple):
-    """What came back for one radio packet (CRTP.md §R3)."""
+    """What came back for one radio packet (docs/protocol.md, "Bulk transfers and the status byte")."""
 
     ack: bool
     power_detector: bool
@@ -146,7 +146,7 @@ class Crazyradio:
             if exc.errno == errno.EBUSY:
                 raise RadioAccessDenied("Crazyradio %d is in use by another program (%s)" % (index, exc)) from exc
             raise self._usb_error(exc, "opening") from exc
-        # Known state whatever the last user left behind (cflib's order, CRTP.md §R4.1).
+        # Known state whatever the last user left behind (the order cflib uses, ``cflib/drivers/crazyradio.py``).
         self.set_data_rate(DR_2MPS)
         self.set_channel(2)
         self.set_cont_carrier(False)

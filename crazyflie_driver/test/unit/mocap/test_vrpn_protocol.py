@@ -1,4 +1,4 @@
-"""VRPN wire format against byte strings written by hand from the fact sheet (MOCAP.md), plus the
+"""VRPN wire format against byte strings written by hand from docs/mocap.md, plus the
 pure helpers around it: Y-up conversion, tracker names, staleness, node parameters."""
 from __future__ import annotations
 

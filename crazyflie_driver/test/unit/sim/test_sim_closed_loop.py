@@ -35,7 +35,8 @@ def yaw_of(q) -> float:
 
 
 class HoverPid:
-    """Offboard position PID on motion-capture poses; output in raw wire values (PHYSICS.md §2.2).
+    """Offboard position PID on motion-capture poses; output in raw wire values (docs/simulation.md, "The onboard
+    attitude and rate controllers").
 
     Wire signs: roll > 0 moves the vehicle to −y, pitch > 0 (nose up) to −x, yaw rate > 0 turns it
     clockwise. Errors are rotated into the vehicle's yaw frame; the thrust is the hover command of

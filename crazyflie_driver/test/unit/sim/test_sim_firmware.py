@@ -1,4 +1,4 @@
-"""Byte-exact behaviour of the simulated Crazyflie firmware, both generations (CRTP.md Part P)."""
+"""Byte-exact behaviour of the simulated Crazyflie firmware, both generations (docs/protocol.md)."""
 from __future__ import annotations
 
 import random

@@ -18,7 +18,7 @@ def bodies(*positions, params=None):
 
 
 def test_hover_command_matches_the_computed_forster_figures():
-    # PHYSICS.md §0: 27 g -> 36 344, 32 g -> 40 922, 34 g -> 42 666
+    # docs/simulation.md, "Vehicle physics": 27 g -> 36 344, 32 g -> 40 922, 34 g -> 42 666
     assert VehicleParams().hover_command() == pytest.approx(36344, abs=1)
     assert VehicleParams(mass=0.032).hover_command() == pytest.approx(40922, abs=1)
     assert VehicleParams(mass=0.034).hover_command() == pytest.approx(42666, abs=1)
@@ -106,7 +106,7 @@ def spin_up(commands, steps=100):
 
 
 def test_x_layout_torque_signs():
-    # M1 front-right, M2 back-right, M3 back-left, M4 front-left (PHYSICS.md §1.6)
+    # M1 front-right, M2 back-right, M3 back-left, M4 front-left (docs/simulation.md, "Vehicle physics")
     left_up = spin_up([30000, 30000, 40000, 40000])          # more thrust on the left: roll right-hand +
     assert left_up.omega[0, 0] > 0.1 and abs(left_up.omega[0, 1]) < 0.02
     nose_up = spin_up([40000, 30000, 30000, 40000])          # more thrust in front: nose up = -pitch

@@ -1,4 +1,5 @@
-"""UDP endpoints as cflib's UDP driver uses them (CRTP.md §R6): scan probe, connected socket, pushes."""
+"""UDP endpoints as cflib's UDP driver uses them (docs/protocol.md, "The UDP link"): scan probe, connected
+socket, pushes."""
 from __future__ import annotations
 
 import socket

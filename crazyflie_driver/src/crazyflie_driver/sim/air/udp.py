@@ -1,6 +1,6 @@
 """UDP endpoints for cflib: ``udp://127.0.0.1:19850+i`` serves the i-th simulated Crazyflie.
 
-cflib's UDP driver (CRTP.md §R6) sends one datagram per CRTP packet (``[header, payload]``) from a
+cflib's UDP driver (docs/protocol.md, "The UDP link") sends one datagram per CRTP packet (``[header, payload]``) from a
 ``connect()``ed socket and scans by sending a lone 0xFF to ports 19850..19859. So an endpoint replies
 from the port it listens on to the client's address, answers the probe at once, and pushes every
 packet the Crazyflie queues (replies, console text, log data) to the last client it heard from.

@@ -1,7 +1,7 @@
 """The simulated Crazyflie's protocol side: nRF radio link plus the STM's CRTP ports.
 
-``SimulatedCrazyflie`` answers the real protocol of one of two firmware generations (CRTP.md
-Decisions 1): "current" (protocol 12, TOC V2, 1-byte empty acks) or "2016.02" (protocol 2, TOC V1,
+``SimulatedCrazyflie`` answers the real protocol of one of two firmware generations (docs/protocol.md):
+"current" (protocol 12, TOC V2, 1-byte empty acks) or "2016.02" (protocol 2, TOC V1,
 3-byte empty acks carrying RSSI). Its flight behaviour lives in the ``Vehicle`` it is given; this
 object only turns packets into vehicle calls and vehicle readings into packets.
 

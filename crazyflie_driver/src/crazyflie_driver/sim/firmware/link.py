@@ -1,7 +1,7 @@
 """The nRF51 side of the simulated Crazyflie's radio: safelink, empty acks, side-channel commands.
 
-Faithful to the nRF firmware (CRTP.md §P2, §R4.5): the STM releases at most one downlink packet per
-uplink packet, the downlink rides in the ack, and with safelink the sequence bits make duplicates
+Faithful to the nRF firmware (docs/protocol.md, "Safelink, empty acks and RSSI"): the STM releases at most one
+downlink packet per uplink packet, the downlink rides in the ack, and with safelink the sequence bits make duplicates
 harmless (an uplink seen twice is delivered once; an ack lost in the air is sent again).
 
 Like the real radio, the ack payload is chosen before the uplink reaches the STM, so the answer to a
@@ -16,7 +16,7 @@ SAFELINK_CMD = 0x05
 RADIO_CTRL_CMD = 0x03
 SYSTEM_CMD = 0xFE
 
-# 0xFF 0xFE <cmd>: power and bootloader commands of the nRF (CRTP.md §P2)
+# 0xFF 0xFE <cmd>: power and bootloader commands of the nRF (docs/protocol.md, "Safelink, empty acks and RSSI")
 SYS_RESET_INIT = 0xFF
 SYS_RESET = 0xF0
 SYS_ALL_OFF = 0x01

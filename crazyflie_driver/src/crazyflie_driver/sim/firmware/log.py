@@ -1,6 +1,6 @@
 """Port 5 of the simulated firmware: the log TOC, log blocks and their periodic data packets.
 
-CRTP.md §P5: every control packet is answered ``[cmd, request byte 1, result]``; the firmware
+docs/protocol.md, "Port 5 (log)": every control packet is answered ``[cmd, request byte 1, result]``; the firmware
 generation sets the TOC version (V2 16-bit ids / V1 8-bit ids), the create commands and the limits
 (current: 16 blocks, 128 ops, 26 value bytes; 2016.02: 8, 64, 30). Data packets are
 ``[block, timestamp u24 ms, values...]`` with each value converted to the type the host asked for.

@@ -1,7 +1,7 @@
 """Port 2 of the simulated firmware: the parameter TOC, reads, writes and the misc channel.
 
-Reply formats follow CRTP.md §P4 byte for byte: current firmware speaks TOC V2 (16-bit ids) with a
-status byte in reads; the 2016.02 firmware speaks TOC V1 (8-bit ids), reads ``[id, value]`` and
+Reply formats follow docs/protocol.md, "Port 2 (parameters)", byte for byte: current firmware speaks TOC V2 (16-bit
+ids) with a status byte in reads; the 2016.02 firmware speaks TOC V1 (8-bit ids), reads ``[id, value]`` and
 reports unknown ids as ``[0xFF, id, ENOENT]``. A write to a read-only parameter gets no reply.
 """
 from __future__ import annotations

@@ -189,7 +189,8 @@ def _pid(group: str, gains: Dict[str, Tuple[float, float, float]]) -> List[Param
     return out
 
 
-# Defaults of the current firmware (PHYSICS.md §2.4); the world overrides them per generation.
+# Defaults of the current firmware (docs/simulation.md, "The onboard attitude and rate controllers"); the world
+# overrides them per generation.
 PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
     [ParamVar("sound", "effect", "uint8_t", 0), ParamVar("sound", "neffect", "uint32_t", 14, readonly=True),
      ParamVar("sound", "freq", "uint16_t", 4000)]
@@ -258,7 +259,7 @@ def select(table: Sequence, generation: str) -> list:
 
 
 def toc_crc(entries: Sequence, type_byte) -> int:
-    """Chained CRC32 over the raw table including group start/stop markers (CRTP.md §P4):
+    """Chained CRC32 over the raw table including group start/stop markers (docs/protocol.md, "Port 2 (parameters)"):
     crc_i = CRC32(LE32(crc_{i-1}) + type byte + name)."""
     crc = 0
     last_group: Optional[str] = None

@@ -1,6 +1,6 @@
 """1S LiPo battery of each vehicle: charge drawn by the motors, voltage sag, firmware power states.
 
-EST model (PHYSICS.md §1.5 gives the anchors): 240 mAh cell; current = idle + k·Σ F_i^1.5 (rotor
+EST model (docs/simulation.md, "Battery", gives the anchors): 240 mAh cell; current = idle + k·Σ F_i^1.5 (rotor
 power grows with thrust^1.5), k set so a 27 g hover draws ≈ 2.1 A (≈ 7 min of hover);
 open-circuit voltage from a typical LiPo discharge curve; 0.15 Ω internal resistance (≈ 0.3 V sag at
 hover). Firmware power states as ``pm.state``: 0 battery, 3 low power (below 3.2 V for 5 s),

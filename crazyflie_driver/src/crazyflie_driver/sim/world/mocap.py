@@ -1,4 +1,4 @@
-"""The motion-capture system of the simulated world, without ROS (PHYSICS.md §4.1).
+"""The motion-capture system of the simulated world, without ROS (docs/simulation.md, "Motion capture").
 
 ``MocapModel`` samples every vehicle's true pose at ``rate`` Hz of world time, adds white position
 noise (σ in m) and a small random rotation (σ in rad), drops a body from a frame with probability

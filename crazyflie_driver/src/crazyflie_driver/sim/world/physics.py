@@ -1,8 +1,8 @@
 """Rigid-body physics of Crazyflies, all vehicles at once (numpy), behind one ``step`` call.
 
-Numbers are the Förster identification of the Crazyflie 2.0 (PHYSICS.md §0, §1): thrust per motor
+Numbers are the Förster identification of the Crazyflie 2.0 (docs/simulation.md, "Vehicle physics"): thrust per motor
 F(u) = c2·u² + c1·u + c0 for a 16-bit command u (0 for u = 0), a first-order motor lag, yaw
-reaction torque κ·F, body drag −K·Σω·v_body and the X layout of §1.6 (M1 front-right, M2
+reaction torque κ·F, body drag −K·Σω·v_body and the X layout of that section (M1 front-right, M2
 back-right, M3 back-left, M4 front-left; M1/M3 react −κF about +z, M2/M4 +κF).
 
 Frames: world x forward, y left, z up; body the same on the vehicle. Quaternions are (x, y, z, w)
@@ -353,7 +353,7 @@ def _quat_multiply_flat(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (a[:, :, None] * b[:, None, :]).reshape(-1, 16) @ _QUAT_PRODUCT
 
 
-# torque = (F @ pattern) * (arm_xy, arm_xy, κ): PHYSICS.md §1.6
+# torque = (F @ pattern) * (arm_xy, arm_xy, κ): docs/simulation.md, "Vehicle physics"
 _TORQUE_PATTERN = np.array([[-1.0, -1.0, -1.0],
                             [-1.0, 1.0, 1.0],
                             [1.0, 1.0, -1.0],

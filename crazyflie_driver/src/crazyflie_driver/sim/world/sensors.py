@@ -1,4 +1,4 @@
-"""Sensor readings of the simulated Crazyflie 2.0 from the true motion (PHYSICS.md §4.2, §4.3).
+"""Sensor readings of the simulated Crazyflie 2.0 from the true motion (docs/simulation.md, "Sensors").
 
 MPU-9250 gyro (deg/s) and accelerometer (g, specific force: +1 on z at rest), AK8963 magnetometer
 (gauss), LPS25H barometer (hPa, °C, metres above sea level), with datasheet-level white noise and a

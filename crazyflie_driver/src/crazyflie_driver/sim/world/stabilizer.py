@@ -1,11 +1,12 @@
 """The firmware's flight controller for the legacy RPYT setpoint, all vehicles at once (numpy).
 
-Follows PHYSICS.md §2: commander semantics (thrust below 1 000 is 0, clamp at 60 000, thrust lock
+Follows docs/simulation.md, "The onboard attitude and rate controllers": commander semantics (thrust below 1 000 is
+0, clamp at 60 000, thrust lock
 until a zero-thrust setpoint, the yaw-rate negation, the legacy nose-up-positive pitch), the
 setpoint watchdog (level out after 0.5 s, motors off after 2 s), emergency stop, tumble detection
 (current firmware), attitude PID -> rate PID -> legacy X mixer with the clamping of each firmware
 generation. Battery compensation is taken as ideal: a command means the same thrust at any
-battery voltage (PHYSICS.md §1.5 option a), so the battery only matters through its cut-off.
+battery voltage (docs/simulation.md, "Battery"), so the battery only matters through its cut-off.
 
 Sign conventions of the firmware estimate used here and in the logs: roll right-hand about body x,
 pitch positive nose up (the negated standard pitch), yaw counter-clockwise seen from above; degrees.
@@ -44,7 +45,7 @@ LOCK_NAMES = {LOCK_NONE: "", LOCK_EMERGENCY: "emergency stop", LOCK_WATCHDOG: "s
 AXES = ("roll", "pitch", "yaw")
 TERMS = ("kp", "ki", "kd")
 
-# (kp, ki, kd) per axis and the integral limits, PHYSICS.md §2.4
+# (kp, ki, kd) per axis and the integral limits (docs/simulation.md, rates and gains table)
 GAINS: Dict[str, Dict[str, Tuple[Tuple[float, float, float], ...]]] = {
     GEN_CURRENT: {"pid_attitude": ((6.0, 3.0, 0.0), (6.0, 3.0, 0.0), (6.0, 1.0, 0.35)),
                   "pid_rate": ((250.0, 500.0, 2.5), (250.0, 500.0, 2.5), (120.0, 16.7, 0.0))},
@@ -54,7 +55,7 @@ GAINS: Dict[str, Dict[str, Tuple[Tuple[float, float, float], ...]]] = {
 ATTITUDE_ILIMIT = (20.0, 20.0, 360.0)
 RATE_ILIMIT = (33.3, 33.3, 166.7)
 
-# mixer rows: m_i = T + R·MIX_R[i] + P·MIX_P[i] + Y·MIX_Y[i]   (PHYSICS.md §2.5)
+# mixer rows: m_i = T + R·MIX_R[i] + P·MIX_P[i] + Y·MIX_Y[i]   (docs/simulation.md, mixing)
 MIX_R = np.array([-0.5, -0.5, 0.5, 0.5])
 MIX_P = np.array([0.5, -0.5, -0.5, 0.5])
 MIX_Y = np.array([1.0, -1.0, 1.0, -1.0])
