@@ -16,11 +16,11 @@ import rostest
 from geometry_msgs.msg import PointStamped, PoseStamped
 from std_msgs.msg import Empty as EmptyMsg
 
-from crazyflie_driver.msg import FullState, Hover, Position, TrajectoryPolynomialPiece, VelocityWorld
-from crazyflie_driver.srv import GoTo, StartTrajectory, UploadTrajectory
+from crazyflie_driver.msg import FullState, GenericLogData, Hover, Position, TrajectoryPolynomialPiece, VelocityWorld
+from crazyflie_driver.srv import GoTo, StartTrajectory, UpdateParams, UploadTrajectory
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
 
 NS = "/crazyflie1"
 SERVICES = {"takeoff": "Takeoff", "land": "Land", "stop": "Stop", "go_to": "GoTo",
@@ -37,6 +37,8 @@ class OnboardApi(unittest.TestCase):
         wait_for_crazyflie("crazyflie1", 60.0)
         for s in SERVICES:
             rospy.wait_for_service(NS + "/" + s, 10.0)
+        cls.locsrv = TopicRecorder(NS + "/locsrv", GenericLogData)
+        cls.estimate = TopicRecorder(NS + "/estimate", GenericLogData)
 
     def state(self):
         return self.world.crazyflie_state(self.uri)
@@ -105,6 +107,50 @@ class OnboardApi(unittest.TestCase):
         self.assertFalse(self.state()["emergency"])
         for name in SERVICES:   # still served
             rospy.wait_for_service(NS + "/" + name, 2.0)
+
+    def truth(self):
+        return self.world.control("vehicle_state", uri=self.uri)["position"]
+
+    def test_e_external_pose_reaches_the_onboard_estimator(self):
+        rospy.set_param(NS + "/stabilizer/estimator", 2)
+        rospy.ServiceProxy(NS + "/update_params", UpdateParams)(["stabilizer/estimator"])
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = 0.12, -0.34, 0.05
+        pose.pose.orientation.w = 1.0
+        def seen():
+            m = self.locsrv.latest()
+            return m is not None and all(abs(a - b) < 1e-4 for a, b in zip(m.values, (0.12, -0.34, 0.05)))
+        self.assertTrue(self.publish_until("external_pose", PoseStamped, pose, seen), self.locsrv.latest())
+
+    def test_f_cmd_position_flies_on_mocap_from_the_host(self):
+        """A host-side mocap loop: the world's true position into external_position, cmd_position to
+        0.5 m above the start; the Crazyflie holds it on its onboard estimator and controller."""
+        rospy.set_param(NS + "/stabilizer/estimator", 2)
+        rospy.ServiceProxy(NS + "/update_params", UpdateParams)(["stabilizer/estimator"])
+        start = self.truth()
+        goal = (start[0], start[1], 0.5)
+        mocap = rospy.Publisher(NS + "/external_position", PointStamped, queue_size=1)
+        setpoint = rospy.Publisher(NS + "/cmd_position", Position, queue_size=1)
+        wait_until(lambda: mocap.get_num_connections() > 0 and setpoint.get_num_connections() > 0, 5.0)
+        errors = []
+        end = time.monotonic() + 12.0
+        while time.monotonic() < end:
+            p = self.truth()
+            point = PointStamped()
+            point.point.x, point.point.y, point.point.z = p
+            mocap.publish(point)
+            setpoint.publish(Position(x=goal[0], y=goal[1], z=goal[2], yaw=0.0))
+            errors.append(math.dist(p, goal))
+            if len(errors) > 50 and max(errors[-50:]) < 0.05:
+                break
+            time.sleep(0.02)
+        self.assertLess(max(errors[-50:]), 0.05, "last positions %s" % (self.truth(),))
+        est = self.estimate.latest().values
+        self.assertLess(math.dist(est, self.truth()), 0.05)
+        stop = rospy.Publisher(NS + "/cmd_stop", EmptyMsg, queue_size=1)
+        wait_until(lambda: stop.get_num_connections() > 0, 5.0)
+        stop.publish(EmptyMsg())
+        self.assertTrue(wait_until(lambda: self.state()["last_generic_type"] == 0, 5.0))
 
 
 if __name__ == "__main__":
