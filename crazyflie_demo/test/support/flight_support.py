@@ -61,8 +61,7 @@ class WorldProbe:
         from crazyflie_driver.sim.air.medium import RemoteMedium
         from crazyflie_driver.sim.world_clock import WorldClock
 
-        host, _, port = address.rpartition(":")
-        self.medium = RemoteMedium(host, int(port))
+        self.medium = RemoteMedium(address)
         self.clock = WorldClock(self.medium.ping)
 
     def sleep(self, world_s: float) -> None:
@@ -91,8 +90,8 @@ class WorldProbe:
         return tuple(self.state(name)["position"])
 
     def yaw(self, name: str) -> float:
-        x, y, z, w = self.state(name)["quaternion"]
-        return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        from crazyflie_driver.mocap.frames import yaw_of
+        return yaw_of(self.state(name)["quaternion"])
 
     def firmware(self, name: str) -> Dict[str, Any]:
         """The simulated firmware's view (emergency flag, last setpoint, ...)."""

@@ -2,20 +2,9 @@
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
 from typing import Callable, Deque, List, NamedTuple, Optional
 
-try:  # the real contract type when the simulated medium is there
-    from crazyflie_driver.sim.air.medium import AirReply  # type: ignore
-except Exception:  # pragma: no cover - until sim.medium lands
-    @dataclass
-    class AirReply:  # type: ignore[no-redef]
-        acked: bool
-        payload: bytes = b""
-        retries: int = 0
-        power_detector: bool = True
-        unplugged: bool = False
-        latency_s: float = 0.0
+from crazyflie_driver.sim.air.medium import AirReply
 
 
 class Transmit(NamedTuple):

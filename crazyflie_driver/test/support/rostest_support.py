@@ -108,8 +108,7 @@ def world_window(medium: RemoteMedium, seconds: float, during: Optional[Callable
 
 def world(address: str) -> RemoteMedium:
     """The simulated world's control API (the same server the fake dongles talk to)."""
-    host, _, port = address.rpartition(":")
-    return RemoteMedium(host, int(port))
+    return RemoteMedium(address)
 
 
 def wait_for_crazyflie(tf_prefix: str, timeout: float = 60.0) -> None:

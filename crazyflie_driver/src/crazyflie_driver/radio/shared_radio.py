@@ -40,23 +40,13 @@ class SharedRadio:
 
     def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
         """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack."""
-        lock = self.lock
-        lock.acquire()
-        try:
-            radio = self.radio
-            if radio is None:
-                radio = self._reopen()
-            try:
-                if channel != radio._channel or datarate != radio._datarate or address != radio._address:
-                    radio.configure(channel, datarate, address)
-                if not radio.ack_enabled:
-                    radio.set_ack_enable(True)   # a broadcast switched acks off
-                return radio.send_packet(data)
-            except RadioUnplugged:
-                self._drop()
-                raise
-        finally:
-            lock.release()
+        def trip(radio: Crazyradio) -> RadioAck:
+            if channel != radio._channel or datarate != radio._datarate or address != radio._address:
+                radio.configure(channel, datarate, address)
+            if not radio.ack_enabled:
+                radio.set_ack_enable(True)   # a broadcast switched acks off
+            return radio.send_packet(data)
+        return self.run(trip)
 
     def run(self, use: Callable[[Crazyradio], _T]) -> _T:
         """``use(radio)`` holding the dongle for one turn of the FIFO (a broadcast burst), with the

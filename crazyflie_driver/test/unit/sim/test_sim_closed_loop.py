@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.mocap.frames import yaw_of
 from crazyflie_driver.sim.world.physics import VehicleParams
 from support.radio_rig import RadioRig
 
@@ -27,11 +28,6 @@ GOAL = np.array([0.0, 0.0, 0.5])
 # 0.40 / 0.58 mm and 0.96 / 1.62 mm. The bounds leave room for other seeds, not for a broken loop.
 HOLD_RMS_BOUND = 0.002
 HOLD_MAX_BOUND = 0.004
-
-
-def yaw_of(q) -> float:
-    x, y, z, w = (float(c) for c in q)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 class HoverPid:
