@@ -20,10 +20,12 @@ from typing import Any, Callable, Deque, Dict, Optional, Sequence, Union
 from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
 from crazyflie_driver.sim.firmware import ports
 from crazyflie_driver.sim.firmware import tables as T
+from crazyflie_driver.sim.firmware.high_level_port import ENOEXEC, high_level_port
 from crazyflie_driver.sim.firmware.link import NrfLink, SYS_ALL_OFF, SYS_RESET, SYS_STM_OFF
 from crazyflie_driver.sim.firmware.log import LogService
 from crazyflie_driver.sim.firmware.param import ParamService
 from crazyflie_driver.sim.firmware.state import SimState
+from crazyflie_driver.sim.firmware.trajectory_memory import TrajectoryMemory, trajectory_memory_port
 
 _log = logging.getLogger(__name__)
 
@@ -46,7 +48,7 @@ class FirmwareProfile:
 
 PROFILES: Dict[str, FirmwareProfile] = {
     T.GEN_CURRENT: FirmwareProfile(T.GEN_CURRENT, 12, "2026.04", "Crazyflie 2.0", True, 200, False, 1.0,
-                                   frozenset({0, 2, 3, 4, 5, 6, 7, 9, 13, 15})),
+                                   frozenset({0, 2, 3, 4, 5, 6, 7, 8, 9, 13, 15})),
     T.GEN_2016: FirmwareProfile(T.GEN_2016, 2, "2016.02", "Crazyflie 2.0", False, 60, True, None,
                                 frozenset({0, 2, 3, 4, 5, 13, 15})),
 }
@@ -95,13 +97,17 @@ class SimulatedCrazyflie:
         self.logs = LogService(self.profile.generation, self._log_table, self.read_value, self.send, self.now)
         self.console = ports.Console(self.send)
         state, hook, profile = self.state, ports.vehicle_hook(self.vehicle), self.profile
+        self.trajectory_memory = TrajectoryMemory()           # RAM: empty after every boot
+        memory = trajectory_memory_port(self.send, self.trajectory_memory) if 8 in profile.ports \
+            else ports.memory_port(self.send)
         handlers = {
             2: self.params.handle,
             3: ports.commander_port(state, hook),
-            4: ports.memory_port(self.send),
+            4: memory,
             5: self.logs.handle,
             6: ports.localization_port(state, hook, self.emergency_stop, self.now, self.address[-1]),
             7: ports.generic_setpoint_port(state, hook, self.halt),
+            8: high_level_port(self.send, self._high_level, self.trajectory_memory),
             9: ports.supervisor_port(state, self.send, self.supervisor_bits, self.emergency_stop, self.now),
             13: ports.platform_port(state, self.send, profile.protocol_version, profile.firmware_version,
                                     profile.device_type, profile.device_type_query),
@@ -342,6 +348,17 @@ class SimulatedCrazyflie:
                 due = 0.0
             finally:
                 self.timer_due = due
+
+    def _high_level(self, command: str, **args) -> int:
+        """A high-level commander command for the vehicle; ENOEXEC when the vehicle has no planner."""
+        fn = getattr(self.vehicle, "high_level", None)
+        if fn is None:
+            return ENOEXEC
+        try:
+            return int(fn(command, **args))
+        except Exception:
+            _log.exception("vehicle.high_level(%s) failed", command)
+            return ENOEXEC
 
     # --- safety ----------------------------------------------------------------------------------
     def halt(self, reason: str, packet: bytes) -> None:

@@ -223,6 +223,7 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
        for n in ("initialX", "initialY", "initialZ", "initialYaw")]
     + [ParamVar("kalman", "maxPos", "float", 100.0, generations=_CUR),
        ParamVar("kalman", "maxVel", "float", 10.0, generations=_CUR)]
+    + [ParamVar("hlCommander", "groupmask", "uint8_t", 0, generations=_CUR)]
     + [ParamVar("locSrv", "extPosStdDev", "float", 0.01, generations=_CUR),
        ParamVar("locSrv", "extQuatStdDev", "float", 4.5e-3, generations=_CUR)]
     # onboard estimator and position controller: the world's vehicle supplies the firmware's defaults

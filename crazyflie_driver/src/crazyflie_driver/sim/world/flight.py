@@ -6,14 +6,17 @@ controllers, whose setpoint row it writes for vehicles flown by generic setpoint
 """
 from __future__ import annotations
 
-from typing import Dict, Optional, Sequence
+import math
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import Setpoint
 from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, Estimator
+from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
 from crazyflie_driver.sim.world.physics import BodyStates
-from crazyflie_driver.sim.world.position_control import POSITION_EVERY, PositionControl
+from crazyflie_driver.sim.world.planner import Evaluation, Piece
+from crazyflie_driver.sim.world.position_control import POSITION_EVERY, PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")
@@ -23,6 +26,7 @@ def default_params() -> Dict[str, float]:
     """Parameters of the onboard estimator and position controller with the firmware's defaults."""
     out = dict(ESTIMATOR_DEFAULTS)
     out.update(control_defaults())
+    out["hlCommander.groupmask"] = 0.0
     return out
 
 
@@ -32,29 +36,120 @@ class OnboardFlight:
     def __init__(self) -> None:
         self.estimator = Estimator()
         self.control = PositionControl()
+        self.hl = HighLevelPlans()
 
     @property
     def models(self):
         """The row containers the world adds to and deletes from."""
-        return (self.estimator.s, self.control.s)
+        return (self.estimator.s, self.control.s, self.hl)
 
     def add(self, rng: np.random.Generator, position: Sequence[float], now: float) -> None:
         self.estimator.add(rng, position, now)
         self.control.add()
+        self.hl.append_row()
 
     def boot(self, i: int, truth: Sequence[float], now: float) -> None:
         self.estimator.boot(i, truth, now)
         self.control.boot(i)
+        self.hl.boot(i)
 
     def set_param(self, i: int, name: str, value: float, truth: Sequence[float], now: float) -> bool:
+        if name == "hlCommander.groupmask":
+            self.hl.group_mask[i] = int(value) & 0xFF
+            return True
         return self.estimator.set_param(i, name, value, truth, now) or self.control.set_param(i, name, value)
 
     # --- inputs from the radio -------------------------------------------------------------------
     def setpoint(self, i: int, sp: Setpoint) -> None:
+        """A low-level (CRTP) setpoint: it takes the priority and stops the high-level planner."""
         self.control.set_setpoint(i, sp)
+        self.control.s.priority[i] = PRIORITY_CRTP
+        self.hl.stop(i)
 
     def release(self, i: int) -> None:
+        """The legacy RPYT path drives this vehicle (also a low-level setpoint)."""
         self.control.release(i)
+        self.control.s.priority[i] = PRIORITY_CRTP
+        self.hl.stop(i)
+
+    def notify_stop(self, i: int, stab, now: float) -> None:
+        """Notify-setpoints-stop: the high-level commander gets the control back; idle, it stops the motors."""
+        self.control.s.priority[i] = PRIORITY_HIGH_LEVEL
+        if self.hl.plans[i].state == 0:
+            self._null_setpoint(i, stab, now)
+
+    def _null_setpoint(self, i: int, stab, now: float) -> None:
+        self.control.release(i)
+        stab.sp[i] = 0.0
+        stab.sp_time[i] = now
+
+    # --- the high-level commander ------------------------------------------------------------------
+    def start_state(self, i: int, bodies: BodyStates, stab, ground_asl: float, now: float) -> Evaluation:
+        """Where a new plan starts: the running plan now, else the state estimate at rest."""
+        current = self.hl.current(i, now)
+        if current is not None:
+            return current
+        pos = self.estimator.position(i, bodies.position[i], ground_asl)
+        return Evaluation(np.asarray(pos, dtype=float), np.zeros(3), np.zeros(3),
+                          math.radians(float(stab.attitude[i, 2])), 0.0)
+
+    def high_level(self, i: int, command: str, args: Dict, bodies: BodyStates, stab, ground_asl: float,
+                   now: float) -> int:
+        """One port-8 command for row i; returns the firmware's result code."""
+        hl = self.hl
+        if command == "set_group_mask":
+            hl.group_mask[i] = int(args["mask"]) & 0xFF
+            return 0
+        if not hl.in_group(i, int(args.get("mask", 0))):
+            return 0
+        if command == "stop":
+            hl.stop(i)
+            if self.control.s.priority[i] == PRIORITY_HIGH_LEVEL:
+                self._null_setpoint(i, stab, now)
+            return 0
+        if stab.lock[i] != 0:
+            return EBUSY
+        start = self.start_state(i, bodies, stab, ground_asl, now)
+        yaw = start.yaw if args.get("use_current_yaw") else float(args.get("yaw", 0.0))
+        duration = float(args.get("duration", 0.0))
+        if command in ("takeoff", "land"):
+            height = float(args["height"])
+            velocity = args.get("velocity")
+            if args.get("relative"):
+                height = start.pos[2] + height if command == "takeoff" else start.pos[2] - height
+            if velocity is not None:
+                v = float(velocity) if float(velocity) > 0 else DEFAULT_VELOCITY
+                duration = abs(height - start.pos[2]) / v
+            fn = hl.takeoff if command == "takeoff" else hl.land
+            return fn(i, start, height, yaw, duration, now)
+        if command == "go_to":
+            return hl.go_to(i, start, args["goal"], float(args["yaw"]), duration, bool(args.get("relative")),
+                            bool(args.get("linear")), now)
+        if command == "start_trajectory":
+            pieces = [Piece(float(d), np.asarray(c, dtype=float)) for d, c in args["pieces"]]
+            return hl.start_trajectory(i, start, pieces, float(args.get("timescale", 1.0)),
+                                       bool(args.get("reversed")), bool(args.get("relative")),
+                                       bool(args.get("relative_yaw")), now)
+        raise ValueError("unknown high-level command %r" % (command,))
+
+    def _high_level_tick(self, now: float, stab) -> bool:
+        rows: List[int] = self.hl.active()
+        if not rows:
+            return False
+        priority = self.control.s.priority
+        for i in rows:
+            if stab.lock[i] != 0:           # the supervisor cannot fly: the plan is stopped
+                self.hl.stop(i)
+                continue
+            if priority[i] != PRIORITY_HIGH_LEVEL:
+                continue
+            sp = self.hl.setpoint(i, now)
+            if sp is None:
+                self._null_setpoint(i, stab, now)
+            else:
+                self.control.set_setpoint(i, sp)
+                stab.sp_time[i] = now
+        return True
 
     def measure(self, i: int, position: Sequence[float], quaternion: Optional[Sequence[float]],
                 bodies: BodyStates, now: float) -> bool:
@@ -66,9 +161,10 @@ class OnboardFlight:
 
         Returns True when it wrote new setpoints into the stabilizer's rows."""
         self.estimator.update(tick, now, stab.thrust > 0.0, bodies.position)
+        wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
         active = self.control.s.active
         if tick % POSITION_EVERY or not active.any():
-            return False
+            return wrote
         est_pos = self.estimator.positions(bodies.position, ground_asl)
         est_vel = self.estimator.velocities(bodies.velocity)
         self.control.update(tick, est_pos, est_vel, stab.attitude[:, 2], stab.sp, stab.yaw_sp, stab.thrust > 0.0)

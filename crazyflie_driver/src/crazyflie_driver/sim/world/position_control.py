@@ -26,6 +26,7 @@ Z_VEL_MAX_FLOOR = 0.5               # m/s, the z position-PID limit is never bel
 VZ_OUTPUT_LIMIT = 65535 / 2 / THRUST_SCALE
 UINT16_MAX = 65535.0
 M_X, M_Y, M_Z, M_ROLL, M_PITCH, M_YAW, M_QUAT = range(7)
+PRIORITY_HIGH_LEVEL, PRIORITY_CRTP = 1, 2
 TERMS = ("Kp", "Ki", "Kd")
 
 # current firmware defaults: gains (kp, ki, kd, kff) per axis, then limits and thrust
@@ -72,6 +73,7 @@ def _param_slot(name: str) -> Tuple[str, Tuple[int, ...]]:
 class PositionStates(Rows):
     FIELDS = {
         "active": ((), bool),             # a generic (or high-level) setpoint drives this vehicle
+        "priority": ((), np.int8),        # commander priority: 1 high-level, 2 low-level (CRTP)
         "kind": ((), np.int8),            # setpoint type that set the modes
         "modes": ((7,), np.int8),         # x, y, z, roll, pitch, yaw, quat
         "prev_modes": ((7,), np.int8),
@@ -114,6 +116,7 @@ class PositionControl:
         for name in s.FIELDS:
             getattr(s, name)[i] = 0
         s.quat[i] = (0.0, 0.0, 0.0, 1.0)
+        s.priority[i] = PRIORITY_HIGH_LEVEL      # at boot the high-level commander owns the setpoint
         s.pos_gains[i] = POS_GAINS
         s.vel_gains[i] = VEL_GAINS
         s.thrust_base[i] = THRUST_BASE

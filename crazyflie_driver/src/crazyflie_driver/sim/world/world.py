@@ -135,8 +135,21 @@ class Vehicle:
                 w.onboard.dirty = True
 
     def notify_setpoint_stop(self) -> None:
-        """Streaming setpoints end: with no high-level plan the null setpoint stops the motors."""
-        self.stop_motors()
+        """Streaming setpoints end: the high-level commander takes over (idle, it stops the motors)."""
+        w = self._world
+        with w._lock:
+            if self._row >= 0:
+                w.flight.notify_stop(self._row, w.onboard.s, w.time)
+                w.onboard.dirty = True
+
+    def high_level(self, command: str, **args) -> int:
+        """A high-level commander command (port 8); returns the firmware's result code."""
+        w = self._world
+        with w._lock:
+            if self._row < 0:
+                return 0
+            w.onboard.dirty = True
+            return w.flight.high_level(self._row, command, args, w.bodies, w.onboard.s, w.ground_asl, w.time)
 
     def external_measurement(self, position, quaternion=None) -> bool:
         """External position (m) and optional quaternion (x, y, z, w) for the onboard estimator."""

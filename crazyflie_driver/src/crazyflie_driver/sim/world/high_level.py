@@ -1,0 +1,121 @@
+"""The high-level commander of every vehicle: plans from commands, setpoints from plans (100 Hz).
+
+The commands come from port 8 (decoded by `sim/firmware/high_level_port.py`); the result codes are
+the firmware's (0 success, 1 refused by the planner, ENOEXEC, EBUSY). Its setpoints have the
+high-level priority: a low-level (port 3 or 7) setpoint takes over and stops the planner, and
+notify-setpoints-stop hands control back. While idle with the control, it stops the motors.
+"""
+from __future__ import annotations
+
+import math
+from typing import List, Optional, Sequence
+
+import numpy as np
+
+from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, Setpoint
+from crazyflie_driver.sim.world.planner import FLYING, IDLE, LANDING, Evaluation, Piece, Plan, online_piece
+
+HL_RATE_EVERY = 10                 # ticks: the high-level commander runs at 100 Hz
+HL_SETPOINT_KIND = 100             # not a port-7 type: marks setpoints of the high-level commander
+ENOEXEC, EBUSY = 8, 16
+REFUSED = 1                        # what the planner returns for a command it does not take now
+DEFAULT_VELOCITY = 0.5             # m/s, hlCommander.vtoff / vland
+
+
+class HighLevelPlans:
+    """One `Plan` (and group mask) per vehicle row; rows follow the world's other models."""
+
+    def __init__(self) -> None:
+        self.plans: List[Plan] = []
+        self.group_mask: List[int] = []
+
+    def __len__(self) -> int:
+        return len(self.plans)
+
+    def append_row(self) -> int:
+        self.plans.append(Plan())
+        self.group_mask.append(0)
+        return len(self.plans) - 1
+
+    def delete_row(self, index: int) -> None:
+        del self.plans[index]
+        del self.group_mask[index]
+
+    def boot(self, i: int) -> None:
+        self.plans[i] = Plan()
+        self.group_mask[i] = 0
+
+    def in_group(self, i: int, mask: int) -> bool:
+        return mask == 0 or bool(mask & self.group_mask[i])
+
+    def active(self) -> List[int]:
+        return [i for i, p in enumerate(self.plans) if p.state in (FLYING, LANDING)]
+
+    # --- commands (world time `now`; `start` is the last setpoint or the estimate) ----------------
+    def takeoff(self, i: int, start: Evaluation, height: float, yaw: float, duration: float, now: float) -> int:
+        plan = self.plans[i]
+        if plan.state != IDLE:
+            return REFUSED
+        goal = np.array([start.pos[0], start.pos[1], height])
+        rest = Evaluation(start.pos, np.zeros(3), np.zeros(3), start.yaw, 0.0)
+        self.plans[i] = Plan(FLYING, [online_piece(duration, rest, goal, yaw)], now)
+        return 0
+
+    def land(self, i: int, start: Evaluation, height: float, yaw: float, duration: float, now: float) -> int:
+        if self.plans[i].state == LANDING:
+            return REFUSED
+        goal = np.array([start.pos[0], start.pos[1], height])
+        rest = Evaluation(start.pos, np.zeros(3), np.zeros(3), start.yaw, 0.0)
+        self.plans[i] = Plan(LANDING, [online_piece(duration, rest, goal, yaw)], now)
+        return 0
+
+    def go_to(self, i: int, start: Evaluation, goal: Sequence[float], yaw: float, duration: float, relative: bool,
+              linear: bool, now: float) -> int:
+        goal = np.asarray(goal, dtype=float)
+        if relative:
+            goal = goal + start.pos
+            yaw = yaw + start.yaw
+        if linear and duration > 0:
+            v = (goal - start.pos) / duration
+            yaw_rate = (yaw - start.yaw) / duration
+            begin = Evaluation(start.pos, v, np.zeros(3), start.yaw, yaw_rate)
+            piece = online_piece(duration, begin, goal, yaw, v, yaw_rate)
+        else:
+            piece = online_piece(duration, start, goal, yaw)
+        self.plans[i] = Plan(FLYING, [piece], now)
+        return 0
+
+    def start_trajectory(self, i: int, start: Evaluation, pieces: List[Piece], timescale: float, reversed_: bool,
+                         relative_position: bool, relative_yaw: bool, now: float) -> int:
+        if not pieces:
+            return ENOEXEC
+        plan = Plan(FLYING, list(pieces), now, timescale if timescale > 0 else 1.0, bool(reversed_))
+        if relative_position:
+            first = plan.evaluate(now)
+            plan.shift[:3] = start.pos - first.pos
+            if relative_yaw:
+                plan.shift[3] = start.yaw - first.yaw
+        self.plans[i] = plan
+        return 0
+
+    def stop(self, i: int) -> None:
+        self.plans[i] = Plan()
+
+    # --- the tick ---------------------------------------------------------------------------------
+    def setpoint(self, i: int, now: float) -> Optional[Setpoint]:
+        """The setpoint of row i's plan now; None when the plan has ended in IDLE (landing done)."""
+        plan = self.plans[i]
+        if plan.state == LANDING and plan.finished(now):
+            self.plans[i] = Plan()
+            return None
+        ev = plan.evaluate(now)
+        if ev is None:
+            return None
+        return Setpoint(HL_SETPOINT_KIND, MODE_ABS, MODE_ABS, MODE_ABS, mode_yaw=MODE_ABS,
+                        position=tuple(ev.pos), velocity=tuple(ev.vel), acceleration=tuple(ev.acc),
+                        attitude=(0.0, 0.0, math.degrees(ev.yaw)),
+                        attitude_rate=(0.0, 0.0, math.degrees(ev.yaw_rate)))
+
+    def current(self, i: int, now: float) -> Optional[Evaluation]:
+        plan = self.plans[i]
+        return plan.evaluate(now) if plan.state in (FLYING, LANDING) else None

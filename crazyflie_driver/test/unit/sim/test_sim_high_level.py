@@ -1,0 +1,160 @@
+"""The simulated high-level commander: planner polynomials, port 8 replies, trajectory memory (port 4),
+priorities against low-level setpoints; flights checked on the world's true state."""
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from crazyflie_driver.sim.firmware.trajectory_memory import POLY4D_PIECE
+from crazyflie_driver.sim.world.planner import Evaluation, Piece, Plan, evaluate, online_piece, poly7_nojerk
+
+from test_sim_onboard_flight import Rig
+
+
+def test_poly7_nojerk_meets_its_constraints():
+    c = poly7_nojerk(2.0, (0.1, 0.3, -0.2), (1.5, 0.0, 0.0))
+    piece = Piece(2.0, np.vstack([c, c, c, c]))
+    for t, (p, v, a) in ((0.0, (0.1, 0.3, -0.2)), (2.0, (1.5, 0.0, 0.0))):
+        pp, vv, aa = evaluate(piece, t)
+        assert (pp[0], vv[0], aa[0]) == pytest.approx((p, v, a), abs=1e-9)
+    n = np.arange(8)
+    jerk = lambda t: sum(c[k] * k * (k - 1) * (k - 2) * t ** (k - 3) for k in n[3:])   # noqa: E731
+    assert jerk(0.0) == pytest.approx(0.0, abs=1e-9) and jerk(2.0) == pytest.approx(0.0, abs=1e-9)
+    assert poly7_nojerk(0.0, (0, 0, 0), (2.0, 0, 0))[0] == 2.0                   # no duration: the goal
+
+
+def test_online_piece_takes_the_short_way_round_in_yaw():
+    start = Evaluation(np.zeros(3), np.zeros(3), np.zeros(3), math.radians(170), 0.0)
+    piece = online_piece(1.0, start, (0, 0, 1), math.radians(-170))
+    p, _, _ = evaluate(piece, 1.0)
+    assert math.degrees(p[3]) == pytest.approx(190.0)
+
+
+def test_trajectory_playback_timescale_reversed_and_shift():
+    c = np.zeros((4, 8))
+    c[0, 1] = 1.0                                    # x = t over 2 s
+    plan = Plan(1, [Piece(2.0, c)], t_begin=10.0, timescale=2.0)
+    assert plan.evaluate(12.0).pos[0] == pytest.approx(1.0) and plan.evaluate(12.0).vel[0] == pytest.approx(0.5)
+    back = Plan(1, [Piece(2.0, c)], t_begin=0.0, reversed=True)
+    assert back.evaluate(0.5).pos[0] == pytest.approx(1.5) and back.evaluate(0.5).vel[0] == pytest.approx(-1.0)
+    assert back.evaluate(5.0).vel[0] == 0.0                                     # after the end: at rest
+
+
+def ask(rig, port, channel, payload):
+    """One packet; its reply (the console's boot text and older replies are drained first)."""
+    while rig.cf.pop_outgoing() is not None:
+        pass
+    rig.send(port, channel, payload)
+    return rig.cf.pop_outgoing()
+
+
+def hl(rig, payload):
+    return ask(rig, 8, 0, payload)
+
+
+def takeoff(height, duration, mask=0):
+    return struct.pack("<BBff?f", 7, mask, height, 0.0, False, duration)
+
+
+def test_takeoff_follows_the_planner_polynomial_and_lands():
+    rig = Rig()
+    request = takeoff(0.6, 2.0)
+    assert hl(rig, request) == b"\x8c" + request[:3] + b"\x00"              # [cmd, byte 1, byte 2, result]
+    assert hl(rig, request) == b"\x8c" + request[:3] + b"\x01"              # not idle any more: refused
+    piece = online_piece(2.0, Evaluation(np.zeros(3), np.zeros(3), np.zeros(3), 0.0, 0.0), (0, 0, 0.6), 0.0)
+    heights, planned = [], []
+    for _ in range(400):
+        rig.fly(0.01)
+        heights.append(rig.truth()[2])
+        planned.append(evaluate(piece, rig.world.time)[0][2])
+    # the PID position controller ignores the plan's velocity: it lags by about v / kp, then holds
+    lag = np.array(planned) - np.array(heights)
+    assert np.all(np.diff(heights[:150]) > -1e-3) and 0.05 < lag.max() < 0.3
+    assert rig.truth()[2] == pytest.approx(0.6, abs=0.05)
+    assert hl(rig, struct.pack("<BBff?f", 8, 0, 0.0, 0.0, False, 2.0))[-1] == 0
+    rig.fly(2.5)
+    assert rig.vehicle.motors().max() == 0 and rig.truth()[2] < 0.02        # landed: idle, motors off
+
+
+def test_go_to_relative_and_linear():
+    rig = Rig()
+    hl(rig, takeoff(0.5, 1.5))
+    rig.fly(3.0)
+    assert hl(rig, struct.pack("<BBBBfffff", 12, 0, 1, 0, 0.5, -0.5, 0.2, 0.0, 2.0))[-1] == 0   # relative
+    rig.fly(3.0)
+    assert np.linalg.norm(rig.truth() - (0.5, -0.5, 0.7)) < 0.05
+    assert hl(rig, struct.pack("<BBBBfffff", 12, 0, 0, 1, 0.0, 0.0, 0.7, 0.0, 2.0))[-1] == 0    # linear
+    rig.fly(3.0)
+    assert np.linalg.norm(rig.truth() - (0.0, 0.0, 0.7)) < 0.05
+
+
+def test_group_mask_decides_who_takes_off():
+    rig = Rig()
+    rig.param("hlCommander.groupmask", 0b0010)
+    hl(rig, takeoff(0.5, 1.0, mask=0b0100))
+    rig.fly(1.5)
+    assert rig.vehicle.motors().max() == 0
+    hl(rig, takeoff(0.5, 1.0, mask=0b0110))
+    rig.fly(2.0)
+    assert rig.truth()[2] > 0.3
+
+
+def test_low_level_setpoint_takes_over_and_notify_hands_back():
+    rig = Rig()
+    hl(rig, takeoff(0.5, 1.0))
+    rig.fly(2.0)
+    rig.position_setpoint(0.3, 0.0, 0.5)              # priority 2: the planner stops
+    rig.fly(3.0)
+    assert rig.truth()[0] == pytest.approx(0.3, abs=0.05)
+    rig.setpoint = None
+    assert hl(rig, struct.pack("<BBBBfffff", 12, 0, 0, 0, -0.3, 0.0, 0.5, 0.0, 1.0))[-1] == 0
+    rig.send(7, 1, b"\x00" + struct.pack("<I", 0))    # hands control to the planner: it flies the go_to
+    rig.fly(2.5)
+    assert rig.truth()[0] == pytest.approx(-0.3, abs=0.05) and rig.vehicle.motors().max() > 0
+
+
+def figure_eight_pieces():
+    """Two pieces drawing an ellipse-like loop at 0.5 m: enough to test upload and playback."""
+    pieces = []
+    for k in range(4):
+        c = np.zeros((4, 8))
+        angle0 = k * math.pi / 2
+        c[0] = poly7_nojerk(1.5, (0.5 * math.cos(angle0), 0, 0), (0.5 * math.cos(angle0 + math.pi / 2), 0, 0))
+        c[1] = poly7_nojerk(1.5, (0.3 * math.sin(angle0), 0, 0), (0.3 * math.sin(angle0 + math.pi / 2), 0, 0))
+        c[2, 0] = 0.5
+        pieces.append((1.5, c))
+    return pieces
+
+
+def test_trajectory_upload_define_start_and_errors():
+    rig = Rig()
+    data = b"".join(POLY4D_PIECE.pack(*c.reshape(-1), d) for d, c in figure_eight_pieces())
+    for offset in range(0, len(data), 24):                           # memory writes, 24 bytes each
+        header = bytes([0]) + struct.pack("<I", offset)
+        assert ask(rig, 4, 2, header + data[offset:offset + 24]) == b"\x4e" + header + b"\x00"
+    assert ask(rig, 4, 2, bytes([0]) + struct.pack("<I", 4090) + bytes(8))[-1] == 5    # past the end: EIO
+    assert ask(rig, 4, 1, bytes([0]) + struct.pack("<IB", 132, 20))[6:] == b"\x00" + data[132:152]   # read back
+    assert hl(rig, struct.pack("<BBBBIB", 6, 31, 1, 0, 0, 4))[-1] == 8    # id out of range: ENOEXEC
+    assert hl(rig, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 3, 1.0))[-1] == 8   # undefined: ENOEXEC
+    assert hl(rig, struct.pack("<BBBBIB", 6, 3, 1, 0, 4000, 4))[-1] == 0       # defined, overflowing
+    assert hl(rig, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 3, 1.0))[-1] == 8
+    assert hl(rig, struct.pack("<BBBBIB", 6, 3, 1, 0, 0, 4))[-1] == 0
+    assert hl(rig, bytes([99]))[-1] == 8                                        # unknown command
+    hl(rig, takeoff(0.5, 1.5))
+    rig.fly(2.0)
+    hl(rig, struct.pack("<BBBBfffff", 12, 0, 0, 0, 0.5, 0.0, 0.5, 0.0, 1.5))
+    rig.fly(2.0)
+    assert hl(rig, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 3, 1.0))[-1] == 0
+    errs = []
+    plan = Plan(1, [Piece(d, c) for d, c in figure_eight_pieces()], rig.world.time)
+    for _ in range(600):
+        rig.fly(0.01)
+        errs.append(np.linalg.norm(rig.truth() - plan.evaluate(rig.world.time).pos))
+    # the path is followed with the PID controller's lag (no feed-forward: about v / kp = 0.2 m at
+    # this speed), and the end point is held
+    assert np.mean(errs) < 0.3 and max(errs) < 0.4
+    rig.fly(3.0)
+    assert np.linalg.norm(rig.truth() - plan.evaluate(rig.world.time).pos) < 0.05
