@@ -1,8 +1,8 @@
 """Port 8: the high-level commander's packets decoded as the current firmware decodes them.
 
-Every packet gets a reply on its own header, `[command, request byte 1, request byte 2, result]`.
-The planning itself happens in the world (`call(command, **args) -> result`); trajectory
-definitions and their data live in the `TrajectoryMemory`. A packet shorter than its command's
+Every packet gets a reply on its own header, ``[command, request byte 1, request byte 2, result]``.
+The planning itself happens in the world (``call(command, **args) -> result``); trajectory
+definitions and their data live in the ``TrajectoryMemory``. A packet shorter than its command's
 layout is read as if zero-padded (the firmware reads whatever the buffer holds). Facts in
 docs/protocol.md ("High-level commander").
 """

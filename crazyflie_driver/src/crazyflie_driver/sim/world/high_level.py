@@ -1,6 +1,6 @@
 """The high-level commander of every vehicle: plans from commands, setpoints from plans (100 Hz).
 
-The commands come from port 8 (decoded by `sim/firmware/high_level_port.py`); the result codes are
+The commands come from port 8 (decoded by ``sim/firmware/high_level_port.py``); the result codes are
 the firmware's (0 success, 1 refused by the planner, ENOEXEC, EBUSY). Its setpoints have the
 high-level priority: a low-level (port 3 or 7) setpoint takes over and stops the planner, and
 notify-setpoints-stop hands control back. While idle with the control, it stops the motors.
@@ -23,7 +23,7 @@ DEFAULT_VELOCITY = 0.5             # m/s, hlCommander.vtoff / vland
 
 
 class HighLevelPlans:
-    """One `Plan` (and group mask) per vehicle row; rows follow the world's other models."""
+    """One ``Plan`` (and group mask) per vehicle row; rows follow the world's other models."""
 
     def __init__(self) -> None:
         self.plans: List[Plan] = []
@@ -51,7 +51,7 @@ class HighLevelPlans:
     def active(self) -> List[int]:
         return [i for i, p in enumerate(self.plans) if p.state in (FLYING, LANDING)]
 
-    # --- commands (world time `now`; `start` is the last setpoint or the estimate) ----------------
+    # --- commands (world time ``now``; ``start`` is the last setpoint or the estimate) ----------------
     def takeoff(self, i: int, start: Evaluation, height: float, yaw: float, duration: float, now: float) -> int:
         plan = self.plans[i]
         if plan.state != IDLE:

@@ -47,8 +47,8 @@ def _basis(t: float, derivative: int) -> np.ndarray:
 
 
 def poly7_nojerk(duration: float, start: Sequence[float], end: Sequence[float]) -> np.ndarray:
-    """Coefficients of the degree-7 polynomial with (p, v, a) = `start` at 0 and `end` at `duration`
-    and zero jerk at both ends. `duration` <= 0 gives the constant end position."""
+    """Coefficients of the degree-7 polynomial with (p, v, a) = ``start`` at 0 and ``end`` at ``duration``
+    and zero jerk at both ends. ``duration`` <= 0 gives the constant end position."""
     if not duration > 0:
         c = np.zeros(N_COEFFS)
         c[0] = end[0]
@@ -76,7 +76,7 @@ def shortest_angle(from_rad: float, to_rad: float) -> float:
 
 def online_piece(duration: float, start: Evaluation, goal_pos: Sequence[float], goal_yaw: float,
                  goal_vel: Sequence[float] = (0.0, 0.0, 0.0), goal_yaw_rate: float = 0.0) -> Piece:
-    """One piece from `start` (its velocity and acceleration kept) to the goal; yaw the short way."""
+    """One piece from ``start`` (its velocity and acceleration kept) to the goal; yaw the short way."""
     yaw_goal = start.yaw + shortest_angle(start.yaw, goal_yaw)
     coeffs = np.zeros((AXES, N_COEFFS))
     for k in range(3):
@@ -88,7 +88,7 @@ def online_piece(duration: float, start: Evaluation, goal_pos: Sequence[float], 
 
 @dataclass
 class Plan:
-    """What the planner of one vehicle follows: pieces played from `t_begin` (world time)."""
+    """What the planner of one vehicle follows: pieces played from ``t_begin`` (world time)."""
 
     state: int = IDLE
     pieces: List[Piece] = field(default_factory=list)
@@ -102,7 +102,7 @@ class Plan:
         return sum(p.duration for p in self.pieces) * self.timescale
 
     def evaluate(self, now: float) -> Optional[Evaluation]:
-        """The plan at world time `now`; after its end, the end point at rest. None without pieces."""
+        """The plan at world time ``now``; after its end, the end point at rest. None without pieces."""
         if not self.pieces:
             return None
         total = sum(p.duration for p in self.pieces)
