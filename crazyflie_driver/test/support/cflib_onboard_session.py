@@ -7,7 +7,8 @@ PYTHONPATH, CRAZYFLIE_SIM_ADDRESS naming the world server). cflib's public API o
   connect -> stabilizer.estimator / stabilizer.controller -> motion capture streamed with
   ``extpos.send_extpos`` (or ``send_extpose``) at 100 Hz, positions taken from the world's true state
   as a motion-capture system would measure them -> position setpoints -> hover setpoints ->
-  velocity-world setpoints -> notify-setpoint-stop -> disconnect.
+  velocity-world setpoints -> notify-setpoint-stop -> disconnect; or, with --high-level, trajectory
+  upload (Poly4D, write_data_sync) -> define -> takeoff -> go_to -> trajectory -> land.
 
 The world's true position is sampled through the world server's control API during every phase and
 reported per phase, so the test judges the flight on the truth.
@@ -82,13 +83,10 @@ def run(args: argparse.Namespace) -> None:
     time.sleep(0.5)                       # the estimator settles on the first measurements
     x, y, z = args.goal
     phases: dict = {}
-    phase("position", args.seconds, lambda: cf.commander.send_position_setpoint(x, y, z, 0.0), mocap, phases)
-    if not args.trap:
-        phase("hover", 2.0, lambda: cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, z), mocap, phases)
-        phase("velocity", 2.0, lambda: cf.commander.send_velocity_world_setpoint(0.3, 0.0, 0.0, 0.0), mocap, phases)
-        phase("hold", 1.0, lambda: cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, z), mocap, phases)
-    cf.commander.send_notify_setpoint_stop()
-    phase("after_stop", 0.5, lambda: None, mocap, phases)
+    if args.high_level:
+        fly_high_level(cf, control, mocap, args, phases)
+    else:
+        fly_setpoints(cf, mocap, args, phases, x, y, z)
     mocap.stop.set()
     mocap.join(1.0)
     RESULT["phases"] = phases
@@ -97,6 +95,45 @@ def run(args: argparse.Namespace) -> None:
     with Step("disconnect"):
         scf.close_link()
     control.close()
+
+
+def fly_high_level(cf, control, mocap: Mocap, args: argparse.Namespace, phases: dict) -> None:
+    """Upload the trajectory (Poly4D, write_data_sync), define it, take off, go_to, fly it, land."""
+    import json
+    from cflib.crazyflie.mem import MemoryElement, Poly4D
+
+    with open(args.high_level) as f:
+        pieces = json.load(f)
+    memory = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)[0]
+    memory.trajectory = [Poly4D(p["duration"], Poly4D.Poly(p["x"]), Poly4D.Poly(p["y"]), Poly4D.Poly(p["z"]),
+                                Poly4D.Poly(p["yaw"])) for p in pieces]
+    with Step("upload"):
+        RESULT["upload_ok"] = bool(memory.write_data_sync())
+    hlc = cf.high_level_commander
+    hlc.define_trajectory(1, 0, len(pieces))
+    total = sum(p["duration"] for p in pieces)
+    idle = lambda: None    # noqa: E731
+    hlc.takeoff(0.5, 2.0)
+    phase("takeoff", 3.0, idle, mocap, phases)
+    hlc.go_to(0.3, 0.2, 0.6, 0.0, 2.0)
+    phase("go_to", 3.0, idle, mocap, phases)
+    hlc.go_to(0.0, 0.0, 0.5, 0.0, 2.0)
+    phase("back", 3.0, idle, mocap, phases)
+    RESULT["trajectory_start"] = control.ping()
+    hlc.start_trajectory(1, 1.0, False)
+    phase("trajectory", total + 2.0, idle, mocap, phases)
+    hlc.land(0.0, 2.0)
+    phase("land", 3.0, idle, mocap, phases)
+
+
+def fly_setpoints(cf, mocap: Mocap, args: argparse.Namespace, phases: dict, x: float, y: float, z: float) -> None:
+    phase("position", args.seconds, lambda: cf.commander.send_position_setpoint(x, y, z, 0.0), mocap, phases)
+    if not args.trap:
+        phase("hover", 2.0, lambda: cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, z), mocap, phases)
+        phase("velocity", 2.0, lambda: cf.commander.send_velocity_world_setpoint(0.3, 0.0, 0.0, 0.0), mocap, phases)
+        phase("hold", 1.0, lambda: cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, z), mocap, phases)
+    cf.commander.send_notify_setpoint_stop()
+    phase("after_stop", 0.5, lambda: None, mocap, phases)
 
 
 def main() -> None:
@@ -109,6 +146,7 @@ def main() -> None:
     p.add_argument("--goal", type=float, nargs=3, default=(0.0, 0.0, 0.5))
     p.add_argument("--seconds", type=float, default=6.0, help="duration of the position phase")
     p.add_argument("--trap", action="store_true", help="position phase only (estimator-1 trap)")
+    p.add_argument("--high-level", default="", help="JSON file of poly4d pieces: fly with the high-level commander")
     p.add_argument("--timeout", type=float, default=40.0)
     args = p.parse_args()
     logging_level = os.environ.get("CFLIB_PEER_LOG")

@@ -116,3 +116,30 @@ def test_cflib_complementary_estimator_trap(python, served):
     assert r["params"]["stabilizer.estimator"] == "1"
     end = r["phases"]["position"][-1]
     assert distance(end, goal) > 0.8 and abs(end[3] - 0.5) < 0.2
+
+
+def test_cflib_high_level_takeoff_go_to_figure_eight_and_land(python, served, tmp_path):
+    """The done-when flight: extpos at 100 Hz, estimator 2 + controller 1, HL takeoff, go_to, a
+    figure-8 uploaded through cflib's trajectory memory API (Poly4D, write_data_sync), defined,
+    started, and a landing; the path is checked on the world's true state."""
+    from crazyflie_driver.sim.world.planner import Plan, figure_eight
+    pieces = figure_eight(0.6, 0.3, 8.0, 8, 0.5)
+    spec = tmp_path / "figure8.json"
+    spec.write_text(json.dumps([{"duration": p.duration, "x": list(p.coeffs[0]), "y": list(p.coeffs[1]),
+                                 "z": list(p.coeffs[2]), "yaw": list(p.coeffs[3])} for p in pieces]))
+    r = fly(python, served, URI_HOLD, URI_HOLD, "--high-level", str(spec))
+    settle(served, URI_HOLD)
+    assert r["upload_ok"] is True
+    ph = r["phases"]
+    assert abs(ph["takeoff"][-1][3] - 0.5) < 0.05 and ph["takeoff"][-1][4] > 0
+    assert distance(ph["go_to"][-1], (0.3, 0.2, 0.6)) < 0.05
+    assert distance(ph["back"][-1], (0.0, 0.0, 0.5)) < 0.05
+    plan = Plan(1, pieces, r["trajectory_start"])
+    flown = [s for s in ph["trajectory"] if s[0] <= r["trajectory_start"] + plan.duration]
+    errors = [distance(s, plan.evaluate(s[0]).pos) for s in flown]
+    xs, ys = [s[1] for s in flown], [s[2] for s in flown]
+    # the figure is flown (both lobes, full width), with the PID controller's lag (no feed-forward)
+    assert max(xs) > 0.4 and min(xs) < -0.4 and max(ys) > 0.15 and min(ys) < -0.15
+    assert sum(errors) / len(errors) < 0.3
+    assert distance(ph["trajectory"][-1], (0.0, 0.0, 0.5)) < 0.08          # the end point is held
+    assert ph["land"][-1][3] < 0.03 and ph["land"][-1][4] == 0.0            # landed, motors off

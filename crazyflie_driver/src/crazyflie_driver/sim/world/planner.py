@@ -126,3 +126,24 @@ class Plan:
 
     def finished(self, now: float) -> bool:
         return bool(self.pieces) and now - self.t_begin >= self.duration
+
+
+def figure_eight(half_width: float, half_height: float, period: float, n_pieces: int, z: float) -> List[Piece]:
+    """A figure-8 at height ``z`` as poly4d pieces: x = w·sin(ωt), y = h·sin(2ωt), one period, starting
+    and ending at (0, 0, z) in motion; each piece matches the curve's position, velocity and
+    acceleration at its ends (for tests and benchmarks of trajectory tracking)."""
+    omega = 2.0 * math.pi / period
+    dt = period / n_pieces
+
+    def state(t: float, amplitude: float, w: float) -> Tuple[float, float, float]:
+        return (amplitude * math.sin(w * t), amplitude * w * math.cos(w * t), -amplitude * w * w * math.sin(w * t))
+
+    pieces = []
+    for k in range(n_pieces):
+        t0, t1 = k * dt, (k + 1) * dt
+        coeffs = np.zeros((AXES, N_COEFFS))
+        coeffs[0] = poly7_nojerk(dt, state(t0, half_width, omega), state(t1, half_width, omega))
+        coeffs[1] = poly7_nojerk(dt, state(t0, half_height, 2 * omega), state(t1, half_height, 2 * omega))
+        coeffs[2, 0] = z
+        pieces.append(Piece(dt, coeffs))
+    return pieces
