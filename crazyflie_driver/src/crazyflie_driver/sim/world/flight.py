@@ -16,7 +16,8 @@ from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS,
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import Evaluation, Piece
-from crazyflie_driver.sim.world.position_control import POSITION_EVERY, PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl
+from crazyflie_driver.sim.world.position_control import (POSITION_EVERY, PRIORITY_CRTP, PRIORITY_HIGH_LEVEL,
+                                                         PositionControl)
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")
