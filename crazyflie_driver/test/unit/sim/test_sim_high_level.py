@@ -158,3 +158,42 @@ def test_trajectory_upload_define_start_and_errors():
     assert np.mean(errs) < 0.3 and max(errs) < 0.4
     rig.fly(3.0)
     assert np.linalg.norm(rig.truth() - plan.evaluate(rig.world.time).pos) < 0.05
+
+
+def test_mellinger_tracks_the_figure_eight_with_feed_forward():
+    from crazyflie_driver.sim.world.planner import figure_eight
+    errors = {}
+    for controller in (1, 2):
+        rig = Rig()
+        rig.param("stabilizer.controller", controller)
+        assert rig.cf.params.value("ctrlMel.massThrust") == 132000.0
+        hl(rig, takeoff(0.5, 2.0))
+        rig.fly(4.0)
+        pieces = figure_eight(0.6, 0.3, 6.0, 6, 0.5)
+        data = b"".join(POLY4D_PIECE.pack(*p.coeffs.reshape(-1), p.duration) for p in pieces)
+        for offset in range(0, len(data), 24):
+            ask(rig, 4, 2, bytes([0]) + struct.pack("<I", offset) + data[offset:offset + 24])
+        hl(rig, struct.pack("<BBBBIB", 6, 1, 1, 0, 0, len(pieces)))
+        assert hl(rig, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 1, 1.0))[-1] == 0
+        plan = Plan(1, pieces, rig.world.time)
+        errs = []
+        for _ in range(600):
+            rig.fly(0.01)
+            errs.append(np.linalg.norm(rig.truth() - plan.evaluate(rig.world.time).pos))
+        errors[controller] = float(np.mean(errs))
+    assert errors[2] < 0.05 and errors[1] > 3 * errors[2], errors     # feed-forward vs none
+
+
+def test_mellinger_quirk_hover_setpoints_have_no_horizontal_control():
+    moved = {}
+    for controller in (1, 2):
+        rig = Rig()
+        rig.param("stabilizer.controller", controller)
+        hl(rig, takeoff(0.5, 1.5))
+        rig.fly(3.0)
+        start = rig.truth().copy()
+        rig.setpoint = bytes([10]) + struct.pack("<ffff", 0.3, 0.0, 0.0, 0.5)
+        rig.fly(2.0)
+        moved[controller] = rig.truth() - start
+        assert rig.truth()[2] == pytest.approx(0.5, abs=0.08)                 # z is held by both
+    assert moved[1][0] > 0.3 and abs(moved[2][0]) < 0.05, moved

@@ -224,6 +224,8 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
     + [ParamVar("kalman", "maxPos", "float", 100.0, generations=_CUR),
        ParamVar("kalman", "maxVel", "float", 10.0, generations=_CUR)]
     + [ParamVar("hlCommander", "groupmask", "uint8_t", 0, generations=_CUR)]
+    + [ParamVar("ctrlMel", n, "float", 0.0, generations=_CUR)
+       for n in ("kp_xy", "kd_xy", "ki_xy", "i_range_xy", "kp_z", "kd_z", "ki_z", "i_range_z", "mass", "massThrust")]
     + [ParamVar("locSrv", "extPosStdDev", "float", 0.01, generations=_CUR),
        ParamVar("locSrv", "extQuatStdDev", "float", 4.5e-3, generations=_CUR)]
     # onboard estimator and position controller: the world's vehicle supplies the firmware's defaults

@@ -14,10 +14,11 @@ import numpy as np
 from crazyflie_driver.sim.firmware.setpoint_decode import Setpoint
 from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, Estimator
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
+from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import Evaluation, Piece
-from crazyflie_driver.sim.world.position_control import (POSITION_EVERY, PRIORITY_CRTP, PRIORITY_HIGH_LEVEL,
-                                                         PositionControl)
+from crazyflie_driver.sim.world.position_control import (CONTROLLER_MELLINGER, POSITION_EVERY, PRIORITY_CRTP,
+                                                         PRIORITY_HIGH_LEVEL, PositionControl)
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")
@@ -164,13 +165,20 @@ class OnboardFlight:
         self.estimator.update(tick, now, stab.thrust > 0.0, bodies.position)
         wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
         active = self.control.s.active
-        if tick % POSITION_EVERY or not active.any():
+        if tick % MELLINGER_EVERY or not active.any():
+            return wrote
+        if tick % POSITION_EVERY and not (active & (self.control.s.controller == CONTROLLER_MELLINGER)).any():
             return wrote
         est_pos = self.estimator.positions(bodies.position, ground_asl)
         est_vel = self.estimator.velocities(bodies.velocity)
-        self.control.update(tick, est_pos, est_vel, stab.attitude[:, 2], stab.sp, stab.yaw_sp, stab.thrust > 0.0)
-        stab.thrust_locked[active] = False
-        return True
+        q = bodies.quaternion
+        body_z = np.stack([2.0 * (q[:, 0] * q[:, 2] + q[:, 3] * q[:, 1]), 2.0 * (q[:, 1] * q[:, 2] - q[:, 3] * q[:, 0]),
+                           1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)], axis=1)
+        if self.control.update(tick, est_pos, est_vel, stab.attitude[:, 2], stab.sp, stab.yaw_sp, stab.thrust > 0.0,
+                               body_z):
+            stab.thrust_locked[active] = False
+            return True
+        return wrote
 
     # --- log variables ---------------------------------------------------------------------------------
     def readings(self, i: int, group: str, bodies: BodyStates, attitude_deg: np.ndarray,

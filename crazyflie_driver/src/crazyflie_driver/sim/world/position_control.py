@@ -15,6 +15,7 @@ from typing import Dict, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, MODE_DISABLE, MODE_VELOCITY, Setpoint
+from crazyflie_driver.sim.world import mellinger as _mel
 from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 POSITION_EVERY = 10                 # ticks: the position controller runs at 100 Hz
@@ -27,6 +28,7 @@ VZ_OUTPUT_LIMIT = 65535 / 2 / THRUST_SCALE
 UINT16_MAX = 65535.0
 M_X, M_Y, M_Z, M_ROLL, M_PITCH, M_YAW, M_QUAT = range(7)
 PRIORITY_HIGH_LEVEL, PRIORITY_CRTP = 1, 2
+CONTROLLER_PID, CONTROLLER_MELLINGER = 1, 2
 TERMS = ("Kp", "Ki", "Kd")
 
 # current firmware defaults: gains (kp, ki, kd, kff) per axis, then limits and thrust
@@ -50,6 +52,7 @@ def default_params() -> Dict[str, float]:
     out.update({"posCtlPid.thrustBase": THRUST_BASE, "posCtlPid.thrustMin": THRUST_MIN,
                 "posCtlPid.rLimit": RP_LIMIT_DEG, "posCtlPid.pLimit": RP_LIMIT_DEG,
                 "posCtlPid.xVelMax": VEL_MAX, "posCtlPid.yVelMax": VEL_MAX, "posCtlPid.zVelMax": VEL_MAX})
+    out.update(_mel.DEFAULTS)
     return out
 
 
@@ -59,6 +62,8 @@ _PARAMS = default_params()
 def _param_slot(name: str) -> Tuple[str, Tuple[int, ...]]:
     """Parameter name -> (field, index within the row) of ``PositionStates``."""
     group, _, field = name.partition(".")
+    if group == "ctrlMel":
+        return "mel_gains", (_mel.GAIN_ORDER.index(name),)
     if group == "posCtlPid":
         if field[:1] in "xyz" and field[1:] in ("Kp", "Ki", "Kd", "Kff"):
             return "pos_gains", ("xyz".index(field[0]), ("Kp", "Ki", "Kd", "Kff").index(field[1:]))
@@ -97,6 +102,9 @@ class PositionStates(Rows):
         "vel_prev": ((3,), float),
         "vel_target": ((3,), float),      # velocity setpoint of the velocity PID (body x, y; world z)
         "out": ((3,), float),             # roll, pitch (deg), thrust (counts)
+        "controller": ((), np.int8),      # stabilizer.controller as it runs: 1 PID, 2 Mellinger
+        "mel_gains": ((len(_mel.GAIN_ORDER),), float),
+        "mel_integ": ((3,), float),
     }
 
 
@@ -123,8 +131,13 @@ class PositionControl:
         s.thrust_min[i] = THRUST_MIN
         s.rp_limit[i] = RP_LIMIT_DEG
         s.vel_max[i] = VEL_MAX
+        s.controller[i] = CONTROLLER_PID
+        s.mel_gains[i] = [_mel.DEFAULTS[n] for n in _mel.GAIN_ORDER]
 
     def set_param(self, i: int, name: str, value: float) -> bool:
+        if name == "stabilizer.controller":       # 0 (auto) and the controllers not simulated run PID
+            self.s.controller[i] = CONTROLLER_MELLINGER if int(value) == CONTROLLER_MELLINGER else CONTROLLER_PID
+            return True
         if name not in _PARAMS:
             return False
         field, index = _param_slot(name)
@@ -148,17 +161,50 @@ class PositionControl:
 
     # --- the tick -----------------------------------------------------------------------------------
     def update(self, tick: int, est_pos: np.ndarray, est_vel: np.ndarray, yaw_deg: np.ndarray,
-               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, thrust_on: np.ndarray) -> None:
-        """100 Hz: new roll, pitch, yaw and thrust setpoints for the active rows of the stabilizer.
+               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, thrust_on: np.ndarray, body_z: np.ndarray) -> bool:
+        """New roll, pitch, yaw and thrust setpoints for the active rows of the stabilizer: PID rows at
+        100 Hz, Mellinger rows at 500 Hz. Returns whether it wrote anything.
 
         ``stab_sp`` (N,4: roll, pitch, yaw rate as the wire has it, thrust) and ``stab_yaw_sp`` (N,)
         are the stabilizer's own setpoint arrays, written in place. ``thrust_on`` (N,) is False
-        where the motors were off at the last tick (the firmware then resets the PIDs).
+        where the motors were off at the last tick (the firmware then resets the PIDs); ``body_z``
+        (N,3) the current body z axes.
         """
         s = self.s
-        if tick % POSITION_EVERY or not s.active.any():
-            return
-        rows = np.flatnonzero(s.active)
+        if tick % _mel.MELLINGER_EVERY or not s.active.any():
+            return False
+        wrote = False
+        mel = s.active & (s.controller == CONTROLLER_MELLINGER)
+        if mel.any():
+            rows = np.flatnonzero(mel)
+            s.mel_integ[rows[~thrust_on[rows]]] = 0.0
+            modes = s.modes[rows]
+            yaw_des = np.radians(self._yaw_target(rows, yaw_deg[rows], _mel.DT))
+            roll, pitch, thrust, s.mel_integ[rows] = _mel.force_and_attitude(
+                s.mel_gains[rows], s.mel_integ[rows], est_pos[rows], est_vel[rows], s.pos[rows], s.vel[rows],
+                s.acc[rows], s.att[rows], modes[:, M_X] == MODE_ABS, modes[:, M_Z] == MODE_ABS, yaw_des, body_z[rows])
+            self._write(rows, roll, pitch, thrust, stab_sp, stab_yaw_sp)
+            wrote = True
+        if tick % POSITION_EVERY == 0:
+            pid = s.active & (s.controller != CONTROLLER_MELLINGER)
+            if pid.any():
+                self._update_pid(np.flatnonzero(pid), est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
+                wrote = True
+        return wrote
+
+    def _yaw_target(self, rows: np.ndarray, yaw_now_deg: np.ndarray, dt: float) -> np.ndarray:
+        """Desired yaw (deg): the setpoint's angle, its quaternion's yaw, or now + rate·dt."""
+        s = self.s
+        modes = s.modes[rows]
+        q = s.quat[rows]
+        quat_yaw = np.degrees(np.arctan2(2.0 * (q[:, 3] * q[:, 2] + q[:, 0] * q[:, 1]),
+                                         1.0 - 2.0 * (q[:, 1] ** 2 + q[:, 2] ** 2)))
+        target = np.where(modes[:, M_QUAT] == MODE_ABS, quat_yaw, yaw_now_deg + s.rate[rows, 2] * dt)
+        return np.where(modes[:, M_YAW] == MODE_ABS, s.att[rows, 2], target)
+
+    def _update_pid(self, rows: np.ndarray, est_pos: np.ndarray, est_vel: np.ndarray, yaw_deg: np.ndarray,
+                    stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, thrust_on: np.ndarray) -> None:
+        s = self.s
         modes = s.modes[rows]
         changed = (modes != s.prev_modes[rows]).any(axis=1) | ~thrust_on[rows]
         if changed.any():
@@ -201,8 +247,14 @@ class PositionControl:
         roll = np.where(xy_off, s.att[rows, 0], roll)
         pitch = np.where(xy_off, s.att[rows, 1], pitch)
         thrust = np.where(modes[:, M_Z] == MODE_DISABLE, s.thrust_sp[rows], thrust)
-        s.out[rows, 0], s.out[rows, 1], s.out[rows, 2] = roll, pitch, thrust
+        self._write(rows, roll, pitch, thrust, stab_sp, stab_yaw_sp)
 
+    def _write(self, rows: np.ndarray, roll: np.ndarray, pitch: np.ndarray, thrust: np.ndarray,
+               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
+        """Roll, pitch (deg), thrust and the yaw setpoint of ``rows`` into the stabilizer's setpoint row."""
+        s = self.s
+        modes = s.modes[rows]
+        s.out[rows, 0], s.out[rows, 1], s.out[rows, 2] = roll, pitch, thrust
         stab_sp[rows, 0] = roll
         stab_sp[rows, 1] = pitch
         stab_sp[rows, 3] = thrust

@@ -1,0 +1,62 @@
+"""The position part of the firmware's Mellinger controller (``stabilizer.controller`` 2), all vehicles at once.
+
+The desired force is F = m·(a_ff + g·ẑ) + kp·e_p + kd·e_v + ki·∫e_p, but only when the setpoint's x
+mode is absolute (position, full state, high-level commander). Any other setpoint gets the
+firmware's quirk: the x/y force comes from the setpoint's roll and pitch fields (zero for hover and
+velocity-world setpoints, which therefore have no horizontal control at all) and z holds the
+setpoint's z (0 for velocity-world setpoints, whose decoder leaves it unset), or 1 N when z is not
+absolute. The thrust command is ``massThrust`` × (F · current body z). The attitude that points
+the body z along F at the desired yaw is handed to the stabilizer's attitude controller: the
+firmware's own moment law (kR, kw) is not simulated. Facts in docs/simulation.md ("Mellinger").
+"""
+from __future__ import annotations
+
+from typing import Dict, Tuple
+
+import numpy as np
+
+GRAVITY = 9.81
+DT = 1.0 / 500.0                    # s, the controller's rate
+MELLINGER_EVERY = 2                 # ticks
+# current firmware defaults
+DEFAULTS: Dict[str, float] = {
+    "ctrlMel.kp_xy": 0.4, "ctrlMel.kd_xy": 0.2, "ctrlMel.ki_xy": 0.05, "ctrlMel.i_range_xy": 2.0,
+    "ctrlMel.kp_z": 1.25, "ctrlMel.kd_z": 0.4, "ctrlMel.ki_z": 0.05, "ctrlMel.i_range_z": 0.4,
+    "ctrlMel.mass": 0.029, "ctrlMel.massThrust": 132000.0,
+}
+GAIN_ORDER = tuple(DEFAULTS)        # column order of the per-vehicle gain array
+
+
+def force_and_attitude(gains: np.ndarray, integ: np.ndarray, pos: np.ndarray, vel: np.ndarray,
+                       sp_pos: np.ndarray, sp_vel: np.ndarray, sp_acc: np.ndarray, sp_att_deg: np.ndarray,
+                       x_abs: np.ndarray, z_abs: np.ndarray, yaw_des_rad: np.ndarray,
+                       body_z: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One 500 Hz step for the given rows: (roll deg, legacy pitch deg, thrust counts, new integrals).
+
+    ``gains`` (n, 10) in ``GAIN_ORDER``; ``integ`` (n, 3) the position-error integrals; ``body_z``
+    (n, 3) the current body z axis in the world frame.
+    """
+    kp_xy, kd_xy, ki_xy, ir_xy, kp_z, kd_z, ki_z, ir_z, mass, mass_thrust = gains.T
+    e_p = sp_pos - pos
+    e_v = sp_vel - vel
+    integ = integ + e_p * DT
+    integ[:, :2] = np.clip(integ[:, :2], -ir_xy[:, None], ir_xy[:, None])
+    integ[:, 2] = np.clip(integ[:, 2], -ir_z, ir_z)
+    full = np.empty_like(e_p)
+    full[:, 0] = mass * sp_acc[:, 0] + kp_xy * e_p[:, 0] + kd_xy * e_v[:, 0] + ki_xy * integ[:, 0]
+    full[:, 1] = mass * sp_acc[:, 1] + kp_xy * e_p[:, 1] + kd_xy * e_v[:, 1] + ki_xy * integ[:, 1]
+    full[:, 2] = mass * (sp_acc[:, 2] + GRAVITY) + kp_z * e_p[:, 2] + kd_z * e_v[:, 2] + ki_z * integ[:, 2]
+    quirk = np.empty_like(e_p)
+    quirk[:, 0] = -np.sin(np.radians(sp_att_deg[:, 1]))
+    quirk[:, 1] = -np.sin(np.radians(sp_att_deg[:, 0]))
+    quirk[:, 2] = np.where(z_abs, mass * GRAVITY + kp_z * e_p[:, 2] + kd_z * e_v[:, 2] + ki_z * integ[:, 2], 1.0)
+    force = np.where(x_abs[:, None], full, quirk)
+    thrust = np.clip(mass_thrust * np.einsum("ij,ij->i", force, body_z), 0.0, 65535.0)
+    norm = np.linalg.norm(force, axis=1)
+    z_des = force / np.where(norm > 0, norm, 1.0)[:, None]
+    c, s = np.cos(yaw_des_rad), np.sin(yaw_des_rad)
+    bx = c * z_des[:, 0] + s * z_des[:, 1]          # desired body z in the yaw-aligned frame
+    by = -s * z_des[:, 0] + c * z_des[:, 1]
+    roll = -np.degrees(np.arcsin(np.clip(by, -1.0, 1.0)))
+    pitch_legacy = -np.degrees(np.arctan2(bx, z_des[:, 2]))
+    return roll, pitch_legacy, thrust, integ
