@@ -29,14 +29,65 @@ sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie  # noqa: E402
 from crazyflie_driver.sim.firmware.setpoint_decode import decode_setpoint  # noqa: E402
 from crazyflie_driver.sim.world.mocap import MocapModel  # noqa: E402
+from crazyflie_driver.sim.world.planner import Evaluation, Plan, evaluate, figure_eight, online_piece  # noqa: E402
 from crazyflie_driver.sim.world.world import World  # noqa: E402
 
 GOAL = (0.0, 0.0, 0.5)
+FIG8_HALF_WIDTH, FIG8_HALF_HEIGHT = 1.0, 0.5       # m: x = w sin(ωt), y = h sin(2ωt)
+FIG8_PERIOD = 8.0                                  # s: 0.76 m/s average (Crazyswarm flew 0.76)
 SETTLE_S = 12.0
 HOLD_S = 10.0
 
 
-def flight(rate_hz: float, std_dev: float, seed: int, outage_s: float = 0.0):
+def rig(seed: int, controller: int = 1, std_dev: float = 0.01, rate_hz: float = 100.0):
+    """A vehicle behind its simulated firmware with mocap as port-6 extpos; estimator 2."""
+    world = World(speed=0, seed=seed)
+    vehicle = world.add_vehicle("cf1")
+    cf = SimulatedCrazyflie(b"\xe7\xe7\xe7\xe7\x01", vehicle)
+    mocap = MocapModel(world, rate=rate_hz, seed=seed).attach()
+    mocap.add_listener(lambda frames: [cf.handle_crtp(bytes([0x6C]) + struct.pack("<fff", *f.position))
+                                       for f in frames])
+    for name, value in (("stabilizer.estimator", 2), ("stabilizer.controller", controller),
+                        ("locSrv.extPosStdDev", std_dev)):
+        vehicle.write_param(name, value)
+        cf.params.values[cf.params.ident(name)] = value
+    return world, vehicle, cf
+
+
+def high_level(cf, payload: bytes) -> None:
+    cf.handle_crtp(bytes([0x8C]) + payload)
+
+
+def takeoff_and_figure_eight(controller: int, seed: int):
+    """HL takeoff to 0.5 m in 2 s (true z against the planner's polynomial), then a figure-8 at
+    Crazyswarm's average speed (true position against the trajectory, first to last point)."""
+    world, vehicle, cf = rig(seed, controller)
+    high_level(cf, struct.pack("<BBff?f", 7, 0, 0.5, 0.0, False, 2.0))
+    piece = online_piece(2.0, Evaluation(np.zeros(3), np.zeros(3), np.zeros(3), 0.0, 0.0), (0, 0, 0.5), 0.0)
+    takeoff_err = []
+    for _ in range(300):
+        world.step(10)
+        takeoff_err.append(abs(vehicle.pose()[0][2] - evaluate(piece, world.time)[0][2]))
+    world.step(2000)
+    pieces = figure_eight(FIG8_HALF_WIDTH, FIG8_HALF_HEIGHT, FIG8_PERIOD, 12, 0.5)
+    data = b"".join(struct.pack("<33f", *p.coeffs.reshape(-1), p.duration) for p in pieces)
+    for offset in range(0, len(data), 24):
+        cf.handle_crtp(bytes([0x4E, 0]) + struct.pack("<I", offset) + data[offset:offset + 24])
+    high_level(cf, struct.pack("<BBBBIB", 6, 1, 1, 0, 0, len(pieces)))
+    high_level(cf, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 1, 1.0))
+    plan = Plan(1, pieces, world.time)
+    err, speeds = [], []
+    while world.time < plan.t_begin + plan.duration:
+        world.step(10)
+        ev = plan.evaluate(world.time)
+        err.append(np.linalg.norm(vehicle.pose()[0] - ev.pos))
+        speeds.append(np.linalg.norm(ev.vel))
+    return {"takeoff_max_mm": 1000 * max(takeoff_err), "takeoff_end_mm": 1000 * takeoff_err[-1],
+            "fig8_mean_mm": 1000 * float(np.mean(err)), "fig8_max_mm": 1000 * float(np.max(err)),
+            "speed_mean": float(np.mean(speeds)), "speed_max": float(np.max(speeds))}
+
+
+def flight(rate_hz: float, std_dev: float, seed: int, outage_s: float = 0.0, controller: int = 1):
     world = World(speed=0, seed=seed)
     vehicle = world.add_vehicle("cf1")
     cf = SimulatedCrazyflie(b"\xe7\xe7\xe7\xe7\x01", vehicle)
@@ -52,7 +103,8 @@ def flight(rate_hz: float, std_dev: float, seed: int, outage_s: float = 0.0):
     mocap.add_listener(on_frames)
     setpoint = bytes([0x7C, 7]) + struct.pack("<ffff", GOAL[0], GOAL[1], GOAL[2], 0.0)
     world.add_tick_listener(lambda now: cf.handle_crtp(setpoint), 0.02)
-    for name, value in (("stabilizer.estimator", 2), ("stabilizer.controller", 1), ("locSrv.extPosStdDev", std_dev)):
+    for name, value in (("stabilizer.estimator", 2), ("stabilizer.controller", controller),
+                        ("locSrv.extPosStdDev", std_dev)):
         vehicle.write_param(name, value)
         cf.params.values[cf.params.ident(name)] = value
     t0 = time.perf_counter()
@@ -119,6 +171,21 @@ def main() -> int:
         r = flight(rate, std, args.seed)
         lines.append("%-8g %-12g %9.2f %9.2f %9.2f %8.2fx"
                      % (rate, std, r["mean_mm"], r["rms_mm"], r["max_mm"], r["rtf"]))
+        print(lines[-1], flush=True)
+    r = flight(100.0, 0.01, args.seed, controller=2)
+    lines.append("%-8s %-12s %9.2f %9.2f %9.2f %8.2fx   (Mellinger, controller 2)"
+                 % ("100", "0.01", r["mean_mm"], r["rms_mm"], r["max_mm"], r["rtf"]))
+    print(lines[-1], flush=True)
+    lines.append("high-level commander: takeoff to 0.5 m in 2 s (true z - planner polynomial) and a %.0f x %.0f m "
+                 "figure-8 in %.0f s (true position - trajectory)" % (2 * FIG8_HALF_WIDTH, 2 * FIG8_HALF_HEIGHT,
+                                                                     FIG8_PERIOD))
+    lines.append("%-11s %16s %16s %14s %14s %18s" % ("controller", "takeoff max mm", "takeoff end mm", "fig8 mean mm",
+                                                     "fig8 max mm", "speed mean/max m/s"))
+    for controller, label in ((1, "1 PID"), (2, "2 Mellinger")):
+        r = takeoff_and_figure_eight(controller, args.seed)
+        lines.append("%-11s %16.1f %16.1f %14.1f %14.1f %13.2f/%.2f" % (
+            label, r["takeoff_max_mm"], r["takeoff_end_mm"], r["fig8_mean_mm"], r["fig8_max_mm"], r["speed_mean"],
+            r["speed_max"]))
         print(lines[-1], flush=True)
     lines.append("mocap outage while hovering (100 Hz before and after): horizontal error of the true position")
     lines.append("%-8s %16s %16s %22s" % ("outage s", "max during mm", "at its end mm", "max from +3 s after mm"))
