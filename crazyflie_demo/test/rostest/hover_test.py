@@ -4,8 +4,9 @@
 Private params: ``sim_address``; ``vehicles`` = [{name, target: [x, y, z]}] (name = the world's
 vehicle = the launch file's namespace); ``rms_bound`` / ``max_bound`` (m) on the hold error over
 ``measure_s`` seconds after ``settle_s`` seconds near the target (seconds of world time: the
-flight's own clock); ``mocap`` (vicon|vrpn): the
-motion-capture names the poses must come through.
+flight's own clock); ``mocap`` (vicon|vrpn): the motion-capture names the poses must come through.
+Throughout, it records /tf: no motion-capture child frame may get two transforms with the same (or
+an older) stamp (tf2's TF_REPEATED_DATA), and the world's real-time status must be on /diagnostics.
 """
 from __future__ import annotations
 
@@ -16,7 +17,9 @@ import unittest
 import rospy
 import rostest
 import tf2_ros
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TransformStamped
+from tf2_msgs.msg import TFMessage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.flight_support import WorldProbe, hold_errors  # noqa: E402
@@ -36,6 +39,30 @@ class Hover(unittest.TestCase):
         cls.measure_s = float(rospy.get_param("~measure_s", 5.0))
         cls.tf = tf2_ros.Buffer()
         cls.listener = tf2_ros.TransformListener(cls.tf)
+        cls.last_stamp, cls.tf_count, cls.repeated = {}, {}, []
+        cls.world_status = None
+        cls.tf_sub = rospy.Subscriber("/tf", TFMessage, cls._on_tf, queue_size=1000)
+        cls.diag_sub = rospy.Subscriber("/diagnostics", DiagnosticArray, cls._on_diagnostics, queue_size=10)
+
+    @classmethod
+    def _on_tf(cls, msg):
+        for t in msg.transforms:
+            child, ns = t.child_frame_id, t.header.stamp.to_nsec()
+            last = cls.last_stamp.get(child)
+            if last is not None and ns <= last:
+                cls.repeated.append((child, last, ns))
+            cls.last_stamp[child] = ns
+            cls.tf_count[child] = cls.tf_count.get(child, 0) + 1
+
+    @classmethod
+    def _on_diagnostics(cls, msg):
+        for st in msg.status:
+            values = {kv.key: kv.value for kv in st.values}
+            if "real-time factor" in values:
+                cls.world_status = (st, values)
+
+    def mocap_frame(self, name):
+        return "vicon/%s/%s" % (name, name) if self.mocap == "vicon" else name
 
     def test_a_poses_come_through_the_motion_capture_names(self):
         for v in self.vehicles:
@@ -72,6 +99,18 @@ class Hover(unittest.TestCase):
             self.assertLess(rms, self.rms_bound, n)
             self.assertLess(worst, self.max_bound, n)
             self.assertFalse(self.probe.state(n)["on_ground"])
+
+    def test_c_no_repeated_tf_stamps_and_the_world_reports_its_real_time_factor(self):
+        for v in self.vehicles:
+            frame = self.mocap_frame(v["name"])
+            self.assertGreater(self.tf_count.get(frame, 0), 100, "too few transforms of %s on /tf" % frame)
+        self.assertEqual(self.repeated[:5], [], "%d transforms with a stamp not after the previous one of their "
+                         "frame (TF_REPEATED_DATA)" % len(self.repeated))
+        self.assertTrue(wait_until(lambda: self.world_status is not None, 5.0), "no world status on /diagnostics")
+        status, values = self.world_status
+        self.assertEqual(int(values["vehicles"]), len(self.vehicles))
+        self.assertGreater(float(values["real-time factor"]), 0.0)
+        print("WORLD %s: %s" % (status.message, values))
 
 
 if __name__ == "__main__":

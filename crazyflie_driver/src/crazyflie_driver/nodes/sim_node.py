@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
@@ -167,78 +167,153 @@ def mocap_model(world: Any, config: MocapConfig, seed: Optional[int] = None):
                       latency=config.latency, dropout=config.dropout, seed=seed)
 
 
+def newest_per_body(frames: Sequence[Any]) -> List[Any]:
+    """The newest of each body's frames (frames oldest first, as the motion-capture model delivers them).
+
+    When the publisher falls behind, a delivery holds several frames of one body: tf gets only the
+    newest, so no two transforms of one frame go out in one message.
+    """
+    newest: Dict[str, Any] = {}
+    for f in frames:
+        newest[f.name] = f
+    return list(newest.values())
+
+
+class StampGuard:
+    """Remembers the last stamp sent per child frame and admits only strictly later ones.
+
+    tf2 drops a transform whose stamp equals the last one of its child frame and warns
+    TF_REPEATED_DATA each time; stamps are compared as integer nanoseconds, as they go on the wire.
+    """
+
+    def __init__(self) -> None:
+        self._last: Dict[str, int] = {}
+        self.refused = 0
+
+    def admit(self, child: str, stamp_ns: int) -> bool:
+        last = self._last.get(child)
+        if last is not None and stamp_ns <= last:
+            self.refused += 1
+            return False
+        self._last[child] = stamp_ns
+        return True
+
+
+@dataclass(frozen=True)
+class WorldStatus:
+    """How the world keeps up with real time, for /diagnostics."""
+
+    level: int                  # 0 OK, 1 WARN (diagnostic_msgs/DiagnosticStatus levels)
+    message: str
+    values: Tuple[Tuple[str, str], ...]
+
+
+def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behind: int, overruns: int,
+                 world_time: float, behind_factor: float) -> WorldStatus:
+    """The world's real-time status; WARN when it runs below `behind_factor` × its speed."""
+    if speed <= 0:
+        level, message = 0, "fast mode: %.1fx real time" % realtime_factor
+    elif realtime_factor < speed * behind_factor:
+        level, message = 1, ("behind real time: %.2fx instead of %.2fx (%d ticks behind); rates that follow the "
+                             "firmware's clock are low by the same factor" % (realtime_factor, speed, ticks_behind))
+    else:
+        level, message = 0, "keeps real time (%.2fx)" % realtime_factor
+    values = (("real-time factor", "%.3f" % realtime_factor), ("speed", "%.3f" % speed),
+              ("vehicles", str(vehicles)), ("ticks behind", str(ticks_behind)), ("overruns", str(overruns)),
+              ("world time [s]", "%.3f" % world_time))
+    return WorldStatus(level, message, values)
+
+
 # ------------------------------------------------------------------------------------------------
 # ROS side
 
 
 class MocapPublisher:
-    """Publishes mocap frames in vicon_bridge and/or vrpn_client_ros style."""
+    """Publishes mocap frames in vicon_bridge and/or vrpn_client_ros style.
+
+    tf: one ``tf2_msgs/TFMessage`` on ``/tf`` per delivery, holding every body's newest transform,
+    packed straight into wire bytes (`nodes.tf_wire`). A child frame never gets two transforms with
+    the same stamp (`StampGuard`). Per-body topics are published only while someone subscribes.
+    """
 
     def __init__(self, config: MocapConfig, names: Sequence[str]) -> None:
         import rospy
-        import tf2_ros
         from geometry_msgs.msg import PoseStamped, TransformStamped
+        from tf2_msgs.msg import TFMessage
+
+        from crazyflie_driver.nodes.tf_wire import packed_message_types
 
         self._rospy, self._PoseStamped, self._TransformStamped = rospy, PoseStamped, TransformStamped
+        self._PackedTF, self._PackedTransform = packed_message_types()
         self.config = config
         self.vicon = config.style in ("vicon", "both")
         self.vrpn = config.style in ("vrpn", "both")
-        self._tf = tf2_ros.TransformBroadcaster() if (self.vicon or self.vrpn) else None
-        self._vicon_pubs: Dict[str, Any] = {}
-        self._vrpn_pubs: Dict[str, Any] = {}
+        # what tf2_ros.TransformBroadcaster does: a TFMessage publisher on /tf
+        self._tf = rospy.Publisher("/tf", TFMessage, queue_size=100) if (self.vicon or self.vrpn) else None
+        self._bodies: Dict[str, Any] = {}
+        self.guard = StampGuard()
         for n in names:
-            self._publishers(n)
+            self._body(n)
 
-    def _publishers(self, name: str):
-        """(vicon, vrpn) publishers of a body; made on first sight for one added at run time."""
-        rospy = self._rospy
-        if self.vicon and name not in self._vicon_pubs:
-            self._vicon_pubs[name] = rospy.Publisher("/vicon/%s/%s" % (name, name), self._TransformStamped,
-                                                     queue_size=10)
-        if self.vrpn and name not in self._vrpn_pubs:
-            self._vrpn_pubs[name] = rospy.Publisher("/vrpn_client_node/%s/pose" % name, self._PoseStamped,
-                                                    queue_size=1)
-        return self._vicon_pubs.get(name), self._vrpn_pubs.get(name)
+    def _body(self, name: str):
+        """Per-body wires and publishers; made on first sight for one added at run time."""
+        body = self._bodies.get(name)
+        if body is None:
+            from crazyflie_driver.nodes.tf_wire import TransformWire
 
-    def _transform(self, stamp, child: str, position, quaternion):
-        t = self._TransformStamped()
-        t.header.stamp = stamp
-        t.header.frame_id = self.config.world_frame
-        t.child_frame_id = child
-        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (float(v) for v in position)
-        (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
-         t.transform.rotation.w) = (float(v) for v in quaternion)
-        return t
+            rospy, parent = self._rospy, self.config.world_frame
+            body = _MocapBody(
+                TransformWire(parent, "vicon/%s/%s" % (name, name)) if self.vicon else None,
+                rospy.Publisher("/vicon/%s/%s" % (name, name), self._TransformStamped, queue_size=10)
+                if self.vicon else None,
+                TransformWire(parent, name) if self.vrpn else None,
+                rospy.Publisher("/vrpn_client_node/%s/pose" % name, self._PoseStamped, queue_size=1)
+                if self.vrpn else None)
+            self._bodies[name] = body
+        return body
 
-    def publish(self, frames: Sequence[Any], world_time: float) -> None:
+    def publish(self, frames: Sequence[Any], world_time: float) -> int:
         """frames: ``sim.mocap.MocapFrame`` s delivered since the last call; ``world_time`` now.
 
-        vicon style stamps each frame with its capture time (ROS now minus its age in world time).
+        vicon style stamps each frame with its capture time (ROS now minus its age in world time);
+        vrpn style with the time of receipt, as vrpn_client_ros does. Returns the transforms sent.
         """
         if not frames or self._tf is None:
-            return
-        now = self._rospy.Time.now()
-        transforms = []
-        for f in frames:
-            name, position, quaternion = f.name, f.position, f.quaternion
-            vicon_pub, vrpn_pub = self._publishers(name)
-            stamp = now - self._rospy.Duration.from_sec(max(0.0, world_time - f.stamp))
-            if self.vicon:
-                t = self._transform(stamp, "vicon/%s/%s" % (name, name), position, quaternion)
-                transforms.append(t)
-                vicon_pub.publish(t)
-            if self.vrpn:
-                # vrpn_client_ros stamps with the time of receipt and publishes only when subscribed
-                transforms.append(self._transform(now, name, position, quaternion))
-                pub = vrpn_pub
-                if pub.get_num_connections() > 0:
+            return 0
+        now_ns = self._rospy.Time.now().to_nsec()
+        parts: List[bytes] = []
+        guard = self.guard
+        for f in newest_per_body(frames):
+            body = self._body(f.name)
+            position, quaternion = f.position, f.quaternion
+            if body.vicon is not None:
+                stamp = now_ns - int(round(max(0.0, world_time - f.stamp) * 1e9))
+                if guard.admit(body.vicon.child, stamp):
+                    packed = body.vicon.pack(stamp, position, quaternion)
+                    parts.append(packed)
+                    if body.vicon_pub.get_num_connections() > 0:
+                        body.vicon_pub.publish(self._PackedTransform(packed))
+            if body.vrpn is not None and guard.admit(body.vrpn.child, now_ns):
+                parts.append(body.vrpn.pack(now_ns, position, quaternion))
+                if body.vrpn_pub.get_num_connections() > 0:     # vrpn_client_ros: only when subscribed
                     p = self._PoseStamped()
-                    p.header.stamp, p.header.frame_id = now, self.config.world_frame
+                    p.header.stamp, p.header.frame_id = self._rospy.Time(*divmod(now_ns, 1000000000)), \
+                        self.config.world_frame
                     p.pose.position.x, p.pose.position.y, p.pose.position.z = (float(v) for v in position)
                     (p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z,
                      p.pose.orientation.w) = (float(v) for v in quaternion)
-                    pub.publish(p)
-        self._tf.sendTransform(transforms)
+                    body.vrpn_pub.publish(p)
+        if parts:
+            self._tf.publish(self._PackedTF(parts))
+        return len(parts)
+
+
+@dataclass
+class _MocapBody:
+    vicon: Any          # TransformWire world -> vicon/<name>/<name>, or None
+    vicon_pub: Any
+    vrpn: Any           # TransformWire world -> <name>, or None
+    vrpn_pub: Any
 
 
 def _advertise_mocap_switches(source: Any, names: Sequence[str]) -> list:
@@ -254,6 +329,34 @@ def _advertise_mocap_switches(source: Any, names: Sequence[str]) -> list:
             return SetBoolResponse(success=True, message="%s %s" % (name, "visible" if req.data else "hidden"))
         return on_call
     return [rospy.Service("~%s/set_mocap" % n, SetBool, handler(n)) for n in names]
+
+
+def _start_diagnostics(world: Any, address: str):
+    """Publishes the world's real-time status on /diagnostics every second; warns (throttled) when behind."""
+    import rospy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from crazyflie_driver.nodes.ros_signals import shutting_down
+    from crazyflie_driver.sim.world.world import BEHIND_FACTOR, BEHIND_WARNING_PERIOD_S
+
+    pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+    name = "%s: simulated world (%s)" % (rospy.get_name(), address)
+
+    def on_timer(_event) -> None:
+        st = world_status(world.realtime_factor, world.speed, len(world.vehicles()), world.ticks_behind,
+                          world.overruns, float(world.time), BEHIND_FACTOR)
+        if st.level:
+            rospy.logwarn_throttle(BEHIND_WARNING_PERIOD_S, "crazyflie_sim: the world runs %s" % st.message)
+        msg = DiagnosticArray()
+        msg.header.stamp = rospy.Time.now()
+        msg.status = [DiagnosticStatus(level=st.level, name=name, message=st.message, hardware_id="crazyflie_sim",
+                                       values=[KeyValue(k, v) for k, v in st.values])]
+        try:
+            pub.publish(msg)
+        except Exception as e:
+            if not shutting_down():
+                rospy.logwarn_throttle(10.0, "crazyflie_sim: diagnostics failed: %s" % e)
+    return rospy.Timer(rospy.Duration(1.0), on_timer)
 
 
 def _private_params() -> Dict[str, Any]:
@@ -331,9 +434,11 @@ def main() -> None:
 
     thread = threading.Thread(target=mocap_loop, name="mocap", daemon=True)
     thread.start()
+    diagnostics = _start_diagnostics(world, server.address)
 
     def shutdown() -> None:
         stop.set()
+        diagnostics.shutdown()
         server.stop()
         world.stop()
     rospy.on_shutdown(shutdown)

@@ -1,0 +1,79 @@
+#!/usr/bin/env python3
+"""crazyflie_sim_node's /tf and /diagnostics: see sim_mocap_tf.test."""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticArray
+from tf2_msgs.msg import TFMessage
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import wait_until  # noqa: E402
+
+NAMES = ("cf1", "cf2", "cf3")
+CHILDREN = tuple("vicon/%s/%s" % (n, n) for n in NAMES) + NAMES
+WINDOW_S = 5.0
+RATE_HZ = 500.0
+
+
+class SimMocapTf(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("sim_mocap_tf_test")
+        cls.lock = threading.Lock()
+        cls.messages = []                  # (monotonic arrival, [(child, stamp ns), ...])
+        cls.status = None
+        cls.tf_sub = rospy.Subscriber("/tf", TFMessage, cls.on_tf, queue_size=5000)
+        cls.diag_sub = rospy.Subscriber("/diagnostics", DiagnosticArray, cls.on_diagnostics, queue_size=10)
+
+    @classmethod
+    def on_tf(cls, msg):
+        entry = (time.monotonic(), [(t.child_frame_id, t.header.stamp.to_nsec()) for t in msg.transforms])
+        with cls.lock:
+            cls.messages.append(entry)
+
+    @classmethod
+    def on_diagnostics(cls, msg):
+        for st in msg.status:
+            values = {kv.key: kv.value for kv in st.values}
+            if "real-time factor" in values:
+                cls.status = (st, values)
+
+    def test_a_stamps_strictly_increase_per_child_frame_and_frames_come_batched(self):
+        self.assertTrue(wait_until(lambda: len(self.messages) > 50, 30.0), "no motion capture on /tf")
+        t0 = time.monotonic()
+        time.sleep(WINDOW_S)
+        with self.lock:
+            window = [m for t, m in self.messages if t >= t0]
+        last, repeated, count = {}, [], {}
+        for transforms in window:
+            for child, ns in transforms:
+                if child in last and ns <= last[child]:
+                    repeated.append((child, last[child], ns))
+                last[child] = ns
+                count[child] = count.get(child, 0) + 1
+        self.assertEqual(repeated[:5], [], "%d transforms not after the previous stamp of their frame "
+                         "(TF_REPEATED_DATA)" % len(repeated))
+        for child in CHILDREN:
+            # a late publisher merges frames (newest per body), but most of 500 Hz come through
+            self.assertGreater(count.get(child, 0), 0.25 * RATE_HZ * WINDOW_S, child)
+        # one message carries every body of a frame: far fewer messages than transforms
+        self.assertLess(len(window), sum(count.values()) / 3.0)
+
+    def test_b_the_world_reports_its_real_time_factor_on_diagnostics(self):
+        self.assertTrue(wait_until(lambda: self.status is not None, 10.0), "no world status on /diagnostics")
+        status, values = self.status
+        self.assertEqual(values["vehicles"], "3")
+        self.assertGreater(float(values["real-time factor"]), 0.0)
+        self.assertIn(status.level, (0, 1))
+        self.assertIn("ticks behind", values)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("crazyflie_driver", "sim_mocap_tf", SimMocapTf, sys.argv)
