@@ -187,6 +187,7 @@ class Drive:
     target: np.ndarray            # (N,4) steady thrust of each motor [N]
     blend: np.ndarray             # (N,1) motor lag over one substep: 1 - exp(-h / tau)
     drag: np.ndarray              # (N,3) body drag per unit body velocity: -K · Σ rotor speed [kg/s]
+    motors_off: bool = False      # no motor of any vehicle turns
 
 
 class RigidBodyBackend:
@@ -221,7 +222,8 @@ class RigidBodyBackend:
         a = states.rotor_speed_coeffs
         rotor_speed = a[:, 0:1] * u + a[:, 1:2]
         rotor_speed *= spinning
-        return Drive(actions, target, self._blend(states, h), rotor_speed @ _MINUS_ONES4 * states.body_drag)
+        return Drive(actions, target, self._blend(states, h), rotor_speed @ _MINUS_ONES4 * states.body_drag,
+                     not spinning.any())
 
     def _blend(self, states: BodyStates, h: float) -> np.ndarray:
         """(N,1) motor lag over a substep of h seconds; kept while the vehicles' time constants stay the same."""
@@ -250,6 +252,9 @@ class RigidBodyBackend:
         lag = d.target - f
         lag *= d.blend
         f += lag
+        if d.motors_off and s.on_ground.all() and s.position[:, 2].max() <= 0.0 and not s.velocity.any() \
+                and not s.omega.any():
+            return      # every vehicle rests on the floor, still, with its motors off: nothing moves
         ft = f @ _FORCE_PATTERN                          # (N,4): torque about x, y, z (unscaled), total thrust
         total = ft[:, 3]
         r = (s.quaternion[:, :, None] * s.quaternion[:, None, :]).reshape(-1, 16) @ _QUAT_TO_MATRIX
@@ -281,23 +286,21 @@ class RigidBodyBackend:
         resting = np.zeros(len(p_new), dtype=bool)
         if p_new[:, 2].min() <= 0.0:
             touching = p_new[:, 2] <= 0.0
-            m = s.mass
-            g = s.gravity
-            lifting = r[:, 2, 2] * total > m * g
+            lifting = r[:, 2, 2] * total > s.mass * s.gravity
             resting = touching & ~lifting
-            p_new[:, 2] = np.where(touching, 0.0, p_new[:, 2])
+            np.maximum(p_new[:, 2], 0.0, out=p_new[:, 2])                 # on the floor, not under it
             v_new[:, 2] = np.where(touching, np.maximum(v_new[:, 2], 0.0), v_new[:, 2])
             if resting.any():
-                v_new = np.where(resting[:, None], 0.0, v_new)
-                w_new = np.where(resting[:, None], 0.0, w_new)
-                yaw = np.arctan2(2 * (q_new[:, 3] * q_new[:, 2] + q_new[:, 0] * q_new[:, 1]),
-                                 1 - 2 * (q_new[:, 1] ** 2 + q_new[:, 2] ** 2))
-                level = np.zeros_like(q_new)
+                v_new[resting] = 0.0
+                w_new[resting] = 0.0
+                q = q_new[resting]
+                yaw = np.arctan2(2 * (q[:, 3] * q[:, 2] + q[:, 0] * q[:, 1]), 1 - 2 * (q[:, 1] ** 2 + q[:, 2] ** 2))
+                level = np.zeros_like(q)
                 level[:, 2] = np.sin(yaw / 2)
                 level[:, 3] = np.cos(yaw / 2)
-                q_new = np.where(resting[:, None], level, q_new)
-                r = np.where(resting[:, None, None], quat_to_matrix(q_new), r)
-            acc = np.where(touching[:, None], (v_new - v_old) / h, acc)
+                q_new[resting] = level
+                r[resting] = quat_to_matrix(level)
+            acc[touching] = (v_new[touching] - v_old[touching]) / h
         s.position, s.velocity, s.omega, s.quaternion = p_new, v_new, w_new, q_new
         s.acceleration = acc
         s.on_ground = resting
