@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
-"""CPU share of the ROS node `crazyflie_sim_node` (world + world server + motion-capture publishing).
+"""CPU share of the ROS node ``crazyflie_sim_node`` (world + world server + motion-capture publishing).
 
-For each fleet size the bench starts its own roscore (port 11611) and one `crazyflie_sim_node`
+For each fleet size the bench starts its own roscore (port 11611) and one ``crazyflie_sim_node``
 with the vehicles on the floor of a grid, vicon-style motion capture at 100 Hz (tf and the
 /vicon/<name>/<name> topics) and a subscriber to /tf in this process, so the node serialises and
-sends every frame as it does when a controller listens. Over a window of `--seconds` of wall time
+sends every frame as it does when a controller listens. Over a window of ``--seconds`` of wall time
 it reads the node's CPU time from /proc/<pid>/stat (user + system, all its threads) and the world
 time from the world server, and prints the share of one core and the real-time factor the world
 kept. CPU time, not wall time: a busy machine does not inflate the share.

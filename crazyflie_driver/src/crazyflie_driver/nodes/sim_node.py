@@ -210,7 +210,7 @@ class WorldStatus:
 
 def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behind: int, overruns: int,
                  world_time: float, behind_factor: float) -> WorldStatus:
-    """The world's real-time status; WARN when it runs below `behind_factor` × its speed."""
+    """The world's real-time status; WARN when it runs below ``behind_factor`` × its speed."""
     if speed <= 0:
         level, message = 0, "fast mode: %.1fx real time" % realtime_factor
     elif realtime_factor < speed * behind_factor:
@@ -232,8 +232,8 @@ class MocapPublisher:
     """Publishes mocap frames in vicon_bridge and/or vrpn_client_ros style.
 
     tf: one ``tf2_msgs/TFMessage`` on ``/tf`` per delivery, holding every body's newest transform,
-    packed straight into wire bytes (`nodes.tf_wire`). A child frame never gets two transforms with
-    the same stamp (`StampGuard`). Per-body topics are published only while someone subscribes.
+    packed straight into wire bytes (``nodes.tf_wire``). A child frame never gets two transforms with
+    the same stamp (``StampGuard``). Per-body topics are published only while someone subscribes.
     """
 
     def __init__(self, config: MocapConfig, names: Sequence[str]) -> None:

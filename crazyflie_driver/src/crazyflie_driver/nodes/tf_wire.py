@@ -32,7 +32,7 @@ class TransformWire:
         self._frames = _string(parent) + _string(child)
 
     def pack(self, stamp_ns: int, position: Sequence[float], quaternion: Sequence[float], seq: int = 0) -> bytes:
-        """Wire bytes of the TransformStamped; `stamp_ns` ROS time in integer nanoseconds."""
+        """Wire bytes of the TransformStamped; ``stamp_ns`` ROS time in integer nanoseconds."""
         secs, nsecs = divmod(int(stamp_ns), _NSEC)
         return (_STAMP.pack(seq & 0xFFFFFFFF, secs, nsecs) + self._frames
                 + _POSE.pack(float(position[0]), float(position[1]), float(position[2]), float(quaternion[0]),
@@ -43,7 +43,7 @@ def packed_message_types():
     """(PackedTFMessage, PackedTransformStamped): message classes rospy publishes from packed bytes.
 
     They are the real tf2_msgs/TFMessage and geometry_msgs/TransformStamped types (same md5, same
-    wire format) whose ``serialize`` writes bytes packed by `TransformWire`.
+    wire format) whose ``serialize`` writes bytes packed by ``TransformWire``.
     """
     from geometry_msgs.msg import TransformStamped
     from tf2_msgs.msg import TFMessage
