@@ -22,7 +22,7 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 from tf2_msgs.msg import TFMessage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, hold_errors  # noqa: E402
+from support.flight_support import WorldProbe, hold_errors, wait_until  # noqa: E402
 
 
 class Hover(unittest.TestCase):
