@@ -19,7 +19,7 @@ from crazyflie_driver.radio.crazyradio import (
     ACK_ENABLE, PRODUCT_ID, SCAN_CHANNELS, SET_CONT_CARRIER, SET_DATA_RATE, SET_RADIO_ADDRESS,
     SET_RADIO_ARC, SET_RADIO_ARD, SET_RADIO_CHANNEL, SET_RADIO_POWER)
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
-from crazyflie_driver.sim.air.usb_descriptors import CRAZYRADIO_2_54, PA_053, DongleModel
+from crazyflie_driver.sim.air.usb_descriptors import CRAZYRADIO_2_54, PA_9955, PA_MODELS, DongleModel
 
 BOOTLOADER_PRODUCT_ID = 0x0101
 # Requests the host driver does not use
@@ -149,7 +149,7 @@ class DongleFirmware:
 
     def scan(self, d: FakeDongle, start: int, stop: int, packet: bytes) -> None:
         """Firmware scan: send the packet on start..stop (every 2nd channel at 2M on the PA)."""
-        step = 2 if (d.datarate == 2 and d.model is PA_053) else 1
+        step = 2 if (d.datarate == 2 and d.model in PA_MODELS) else 1
         hits = bytearray()
         spent = 0.0
         channel = start
@@ -188,17 +188,27 @@ class DongleFirmware:
             d.reply = b"\x00"  # Crazyradio 2.0: invalid settings, nothing sent, "no ack"
             d.reply_ready_at = start + self.timing.bulk_round_trip_s
             return
+        if not d.ack_enabled:
+            # No IN reply; the dongle still needs the air time of each packet before the next OUT.
+            # The 99.55 firmware sends a longer OUT as two packets of half its length.
+            half = len(data) // 2
+            packets = [data[:half].tobytes(), data[half:2 * half].tobytes()] \
+                if d.model is PA_9955 and len(data) > MAX_RADIO_PAYLOAD else [packet]
+            busy = 0.0
+            for one in packets:
+                reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, one, False, d.arc)
+                if reply.unplugged:
+                    d.unplugged = True
+                    raise no_device()
+                busy += self.timing.bulk_round_trip_s + reply.latency_s
+            if busy > 0:
+                self.clock.sleep(busy)
+            return
         reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, packet,
                                      d.ack_enabled, d.arc)
         if reply.unplugged:
             d.unplugged = True
             raise no_device()
-        if not d.ack_enabled:
-            # No IN reply; the dongle still needs the air time before it takes the next OUT.
-            busy = self.timing.bulk_round_trip_s + reply.latency_s
-            if busy > 0:
-                self.clock.sleep(busy)
-            return
         if reply.acked:
             payload = reply.payload
             if len(payload) > MAX_RADIO_PAYLOAD:

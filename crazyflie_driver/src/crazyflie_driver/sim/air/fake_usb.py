@@ -39,7 +39,7 @@ import usb.core
 from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming, RealClock
 from crazyflie_driver.sim.air.usb_descriptors import (
-    DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_053, DongleModel, config_descriptor_bytes,
+    DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_053, PA_MODELS, DongleModel, config_descriptor_bytes,
     configuration_descriptor, device_descriptor, device_descriptor_bytes, endpoint_descriptor,
     interface_descriptor, string_descriptor)
 
@@ -238,7 +238,7 @@ class FakeUsbBackend(usb.backend.IBackend):
                 raw = string_descriptor(d.model, d.serial, index)
                 if raw is None:
                     raise stall("no string descriptor %d" % index)
-                if index == d.model.serial_index and d.model is PA_053 and len(data) < len(raw):
+                if index == d.model.serial_index and d.model in PA_MODELS and len(data) < len(raw):
                     # The PA always sends the full 22-byte serial descriptor: the host overflows.
                     raise usb.core.USBError("Overflow", -8, errno.EOVERFLOW)
             else:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.sim.air import server_framing as framing
 
 DEFAULT_HOST = "127.0.0.1"
@@ -175,6 +176,13 @@ class LocalMedium:
             f = self._faults[dongle]
             if f.unplugged:
                 return AirReply(acked=False, power_detector=False, unplugged=True, latency_s=f.latency_s)
+            if key[2] == BROADCAST_ADDRESS:
+                listeners = [c for (ch, dr, _), c in self._crazyflies.items() if ch == channel and dr == datarate]
+                heard = [c for c in listeners if not (f.packet_loss > 0 and self._rng.random() * 100.0 < f.packet_loss)]
+                latency = f.latency_s
+                broadcast = True
+            else:
+                broadcast = False
             cf = self._crazyflies.get(key)
             lost = f.packet_loss > 0 and self._rng.random() * 100.0 < f.packet_loss
             ack_lost = f.ack_loss > 0 and self._rng.random() * 100.0 < f.ack_loss
@@ -185,6 +193,10 @@ class LocalMedium:
                 rssi_dbm = min(0.0, max(-127.0, rssi_dbm))
             latency = f.latency_s
         miss = AirReply(acked=False, retries=arc & 0x0F, power_detector=False, latency_s=latency)
+        if broadcast:            # every Crazyflie on this channel and data rate takes it; none acks
+            for c in heard:
+                c.handle_broadcast(data)
+            return miss
         if cf is None or lost or not cf.powered:
             return miss
         cf.rssi_dbm = rssi_dbm

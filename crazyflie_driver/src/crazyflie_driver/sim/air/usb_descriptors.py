@@ -28,8 +28,13 @@ class DongleModel:
 
 
 PA_053 = DongleModel("PA", 0x0053, "Bitcraze", "Crazyradio PA USB Dongle", 0x1D, 0xFF, 6, 10)
+#: The PA with the development firmware "99.55" swarm setups flash: an unacked OUT of more than 32
+#: bytes goes out as two radio packets of half its length each.
+PA_9955 = DongleModel("PA-99.55", 0x9955, "Bitcraze", "Crazyradio PA USB Dongle", 0x1D, 0xFF, 6, 10)
 CRAZYRADIO_2_54 = DongleModel("2.0", 0x0504, "Bitcraze AB", "Crazyradio 2.0", 3, 0x00, 0, 16)
-MODELS = {"PA": PA_053, "pa": PA_053, "2.0": CRAZYRADIO_2_54, "2": CRAZYRADIO_2_54}
+MODELS = {"PA": PA_053, "pa": PA_053, "PA-99.55": PA_9955, "pa-99.55": PA_9955, "2.0": CRAZYRADIO_2_54,
+          "2": CRAZYRADIO_2_54}
+PA_MODELS = (PA_053, PA_9955)
 
 
 class Descriptor:

@@ -184,6 +184,10 @@ class SimulatedCrazyflie:
             return float(self.timestamp_ms())
         if name == "sys.armed":
             return 1.0 if self.state.armed else 0.0
+        if name == "radio.numRxBc":
+            return float(self.state.rx_broadcast & 0xFFFF)
+        if name == "radio.numRxUc":
+            return float(self.state.rx_unicast & 0xFFFF)
         if name == "supervisor.info":
             return float(self.supervisor_bits())
         return float(self.vehicle.read(name))
@@ -229,11 +233,26 @@ class SimulatedCrazyflie:
                 return b""
             self._last_radio = self.now()
             self.packet_link_active = False
+            self.state.rx_unicast += 1
             try:
                 return self.link.handle(bytes(data), ack_requested)
             except Exception:
                 _log.exception("radio packet %s broke the simulated nRF", bytes(data).hex())
                 return self.link.empty_ack()
+
+    def handle_broadcast(self, data: bytes) -> None:
+        """A radio packet on the broadcast address 0xFFE7E7E7E7: the nRF never acks it and hands it
+        to the STM as it is (no safelink); it counts in ``radio.numRxBc`` and keeps the link alive."""
+        with self.lock:
+            if not self.state.powered:
+                return
+            self._last_radio = self.now()
+            self.packet_link_active = False
+            self.state.rx_broadcast += 1
+            raw = bytes(data)
+            if len(raw) == 1 and raw[0] == 0xFF:
+                return                                  # a null packet: nothing for the STM
+            self._dispatch(raw)
 
     def handle_crtp(self, packet: Union[bytes, CRTPPacket]) -> None:
         """One CRTP packet (header + payload) from a packet link; replies go to the TX queue."""
@@ -399,6 +418,8 @@ class SimulatedCrazyflie:
                 "emergency_reason": s.emergency_reason,
                 "halted": s.halted,
                 "external_measurements": s.external_measurements,
+                "rx_broadcast": s.rx_broadcast,
+                "rx_unicast": s.rx_unicast,
                 "armed": s.armed,
                 "last_setpoint": list(s.last_setpoint) if s.last_setpoint is not None else None,
                 "setpoints": s.setpoints,

@@ -19,6 +19,8 @@ class SimState:
     external_position: Optional[Tuple[float, float, float]] = None
     external_measurements: int = 0
     setpoint_stop_notices: int = 0
+    rx_unicast: int = 0                     # radio packets taken on the own address (radio.numRxUc)
+    rx_broadcast: int = 0                   # and on the broadcast address (radio.numRxBc)
     halted: str = ""                        # why the STM stopped on an assert ('' while it runs)
     estop_watchdog: Optional[float] = None
     packets_by_port: Dict[int, int] = field(default_factory=dict)

@@ -173,6 +173,7 @@ LOG_TABLE: Tuple[LogVar, ...] = tuple(
     + _lv("motor", "m1 m2 m3 m4", "int32_t", _OLD)
     + _lv("radio", "rssi", "uint8_t")
     + _lv("radio", "isConnected", "uint8_t", _CUR)
+    + _lv("radio", "numRxBc numRxUc", "uint16_t", _CUR)
     + _lv("sys", "canfly", "uint8_t")
     + _lv("sys", "isFlying isTumbled", "uint8_t", _CUR)
     + _lv("sys", "armed", "int8_t", _CUR)
