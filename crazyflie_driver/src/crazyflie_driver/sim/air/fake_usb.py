@@ -39,7 +39,7 @@ import usb.core
 from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming, RealClock
 from crazyflie_driver.sim.air.usb_descriptors import (
-    DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_053, PA_MODELS, DongleModel, config_descriptor_bytes,
+    DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_MODELS, DongleModel, config_descriptor_bytes,
     configuration_descriptor, device_descriptor, device_descriptor_bytes, endpoint_descriptor,
     interface_descriptor, string_descriptor)
 
