@@ -12,6 +12,8 @@ import math
 import random
 from collections import deque
 
+from crazyflie_driver.server.setpoint import setpoint_from_twist
+
 from crazyflie_controller.position_controller import Command, PositionController, PoseSample
 
 G = 9.81
@@ -51,10 +53,9 @@ class QuadModel:
 
     def apply(self, command: Command, roll_trim: float = 0.0, pitch_trim: float = 0.0) -> None:
         """crazyflie_server's cmd_vel → RPYT mapping."""
-        roll = command.linear_y + roll_trim
-        pitch = -(command.linear_x + pitch_trim)
-        thrust = min(max(command.linear_z, 0.0), 60000.0)
-        self.cmd = (roll, pitch, command.angular_z, thrust)
+        sp = setpoint_from_twist(command.linear_x, command.linear_y, command.linear_z, command.angular_z,
+                                 roll_trim, pitch_trim)
+        self.cmd = (sp.roll, sp.pitch, sp.yawrate, float(sp.thrust))
 
     def step(self, dt: float = 0.001) -> None:
         roll, pitch, yawrate, thrust = self.cmd

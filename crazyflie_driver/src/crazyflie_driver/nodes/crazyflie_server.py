@@ -150,11 +150,16 @@ class RosCrazyflie(WorkerListener):
     # -- ROS callbacks ------------------------------------------------------------------------------
     def _on_cmd_vel(self, msg: Twist) -> None:
         try:
-            if not self.worker.cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z):
-                rospy.logwarn_throttle(5.0, "%s: cmd_vel ignored after emergency (remove and add the "
-                                            "Crazyflie again to fly)" % self.config.uri)
+            setpoint = self.worker.setpoint_for_cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z)
         except ValueError as e:
             rospy.logwarn_throttle(1.0, "%s: cmd_vel refused: %s" % (self.config.uri, e))
+            return
+        if setpoint.notes:
+            rospy.logwarn_throttle(1.0, "%s: cmd_vel held to the firmware's limits: %s"
+                                   % (self.config.uri, "; ".join(setpoint.notes)))
+        if not self.worker.set_setpoint(setpoint):
+            rospy.logwarn_throttle(5.0, "%s: cmd_vel ignored after emergency (remove and add the "
+                                        "Crazyflie again to fly)" % self.config.uri)
 
     def _on_emergency(self, _req) -> EmptyResponse:
         self.worker.emergency()

@@ -2,7 +2,10 @@
 
 RPYT is ``[roll f32, pitch f32, yaw f32, thrust u16]`` on 3:0, raw wire values:
 sign conventions (the firmware's inverted pitch and yaw rate) belong to the
-caller. Thrust is clamped to 0..60000, as the firmware does.
+caller. Thrust is clamped to 0..MAX_THRUST, as the firmware does; roll, pitch and
+yaw are held to the widest range the firmware acts on (+-MAX_RATE_DEG_S), so no
+value can overflow the packing. Callers that know the flight mode check tighter
+ranges first (the server: :mod:`crazyflie_driver.server.setpoint`).
 """
 from __future__ import annotations
 
@@ -10,10 +13,10 @@ import math
 import numbers
 import struct
 
+from crazyflie_driver.crtp.firmware_limits import MAX_RATE_DEG_S, MAX_THRUST
 from crazyflie_driver.crtp.packet import (PORT_COMMANDER, PORT_GENERIC_SETPOINT, PORT_LOCALIZATION, PORT_SUPERVISOR,
                    CRTPPacket)
 
-MAX_THRUST = 60000
 #: Protocol version from which the emergency stop lives on the supervisor port (9:1).
 SUPERVISOR_FROM = 12
 #: Protocol version from which port 7 (generic setpoints, with its "stop" type) exists.
@@ -24,13 +27,18 @@ GENERIC_STOP = 0
 
 def rpyt_packet(roll: float, pitch: float, yawrate: float, thrust: float) -> CRTPPacket:
     """The 14-byte RPYT setpoint; ValueError for a value that is not a finite number."""
-    for name, value in (("roll", roll), ("pitch", pitch), ("yaw rate", yawrate),
-                        ("thrust", thrust)):
-        if not isinstance(value, numbers.Real) or not math.isfinite(value):
+    values = []
+    for name, value in (("roll", roll), ("pitch", pitch), ("yaw rate", yawrate), ("thrust", thrust)):
+        try:
+            number = float(value) if isinstance(value, numbers.Real) else math.nan
+        except OverflowError:
+            number = math.nan
+        if not math.isfinite(number):
             raise ValueError("setpoint %s must be a finite number, got %r" % (name, value))
-    thrust_u16 = int(min(max(thrust, 0), MAX_THRUST))
-    return CRTPPacket(PORT_COMMANDER, 0, struct.pack("<fffH", float(roll), float(pitch), float(yawrate),
-                                                   thrust_u16))
+        values.append(number)
+    roll, pitch, yawrate = (min(max(v, -MAX_RATE_DEG_S), MAX_RATE_DEG_S) for v in values[:3])
+    thrust_u16 = int(min(max(values[3], 0.0), MAX_THRUST))
+    return CRTPPacket(PORT_COMMANDER, 0, struct.pack("<fffH", roll, pitch, yawrate, thrust_u16))
 
 
 def stop_packet(protocol_version: int) -> CRTPPacket:

@@ -13,7 +13,10 @@ from typing import Callable, Dict, List, Sequence
 
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, PORT_LOG, CRTPPacket
 from crazyflie_driver.errors import LogConfigError, ProtocolError
-from crazyflie_driver.protocol.toc import LOG_TYPE_CODES, STRUCT_FORMATS, TocEntry, TocPortClient, type_size
+from crazyflie_driver.crtp.ctypes import ctype, type_size
+from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_PERIOD_MAX_MS,
+                                                   LOG_PERIOD_MIN_MS, LOG_PERIOD_UNIT_MS, LOG_PERIOD_V2_MAX_MS)
+from crazyflie_driver.protocol.toc import TocEntry, TocPortClient
 
 _LOG = logging.getLogger(__name__)
 
@@ -33,12 +36,6 @@ CMD_START_V2 = 8
 
 #: Protocol version from which START_V2 (period in ms as u16) exists (firmware 2024.10).
 START_V2_FROM = 8
-
-MAX_BLOCK_BYTES = 26
-DEFAULT_MAX_BLOCKS = 16
-MIN_PERIOD_MS = 10
-MAX_PERIOD_MS = 2550  # START carries period/10 in one byte
-MAX_PERIOD_V2_MS = 0xFFFF
 
 ENOENT, E2BIG, ENOEXEC, ENOMEM, EEXIST = 2, 7, 8, 12, 17
 FIRMWARE_ERRORS = {
@@ -68,7 +65,7 @@ class LogBlock:
         self.callback = callback
         self.started = False
         self.deleted = False
-        self._formats = [STRUCT_FORMATS[v.ctype] for v in variables]
+        self._types = [ctype(v.ctype) for v in variables]
         self._size = sum(type_size(v.ctype) for v in variables)
 
     @property
@@ -92,9 +89,9 @@ class LogBlock:
         timestamp = data[0] | (data[1] << 8) | (data[2] << 16)
         values = []
         offset = 3
-        for fmt in self._formats:
-            values.append(struct.unpack_from(fmt, data, offset)[0])
-            offset += struct.calcsize(fmt)
+        for ct in self._types:
+            values.append(ct.unpack(data, offset))
+            offset += ct.size
         return timestamp, values
 
 
@@ -103,7 +100,7 @@ class LogClient(TocPortClient):
 
     def __init__(self, link, cache=None, timeout: float = 1.0) -> None:
         super().__init__(link, PORT_LOG, "log", cache, timeout)
-        self.max_blocks = DEFAULT_MAX_BLOCKS
+        self.max_blocks = LOG_MAX_BLOCKS
         self.blocks: Dict[int, LogBlock] = {}
         self._unsubscribe = link.subscribe(PORT_LOG, CH_DATA, self._on_data)
 
@@ -112,7 +109,7 @@ class LogClient(TocPortClient):
         with self._lock:
             info = self._download_toc()
             if info.max_blocks:
-                self.max_blocks = min(info.max_blocks, DEFAULT_MAX_BLOCKS)
+                self.max_blocks = min(info.max_blocks, LOG_MAX_BLOCKS)
             assert self.toc is not None
             return list(self.toc)
 
@@ -134,10 +131,10 @@ class LogClient(TocPortClient):
                 raise LogConfigError("a log block needs at least one variable")
             entries = [toc.lookup(name, "log variable") for name in variables]
             size = sum(type_size(e.ctype) for e in entries)
-            if size > MAX_BLOCK_BYTES:
+            if size > LOG_BLOCK_MAX_BYTES:
                 raise LogConfigError(
                     "log block %s needs %d bytes of values, at most %d fit in one log packet"
-                    % (", ".join(variables), size, MAX_BLOCK_BYTES))
+                    % (", ".join(variables), size, LOG_BLOCK_MAX_BYTES))
             period_ms = self._effective_period(period_ms)
             if len(self.blocks) >= self.max_blocks:
                 raise LogConfigError("cannot create log block %s: all %d log blocks are in use"
@@ -166,14 +163,14 @@ class LogClient(TocPortClient):
         except (TypeError, ValueError):
             raise LogConfigError("log period %r is not a number of milliseconds" % (period_ms,))
         if self.protocol_version >= START_V2_FROM:
-            if not 1 <= period <= MAX_PERIOD_V2_MS:
+            if not 1 <= period <= LOG_PERIOD_V2_MAX_MS:
                 raise LogConfigError("log period %r ms is out of range 1..%d ms"
-                                     % (period_ms, MAX_PERIOD_V2_MS))
+                                     % (period_ms, LOG_PERIOD_V2_MAX_MS))
             return period
-        if not MIN_PERIOD_MS <= period <= MAX_PERIOD_MS:
+        if not LOG_PERIOD_MIN_MS <= period <= LOG_PERIOD_MAX_MS:
             raise LogConfigError("log period %r ms is out of range %d..%d ms (the firmware counts "
-                                 "in 10 ms units)" % (period_ms, MIN_PERIOD_MS, MAX_PERIOD_MS))
-        return period - period % 10
+                                 "in 10 ms units)" % (period_ms, LOG_PERIOD_MIN_MS, LOG_PERIOD_MAX_MS))
+        return period - period % LOG_PERIOD_UNIT_MS
 
     def _send_create(self, block: LogBlock) -> None:
         v2 = self.version >= 2
@@ -181,7 +178,7 @@ class LogClient(TocPortClient):
         per_packet = (MAX_PAYLOAD - 2) // item_size
         items = []
         for entry in block.variables:
-            code = LOG_TYPE_CODES[entry.ctype]
+            code = ctype(entry.ctype).log_code
             type_byte = (code << 4) | code
             if v2:
                 items.append(struct.pack("<BH", type_byte, entry.ident))
@@ -213,8 +210,8 @@ class LogClient(TocPortClient):
     def _start(self, block: LogBlock) -> None:
         with self._lock:
             period = block.period_ms
-            if period % 10 == 0 and MIN_PERIOD_MS <= period <= MAX_PERIOD_MS:
-                payload = bytes([CMD_START, block.ident, period // 10])
+            if period % LOG_PERIOD_UNIT_MS == 0 and LOG_PERIOD_MIN_MS <= period <= LOG_PERIOD_MAX_MS:
+                payload = bytes([CMD_START, block.ident, period // LOG_PERIOD_UNIT_MS])
             elif self.protocol_version >= START_V2_FROM:
                 payload = struct.pack("<BBH", CMD_START_V2, block.ident, period)
             else:  # unreachable after _effective_period; kept as a guard

@@ -10,11 +10,12 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from typing import Callable, Dict, List, Union
+from typing import Any, Callable, Dict, List, Union
 
 from crazyflie_driver.crtp.packet import PORT_PARAM, CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam
-from crazyflie_driver.protocol.toc import STRUCT_FORMATS, TocEntry, TocPortClient, type_size
+from crazyflie_driver.crtp.ctypes import ctype, type_size
+from crazyflie_driver.protocol.toc import TocEntry, TocPortClient
 
 _LOG = logging.getLogger(__name__)
 
@@ -28,34 +29,40 @@ ENOENT = 2
 Value = Union[int, float]
 
 
-def convert_value(entry: TocEntry, value) -> Value:
-    """``value`` (number, bool or text) as the parameter's type; ParamValueError if it does not fit."""
-    fmt = STRUCT_FORMATS[entry.ctype]
-    if entry.ctype in ("FP16", "float", "double"):
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            raise ParamValueError("parameter %s (%s): %r is not a number"
-                                  % (entry.full_name, entry.ctype, value))
-        try:
-            struct.pack(fmt, number)
-        except (OverflowError, struct.error):
-            raise ParamValueError("parameter %s (%s): %r is out of range"
-                                  % (entry.full_name, entry.ctype, value))
+def param_value(full_name: str, ctype_name: str, value: Any) -> Value:
+    """``value`` (number, bool or text) as parameter ``full_name`` of C type ``ctype_name`` holds it.
+
+    The one conversion every parameter write goes through. Integer types take whole numbers in
+    their range, ``true``/``false`` (bool or text, any case) as 1/0, and numeric text (``"0x10"``);
+    floating types take finite numbers within the type's range and numeric text. NaN, infinity,
+    fractions for integers and booleans for floating types are refused: ParamValueError naming the
+    parameter, its type and the range.
+    """
+    ct = ctype(ctype_name)
+    label = "parameter %s (%s)" % (full_name, ct.name)
+    if ct.is_float:
+        number = _as_float(label, value)
+        if not math.isfinite(number):
+            raise ParamValueError("%s: %r is not a finite number" % (label, value))
+        if not ct.holds(number):
+            raise ParamValueError("%s: %r is out of range %g..%g" % (label, value, ct.low, ct.high))
         return number
-    number = _as_integer(entry, value)
-    bits = 8 * type_size(entry.ctype)
-    if entry.ctype.startswith("u"):
-        low, high = 0, (1 << bits) - 1
-    else:
-        low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
-    if not low <= number <= high:
-        raise ParamValueError("parameter %s (%s): %d is out of range %d..%d"
-                              % (entry.full_name, entry.ctype, number, low, high))
+    number = _as_integer(label, value)
+    if not ct.holds(number):
+        raise ParamValueError("%s: %r is out of range %d..%d" % (label, value, ct.low, ct.high))
     return number
 
 
-def _as_integer(entry: TocEntry, value) -> int:
+def _as_float(label: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ParamValueError("%s: %r is not a number" % (label, value))
+    try:
+        return float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ParamValueError("%s: %r is not a number" % (label, value)) from None
+
+
+def _as_integer(label: str, value: Any) -> int:
     if isinstance(value, bool):
         return int(value)
     if isinstance(value, int):
@@ -67,28 +74,24 @@ def _as_integer(entry: TocEntry, value) -> int:
         try:
             return int(text, 0)
         except ValueError:
-            try:
-                value = float(text)
-            except ValueError:
-                raise ParamValueError("parameter %s (%s): %r is not an integer"
-                                      % (entry.full_name, entry.ctype, value))
+            pass
+    if not isinstance(value, (float, str)):
+        raise ParamValueError("%s: %r is not an integer" % (label, value))
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise ParamValueError("parameter %s (%s): %r is not an integer"
-                              % (entry.full_name, entry.ctype, value))
+        raise ParamValueError("%s: %r is not an integer" % (label, value)) from None
     if not math.isfinite(number) or number != int(number):
-        raise ParamValueError("parameter %s (%s): %r is not an integer"
-                              % (entry.full_name, entry.ctype, value))
+        raise ParamValueError("%s: %r is not an integer" % (label, value))
     return int(number)
 
 
 def pack_value(entry: TocEntry, value: Value) -> bytes:
-    return struct.pack(STRUCT_FORMATS[entry.ctype], value)
+    return ctype(entry.ctype).pack(value)
 
 
 def unpack_value(entry: TocEntry, data: bytes) -> Value:
-    return struct.unpack(STRUCT_FORMATS[entry.ctype], data)[0]
+    return ctype(entry.ctype).unpack(data)
 
 
 class ParamClient(TocPortClient):
@@ -122,7 +125,7 @@ class ParamClient(TocPortClient):
             entry = self._ensure_toc().lookup(name, "parameter")
             if entry.readonly:
                 raise ReadOnlyParam("parameter %s is read-only on the Crazyflie" % entry.full_name)
-            converted = convert_value(entry, value)
+            converted = param_value(entry.full_name, entry.ctype, value)
             self._write(entry, converted)
             return converted
 

@@ -14,6 +14,7 @@ import threading
 from dataclasses import dataclass
 from typing import Dict, Iterator, List, Optional
 
+from crazyflie_driver.crtp.ctypes import BY_LOG_CODE, BY_PARAM_CODE
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ProtocolError, UnknownName
 from crazyflie_driver.protocol.platform import toc_version
@@ -25,32 +26,7 @@ CMD_GET_INFO_V1 = 1
 CMD_GET_ITEM_V2 = 2
 CMD_GET_INFO_V2 = 3
 
-#: Parameter TOC type byte: low nibble (size, float, unsigned bits) -> C type.
-PARAM_TYPES = {
-    0x08: "uint8_t", 0x09: "uint16_t", 0x0A: "uint32_t", 0x0B: "uint64_t",
-    0x00: "int8_t", 0x01: "int16_t", 0x02: "int32_t", 0x03: "int64_t",
-    0x05: "FP16", 0x06: "float", 0x07: "double",
-}
 PARAM_READONLY = 0x40
-
-#: Log TOC type codes -> C type.
-LOG_TYPES = {
-    1: "uint8_t", 2: "uint16_t", 3: "uint32_t", 4: "int8_t",
-    5: "int16_t", 6: "int32_t", 7: "float", 8: "FP16",
-}
-LOG_TYPE_CODES = {v: k for k, v in LOG_TYPES.items()}
-
-#: struct format (little-endian) of every C type a TOC can name.
-STRUCT_FORMATS = {
-    "uint8_t": "<B", "uint16_t": "<H", "uint32_t": "<I", "uint64_t": "<Q",
-    "int8_t": "<b", "int16_t": "<h", "int32_t": "<i", "int64_t": "<q",
-    "FP16": "<e", "float": "<f", "double": "<d",
-}
-
-
-def type_size(ctype: str) -> int:
-    """Bytes a value of this C type takes on the wire."""
-    return struct.calcsize(STRUCT_FORMATS[ctype])
 
 
 @dataclass(frozen=True)
@@ -142,15 +118,15 @@ def parse_item(kind: str, version: int, data: bytes) -> TocEntry:
     except UnicodeDecodeError:
         raise ProtocolError("%s TOC item %d: name is not ASCII: %s" % (kind, ident, data.hex(" ")))
     if kind == "param":
-        ctype = PARAM_TYPES.get(type_byte & 0x0F)
+        ct = BY_PARAM_CODE.get(type_byte & 0x0F)
         readonly = bool(type_byte & PARAM_READONLY)
     else:
-        ctype = LOG_TYPES.get(type_byte & 0x0F)
+        ct = BY_LOG_CODE.get(type_byte & 0x0F)
         readonly = False
-    if ctype is None:
+    if ct is None:
         raise ProtocolError("%s TOC item %d (%s.%s): unknown type byte 0x%02X"
                             % (kind, ident, group, name, type_byte))
-    return TocEntry(ident, group, name, ctype, readonly)
+    return TocEntry(ident, group, name, ct.name, readonly)
 
 
 class TocFetcher:

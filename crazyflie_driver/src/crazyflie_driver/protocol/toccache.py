@@ -13,7 +13,8 @@ import os
 import tempfile
 from typing import List, Optional
 
-from crazyflie_driver.protocol.toc import STRUCT_FORMATS, TocEntry
+from crazyflie_driver.crtp.ctypes import CTYPES
+from crazyflie_driver.protocol.toc import TocEntry
 
 _LOG = logging.getLogger(__name__)
 _FORMAT_VERSION = 1
@@ -93,7 +94,7 @@ def _decode(doc, kind: str, crc: int) -> List[TocEntry]:
         ident, group, name, ctype, readonly = row
         if not isinstance(ident, int) or not isinstance(group, str) or not isinstance(name, str):
             raise ValueError("bad entry %r" % (row,))
-        if ctype not in STRUCT_FORMATS or not isinstance(readonly, bool):
+        if ctype not in CTYPES or not isinstance(readonly, bool):
             raise ValueError("bad entry %r" % (row,))
         entries.append(TocEntry(ident, group, name, ctype, readonly))
     return entries

@@ -10,17 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Dict, List, Sequence, Tuple
 
+from crazyflie_driver.crtp.ctypes import type_size
+from crazyflie_driver.crtp.firmware_limits import LOG_BLOCK_MAX_BYTES, LOG_PERIOD_MAX_MS, LOG_PERIOD_MIN_MS
 from crazyflie_driver.errors import LogConfigError, UnknownName
 
-LOG_BLOCK_MAX_BYTES = 26            # values per log packet the current firmware accepts
-LOG_PERIOD_MIN_MS = 10              # the firmware's log timer counts in 10 ms units, 1..254
-LOG_PERIOD_MAX_MS = 2540
-
-# Size in bytes of one value of each TOC type (log packets carry values in the TOC type).
-CTYPE_SIZES = {
-    "uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "uint32_t": 4, "int32_t": 4,
-    "uint64_t": 8, "int64_t": 8, "FP16": 2, "float": 4, "double": 8,
-}
 
 IMU_TOPIC = "imu"
 TEMPERATURE_TOPIC = "temperature"
@@ -96,7 +89,7 @@ def topic_size(topic: str, variables: Sequence[str], types: Dict[str, str]) -> i
     if unknown:
         raise UnknownName("log topic %r: unknown log variable(s) %s (not in the Crazyflie's log TOC)"
                           % (topic, ", ".join(unknown)))
-    size = sum(CTYPE_SIZES.get(types[v], 4) for v in variables)
+    size = sum(type_size(types[v]) for v in variables)
     if size > LOG_BLOCK_MAX_BYTES:
         raise LogConfigError("log topic %r needs %d bytes per packet (%s); a log block holds at most "
                              "%d bytes: split it into several topics"

@@ -36,9 +36,9 @@ from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFoun
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
                        PlannedBlock, log_packet_rate, plan_log_blocks)
-from crazyflie_driver.server.param_values import coerce_param_value
+from crazyflie_driver.protocol.param import param_value
 from crazyflie_driver.server.poll_pacer import PollPacer
-from crazyflie_driver.server.setpoint import Setpoint, setpoint_from_twist
+from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
 from crazyflie_driver.protocol.toc import toc_types
 
 LOG = logging.getLogger("crazyflie_driver.server")
@@ -127,6 +127,7 @@ class CrazyflieWorker:
         self.restarts = 0                        # loop restarts after unexpected errors
         self.last_unexpected_error = ""          # "Type: message" of the latest one
         self.listener_errors = 0                 # log packets a listener failed to handle
+        self.param_values: Dict[str, Any] = {}   # as read after connecting and written since
 
         self._cond = threading.Condition()
         self._pending: Optional[Setpoint] = None
@@ -215,10 +216,16 @@ class CrazyflieWorker:
         return self.set_setpoint(packet)
 
     def cmd_vel(self, linear_x: float, linear_y: float, linear_z: float, angular_z: float) -> bool:
-        """A cmd_vel message mapped with this Crazyflie's trims (see :func:``setpoint_from_twist``)."""
-        sp = setpoint_from_twist(linear_x, linear_y, linear_z, angular_z,
-                                 self.config.roll_trim, self.config.pitch_trim)
-        return self.set_setpoint(sp)
+        """A cmd_vel message mapped with this Crazyflie's trims (see :meth:`setpoint_for_cmd_vel`)."""
+        return self.set_setpoint(self.setpoint_for_cmd_vel(linear_x, linear_y, linear_z, angular_z))
+
+    def setpoint_for_cmd_vel(self, linear_x: float, linear_y: float, linear_z: float, angular_z: float) -> Setpoint:
+        """The setpoint a cmd_vel asks for, held to this Crazyflie's limits (its flight modes).
+
+        ValueError naming the field when one is NaN or infinite (the last good setpoint stays);
+        fields held to their limit are named in the setpoint's ``notes``."""
+        return setpoint_from_twist(linear_x, linear_y, linear_z, angular_z, self.config.roll_trim,
+                                   self.config.pitch_trim, limits_for_modes(self.param_values))
 
     def emergency(self) -> None:
         """Stop flying now: no setpoint after this returns; e-stop packet; then zero thrust only."""
@@ -253,8 +260,9 @@ class CrazyflieWorker:
                 errors.append("%s: no such parameter on %s" % (name, self.uri))
                 continue
             try:
-                v = coerce_param_value(name, ctype, value) if ctype else value
+                v = param_value(name, ctype, value) if ctype else value
                 self.cf.params.set(name, v)
+                self.param_values[name] = v
                 written.append(name)
             except UnknownName:
                 errors.append("%s: no such parameter on %s" % (name, self.uri))
@@ -343,6 +351,7 @@ class CrazyflieWorker:
             cf.params.fetch_toc()
             self.param_types = toc_types(cf.params.toc)
             values = cf.params.read_all()
+            self.param_values = dict(values)
             self.listener.on_params(dict(values))
         if cfg.enable_logging or cfg.log_blocks:
             cf.log.fetch_toc()

@@ -6,6 +6,7 @@ import struct
 import numpy as np
 import pytest
 
+from crazyflie_driver.crtp.firmware_limits import MAX_RATE_DEG_S
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
 
@@ -52,12 +53,24 @@ def test_thrust_clamped(thrust, wire):
     assert struct.unpack("<H", link.sent[-1].data[12:])[0] == wire
 
 
-def test_non_finite_setpoint_is_refused():
+@pytest.mark.parametrize("field", range(4))
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf"), "1", None, 10 ** 400])
+def test_non_finite_setpoint_is_refused(field, bad):
     cf, link, fw = make_crazyflie(12)
     before = len(link.sent)
-    with pytest.raises(ValueError, match="pitch"):
-        cf.send_setpoint(0, float("nan"), 0, 0)
+    values = [0.0] * 4
+    values[field] = bad
+    with pytest.raises(ValueError, match=("roll", "pitch", "yaw rate", "thrust")[field]):
+        cf.send_setpoint(*values)
     assert len(link.sent) == before
+
+
+@pytest.mark.parametrize("value, wire", [(1e39, MAX_RATE_DEG_S), (-1e30, -MAX_RATE_DEG_S), (1999.5, 1999.5),
+                                         (np.float64(-3.0), -3.0)])
+def test_angles_and_rates_never_overflow_the_packing(value, wire):
+    cf, link, fw = make_crazyflie(12)
+    cf.send_setpoint(value, value, value, 0)
+    assert struct.unpack("<fff", link.sent[-1].data[:12]) == (wire, wire, wire)
 
 
 @pytest.mark.parametrize("version, estop, stop", [

@@ -7,7 +7,7 @@ import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam, UnknownName
-from crazyflie_driver.protocol.param import ParamClient, convert_value
+from crazyflie_driver.protocol.param import ParamClient, param_value
 from crazyflie_driver.protocol.toc import Toc, TocEntry
 
 from support.scripted_link import ScriptedLink, make_crazyflie
@@ -99,9 +99,11 @@ def test_unknown_name_is_refused_naming_it():
     ("uint8_t", "255", 255), ("uint8_t", 3.0, 3), ("uint8_t", True, 1), ("int8_t", -128, -128),
     ("uint16_t", "0x10", 16), ("int32_t", "-5", -5), ("float", "1.5", 1.5), ("FP16", 0.5, 0.5),
     ("double", 2, 2.0), ("uint32_t", 4294967295, 4294967295), ("uint8_t", "false", 0),
+    ("uint8_t", " TRUE ", 1), ("int16_t", "7.0", 7), ("float", 3, 3.0), ("float", "-1e3", -1000.0),
+    ("float", 3.4028234663852886e38, 3.4028234663852886e38), ("int64_t", -2 ** 63, -2 ** 63),
 ])
 def test_conversion_to_the_toc_type(ctype, value, expected):
-    result = convert_value(TocEntry(0, "g", "n", ctype), value)
+    result = param_value("g.n", ctype, value)
     assert result == expected and type(result) is type(expected)
 
 
@@ -110,11 +112,17 @@ def test_conversion_to_the_toc_type(ctype, value, expected):
     ("int8_t", 128, "out of range -128..127"), ("uint16_t", 65536, "0..65535"),
     ("uint8_t", 1.5, "not an integer"), ("uint8_t", "abc", "not an integer"),
     ("float", "fast", "not a number"), ("FP16", 1e6, "out of range"),
-    ("int16_t", float("nan"), "not an integer"),
+    ("int16_t", float("nan"), "not an integer"), ("uint8_t", float("inf"), "not an integer"),
+    ("float", float("nan"), "not a finite number"), ("float", float("-inf"), "not a finite number"),
+    ("float", "nan", "not a finite number"), ("double", "inf", "not a finite number"),
+    ("float", 1e39, "out of range"), ("float", -1e39, "out of range"), ("FP16", 65520.0, "out of range"),
+    ("float", 10 ** 400, "not a number"), ("float", True, "not a number"), ("float", "true", "not a number"),
+    ("float", [1], "not a number"), ("uint8_t", None, "not an integer"), ("uint8_t", {"a": 1}, "not an integer"),
+    ("uint32_t", 2 ** 32, "out of range 0..4294967295"), ("int32_t", "0x80000000", "out of range"),
 ])
 def test_bad_values_are_refused_with_the_range(ctype, value, message):
-    with pytest.raises(ParamValueError, match=message):
-        convert_value(TocEntry(0, "g", "n", ctype), value)
+    with pytest.raises(ParamValueError, match=r"parameter g\.n \(%s\): .*%s" % (ctype, message)):
+        param_value("g.n", ctype, value)
 
 
 @pytest.mark.parametrize("version", [2, 12])

@@ -313,3 +313,34 @@ def test_a_failing_log_listener_does_not_stop_the_worker(caplog):
         assert wait_for(lambda: len(cf.of_kind("null")) > n + 5)
     finally:
         w.stop()
+
+
+def test_out_of_range_cmd_vel_is_held_and_non_finite_is_refused_keeping_the_last_setpoint():
+    w, cf, _ = started(keepalive_period=0.5)
+    try:
+        w.cmd_vel(1e39, -1e30, 1e39, 1e39)          # finite but beyond float32: once killed the worker
+        assert wait_for(lambda: len(cf.of_kind("setpoint")) >= 2)
+        assert cf.of_kind("setpoint")[-1][2] == (-90.0, -90.0, 2000.0, 60000)
+        w.cmd_vel(0.0, 1.0, 30000.0, 0.0)
+        assert wait_for(lambda: cf.of_kind("setpoint")[-1][2] == (1.0, -0.0, 0.0, 30000))
+        for bad in (float("nan"), float("inf"), float("-inf")):
+            with pytest.raises(ValueError, match="angular.z"):
+                w.cmd_vel(0.0, 5.0, 50000.0, bad)
+        assert w._pending is None and w.state == WorkerState.RUNNING
+        w.cmd_vel(0.0, 2.0, 31000.0, 0.0)                  # still flyable
+        assert wait_for(lambda: cf.of_kind("setpoint")[-1][2] == (2.0, -0.0, 0.0, 31000))
+    finally:
+        w.stop()
+
+
+def test_update_params_refuses_non_finite_and_out_of_range_values_without_writing_them():
+    w, cf, _ = started()
+    try:
+        written, errors = w.update_params({"pid_rate.roll_kp": float("nan"), "ring.headlightEnable": 256,
+                                           "flightmode.althold": float("inf")})
+        assert written == [] and len(errors) == 3
+        assert cf.params.values == {"ring.headlightEnable": 0, "pid_rate.roll_kp": 250.0, "flightmode.althold": 0}
+        assert "pid_rate.roll_kp (float): nan is not a finite number" in " ".join(errors)
+        assert "out of range 0..255" in " ".join(errors)
+    finally:
+        w.stop()

@@ -12,6 +12,7 @@ import struct
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
+from crazyflie_driver.crtp.firmware_limits import LOG_LIMITS, LOG_LIMITS_2016
 from crazyflie_driver.sim.firmware import tables as T
 
 ENOENT = 2
@@ -29,14 +30,7 @@ DATA_HEADER = (5 << 4) | CH_DATA   # CRTP_HEADER(LOG, DATA): link bits 0
 _log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class LogLimits:
-    max_blocks: int
-    max_ops: int
-    max_bytes: int
-
-
-LIMITS = {T.GEN_CURRENT: LogLimits(16, 128, 26), T.GEN_2016: LogLimits(8, 64, 30)}
+LIMITS = {T.GEN_CURRENT: LOG_LIMITS, T.GEN_2016: LOG_LIMITS_2016}
 
 
 @dataclass
@@ -62,7 +56,7 @@ class LogService:
         self.limits = LIMITS[generation]
         self.entries: List[T.LogVar] = T.select(table, generation)
         T.check_names(self.entries)
-        self.crc = T.toc_crc(self.entries, lambda e: T.CTYPES[e.ctype].log_type)
+        self.crc = T.toc_crc(self.entries, lambda e: T.CTYPES[e.ctype].log_code)
         if not self.v2:
             self.crc ^= 0x20160200  # opaque in the 2016 firmware
         self._read_value = read_value
@@ -108,7 +102,7 @@ class LogService:
                 self._send(header, bytes([cmd, ident, self._type_of(ident)]) + self._name(ident))
 
     def _type_of(self, ident: int) -> int:
-        return T.CTYPES[self.entries[ident].ctype].log_type
+        return T.CTYPES[self.entries[ident].ctype].log_code
 
     def _name(self, ident: int) -> bytes:
         return T.toc_item_name(self.entries[ident])

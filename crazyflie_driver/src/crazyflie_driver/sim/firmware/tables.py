@@ -12,6 +12,9 @@ import zlib
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
+from crazyflie_driver.crtp.ctypes import BY_LOG_CODE, CTYPES, CType
+from crazyflie_driver.crtp.firmware_limits import TOC_NAME_MAX_BYTES
+
 Number = Union[int, float]
 
 GEN_CURRENT = "current"
@@ -19,36 +22,9 @@ GEN_2016 = "2016.02"
 GENERATIONS = (GEN_CURRENT, GEN_2016)
 
 
-@dataclass(frozen=True)
-class CType:
-    """One C type as both TOCs and the wire know it."""
-
-    name: str
-    fmt: str            # struct format, little-endian
-    param_type: int     # parameter TOC type byte (without flags)
-    log_type: int       # log TOC / fetch type id (1..8)
-
-    @property
-    def size(self) -> int:
-        return struct.calcsize(self.fmt)
-
-    @property
-    def is_float(self) -> bool:
-        return self.fmt[-1] in "fe"
-
-
-CTYPES: Dict[str, CType] = {c.name: c for c in (
-    CType("uint8_t", "<B", 0x08, 1),
-    CType("uint16_t", "<H", 0x09, 2),
-    CType("uint32_t", "<I", 0x0A, 3),
-    CType("int8_t", "<b", 0x00, 4),
-    CType("int16_t", "<h", 0x01, 5),
-    CType("int32_t", "<i", 0x02, 6),
-    CType("float", "<f", 0x06, 7),
-    CType("FP16", "<e", 0x05, 8),
-)}
-LOG_TYPES: Dict[int, CType] = {c.log_type: c for c in CTYPES.values()}
-PARAM_TYPES_BY_BYTE: Dict[int, CType] = {c.param_type: c for c in CTYPES.values()}
+#: The C types the simulated firmware declares its variables with (no 64-bit or double ones).
+FIRMWARE_CTYPES = ("uint8_t", "uint16_t", "uint32_t", "int8_t", "int16_t", "int32_t", "float", "FP16")
+LOG_TYPES: Dict[int, CType] = BY_LOG_CODE
 
 PARAM_EXTENDED = 0x10
 PARAM_CORE = 0x20
@@ -65,7 +41,7 @@ def convert(value: Number, ctype: CType) -> Number:
     cast, floats rounded to their width. Non-finite values become 0 for integer types."""
     if ctype.is_float:
         try:
-            return struct.unpack(ctype.fmt, struct.pack(ctype.fmt, float(value)))[0]
+            return ctype.unpack(ctype.pack(float(value)))
         except (OverflowError, struct.error):
             return float("inf") if float(value) > 0 else float("-inf")
     try:
@@ -74,7 +50,7 @@ def convert(value: Number, ctype: CType) -> Number:
         return 0
     bits = ctype.size * 8
     iv &= (1 << bits) - 1
-    if ctype.fmt[-1].islower() and iv >= 1 << (bits - 1):  # signed formats are lower case
+    if ctype.signed and iv >= 1 << (bits - 1):
         iv -= 1 << bits
     return iv
 
@@ -87,20 +63,15 @@ def clamp(value: Number, ctype: CType) -> Number:
         iv = int(value)
     except (OverflowError, ValueError):
         return 0
-    bits = ctype.size * 8
-    if ctype.fmt[-1].islower():
-        lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
-    else:
-        lo, hi = 0, (1 << bits) - 1
-    return max(lo, min(hi, iv))
+    return max(ctype.low, min(ctype.high, iv))
 
 
 def pack(value: Number, ctype: CType) -> bytes:
-    return struct.pack(ctype.fmt, convert(value, ctype))
+    return ctype.pack(convert(value, ctype))
 
 
 def unpack(data: bytes, ctype: CType) -> Number:
-    return struct.unpack(ctype.fmt, data[:ctype.size])[0]
+    return ctype.unpack(data[:ctype.size])
 
 
 @dataclass(frozen=True)
@@ -131,7 +102,7 @@ class ParamVar:
         return "%s.%s" % (self.group, self.name)
 
     def type_byte(self, generation: str) -> int:
-        t = CTYPES[self.ctype].param_type
+        t = CTYPES[self.ctype].param_code
         if self.readonly:
             t |= PARAM_RO
         if generation == GEN_CURRENT:
@@ -290,10 +261,10 @@ def toc_item_name(entry) -> bytes:
 
 
 def check_names(entries: Sequence) -> None:
-    """The firmware asserts strlen(group)+strlen(name)+2 <= 26 at boot; so do we."""
+    """The firmware asserts strlen(group)+strlen(name)+2 <= TOC_NAME_MAX_BYTES at boot; so do we."""
     for e in entries:
-        if len(e.group) + len(e.name) + 2 > 26:
-            raise ValueError("TOC entry %s.%s: group+name longer than the firmware allows (24 chars)"
-                             % (e.group, e.name))
-        if e.ctype not in CTYPES:
+        if len(e.group) + len(e.name) + 2 > TOC_NAME_MAX_BYTES:
+            raise ValueError("TOC entry %s.%s: group+name longer than the firmware allows (%d chars)"
+                             % (e.group, e.name, TOC_NAME_MAX_BYTES - 2))
+        if e.ctype not in FIRMWARE_CTYPES:
             raise ValueError("TOC entry %s.%s: unknown C type %r" % (e.group, e.name, e.ctype))

@@ -18,6 +18,7 @@ from typing import Dict, Tuple
 
 import numpy as np
 
+from crazyflie_driver.crtp.firmware_limits import MAX_THRUST, MIN_THRUST
 from crazyflie_driver.sim.world.vehicle_rows import Rows
 from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
@@ -27,8 +28,6 @@ GEN_2016 = "2016.02"
 GENERATIONS = (GEN_CURRENT, GEN_2016)
 
 PID_DT = CONTROL_PERIOD_S        # dt both generations use inside their PIDs (1/500 s)
-MIN_THRUST = 1000
-MAX_THRUST = 60000
 RATE_OUTPUT_LIMIT = 32767.0
 WATCHDOG_LEVEL_S = 0.5
 WATCHDOG_SHUTDOWN_S = 2.0
