@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, List
 
+import rosgraph.masterapi
 import rospy
 from geometry_msgs.msg import PointStamped, PoseStamped
 from std_msgs.msg import Empty as EmptyMsg
@@ -63,8 +64,15 @@ class RosOnboardCommands:
             ("notify_setpoints_stop", NotifySetpointsStop, NotifySetpointsStopResponse,
              lambda r: c.notify_setpoints_stop(r.remainValidMillisecs)),
         ]
-        self._services: List[Any] = [rospy.Service(name(s), kind, self._service(s, handler, response))
-                                     for s, kind, response, handler in services]
+        self._services: List[Any] = []
+        for s, kind, response, handler in services:
+            provider = _other_provider(name(s))
+            if provider:
+                rospy.loginfo("%s: %s is already served by %s (the chapter's host-side controller has its own "
+                              "takeoff and land there); the onboard high-level %s is not advertised under that "
+                              "name. Fly without that node to use the onboard one." % (self.uri, name(s), provider, s))
+                continue
+            self._services.append(rospy.Service(name(s), kind, self._service(s, handler, response)))
 
     def _topic(self, topic: str, handler: Callable[[Any], Any]) -> Callable[[Any], None]:
         def callback(msg) -> None:
@@ -91,6 +99,25 @@ class RosOnboardCommands:
         for s in self._services:
             s.shutdown("Crazyflie %s removed" % self.uri)
         self._subscribers, self._services = [], []
+
+
+def _other_provider(service: str) -> str:
+    """The node that already serves ``service`` (resolved name), or "" when none does or the master can't tell.
+
+    crazyflie_ros HEAD advertised its high-level ``takeoff``/``land`` in the namespace where the chapter's
+    controller serves std_srvs/Empty ones of the same name; the master keeps the newest registration, so
+    whichever started last would silently answer the other's callers with the wrong type.
+    """
+    resolved = rospy.resolve_name(service)
+    try:
+        _pubs, _subs, services = rosgraph.masterapi.Master(rospy.get_name()).getSystemState()
+    except (rosgraph.masterapi.Error, OSError):
+        return ""
+    for name, nodes in services:
+        if name == resolved:
+            others = [n for n in nodes if n != rospy.get_name()]
+            return others[0] if others else ""
+    return ""
 
 
 def _xyz(v) -> tuple:
