@@ -4,6 +4,8 @@ Thin glue around :class:``PositionController``. The pose is the tf transform ``w
 its stamp is the pose's age, so a motion-capture stream that stops is noticed (the original used
 the latest transform whatever its age). The state and the safety status ("Automatic: ok",
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).
+The server's ``emergency_stopped`` topic puts it in "Idle: emergency stop ..." until the Crazyflie is
+added again; idle without a pose, it says so in the log every few seconds.
 """
 from __future__ import annotations
 
@@ -13,14 +15,17 @@ from typing import Any, Dict, Optional
 
 import rospy
 import tf2_ros
+import yaml
 from geometry_msgs.msg import PoseStamped, Twist
-from std_msgs.msg import String
+from std_msgs.msg import Bool, String
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 
 from .pid import PidGains
-from .position_controller import ControllerConfig, PoseSample, PositionController, yaw_from_quaternion
+from .position_controller import ControllerConfig, PoseSample, PositionController, Safety, yaw_from_quaternion
+
+NO_POSE_REPEAT_S = 5.0      # while idle without a pose, say so again this often
 
 # private parameter → ControllerConfig field (beyond the original's frame, worldFrame, frequency, PIDs)
 EXTRA_PARAMS = {
@@ -99,11 +104,14 @@ class ControllerNode:
         self._lock = threading.Lock()
         self._status = ""
         self._last_lookup_error = ""
+        self._no_pose_since: Optional[float] = None
+        self._no_pose_said = 0.0
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(2.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
         self.state_pub = rospy.Publisher("~state", String, queue_size=1, latch=True)
         rospy.Subscriber("goal", PoseStamped, self._on_goal, queue_size=1)
+        rospy.Subscriber("emergency_stopped", Bool, self._on_emergency_stopped, queue_size=1)
         rospy.Service("takeoff", Empty, self._on_takeoff)
         rospy.Service("land", Empty, self._on_land)
         self._publish_status()
@@ -132,6 +140,7 @@ class ControllerNode:
             cmd = self.controller.update(rospy.get_time(), pose)
         msg = Twist()
         msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z = cmd
+        self._remind_no_pose(rospy.get_time())
         try:
             self.cmd_pub.publish(msg)
             self._publish_status()
@@ -140,6 +149,28 @@ class ControllerNode:
             # before is_shutdown() turns true, so ask whether a shutdown has begun
             if not shutting_down():
                 raise
+
+    def _remind_no_pose(self, now: float) -> None:
+        """Idle without a pose: say so every NO_POSE_REPEAT_S, naming the frames tf does know."""
+        if self.controller.safety != Safety.NO_POSE:
+            self._no_pose_since = None
+            return
+        if self._no_pose_since is None:
+            self._no_pose_since = self._no_pose_said = now
+            return
+        if now - self._no_pose_said < NO_POSE_REPEAT_S:
+            return
+        self._no_pose_said = now
+        rospy.logwarn("controller: still no pose of %s in %s after %.0f s, take-off is refused; tf knows %s. "
+                      "Is the motion capture running, and does the frame argument name the tracked body?",
+                      self.frame, self.world_frame, now - self._no_pose_since, self._known_frames())
+
+    def _known_frames(self) -> str:
+        try:
+            frames = sorted(yaml.safe_load(self.tf_buffer.all_frames_as_yaml()) or {})
+        except (yaml.YAMLError, TypeError, AttributeError):
+            frames = []
+        return ", ".join(frames) if frames else "no frames at all"
 
     def _publish_status(self) -> None:
         text = self.controller.status_text()
@@ -157,6 +188,15 @@ class ControllerNode:
         yaw = yaw_from_quaternion(q.x, q.y, q.z, q.w) if (q.x, q.y, q.z, q.w) != (0, 0, 0, 0) else 0.0
         with self._lock:
             self.controller.set_goal(p.x, p.y, p.z, yaw)
+
+    def _on_emergency_stopped(self, msg: Bool) -> None:
+        """The server's word on this Crazyflie: stopped by emergency (True) or added afresh (False)."""
+        with self._lock:
+            if msg.data:
+                self.controller.emergency()
+            else:
+                self.controller.clear_emergency()
+        self._publish_status()
 
     def _on_takeoff(self, _req) -> EmptyResponse:
         pose = self._lookup_pose()

@@ -4,7 +4,10 @@
 Private params: ``sim_address``; ``vehicles`` = [{name, target: [x, y, z]}] (name = the world's
 vehicle = the launch file's namespace); ``rms_bound`` / ``max_bound`` (m) on the hold error over
 ``measure_s`` seconds after ``settle_s`` seconds near the target (seconds of world time: the
-flight's own clock); ``mocap`` (vicon|vrpn): the motion-capture names the poses must come through.
+flight's own clock); ``mocap`` (vicon|vrpn): the motion-capture names the poses must come through;
+a vehicle's optional ``frame`` is the tf frame its vicon pose must come under (the launch file's
+``frame`` argument); ``no_pose_node``: a node (a controller whose frame nobody publishes) that must
+keep saying it has no pose, at least twice.
 Throughout, it records /tf: no motion-capture child frame may get two transforms with the same (or
 an older) stamp (tf2's TF_REPEATED_DATA), and the world's real-time status must be on /diagnostics.
 """
@@ -19,6 +22,7 @@ import rostest
 import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TransformStamped
+from rosgraph_msgs.msg import Log
 from tf2_msgs.msg import TFMessage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
@@ -43,6 +47,9 @@ class Hover(unittest.TestCase):
         cls.world_status = None
         cls.tf_sub = rospy.Subscriber("/tf", TFMessage, cls._on_tf, queue_size=1000)
         cls.diag_sub = rospy.Subscriber("/diagnostics", DiagnosticArray, cls._on_diagnostics, queue_size=10)
+        cls.no_pose_node = rospy.get_param("~no_pose_node", "")
+        cls.no_pose_said = []
+        rospy.Subscriber("/rosout", Log, cls._on_log, queue_size=100)
 
     @classmethod
     def _on_tf(cls, msg):
@@ -62,15 +69,23 @@ class Hover(unittest.TestCase):
                 cls.world_status = (st, values)
 
     def mocap_frame(self, name):
-        return "vicon/%s/%s" % (name, name) if self.mocap == "vicon" else name
+        if self.mocap != "vicon":
+            return name
+        frames = {v["name"]: v.get("frame") for v in self.vehicles}
+        return frames.get(name) or "vicon/%s/%s" % (name, name)
+
+    @classmethod
+    def _on_log(cls, msg):
+        if msg.name == cls.no_pose_node and "still no pose" in msg.msg:
+            cls.no_pose_said.append(msg.msg)
 
     def test_a_poses_come_through_the_motion_capture_names(self):
         for v in self.vehicles:
             name = v["name"]
             if self.mocap == "vicon":
+                frame = v.get("frame", "vicon/%s/%s" % (name, name))
                 msg = rospy.wait_for_message("/vicon/%s/%s" % (name, name), TransformStamped, timeout=20.0)
-                self.assertEqual(msg.child_frame_id, "vicon/%s/%s" % (name, name))
-                frame = "vicon/%s/%s" % (name, name)
+                self.assertEqual(msg.child_frame_id, frame)
             else:
                 msg = rospy.wait_for_message("/vrpn_client_node/%s/pose" % name, PoseStamped, timeout=20.0)
                 self.assertEqual(msg.header.frame_id, "world")
@@ -111,6 +126,13 @@ class Hover(unittest.TestCase):
         self.assertEqual(int(values["vehicles"]), len(self.vehicles))
         self.assertGreater(float(values["real-time factor"]), 0.0)
         print("WORLD %s: %s" % (status.message, values))
+
+    def test_d_a_controller_without_pose_keeps_saying_so(self):
+        if not self.no_pose_node:
+            self.skipTest("no ~no_pose_node in this launch")
+        said = wait_until(lambda: len(self.no_pose_said) >= 2, 15.0, 0.2)
+        self.assertTrue(said, "%s said 'still no pose' %d times" % (self.no_pose_node, len(self.no_pose_said)))
+        print("NO_POSE %s: %s" % (self.no_pose_node, self.no_pose_said[-1]))
 
 
 if __name__ == "__main__":

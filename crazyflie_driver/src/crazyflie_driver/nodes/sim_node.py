@@ -11,7 +11,9 @@ each vehicle's pose as the motion-capture bridges of the original stack did:
 * ``both`` or ``none``.
 
 Private parameters: ``vehicles`` (list of ``{uri, name, x, y, z}``; ``position: [x, y, z]``,
-``yaw`` and ``firmware`` also accepted; also as a YAML string holding that list, or the path of a
+``yaw``, ``firmware`` and ``frame`` also accepted: ``frame`` is the tf frame the vicon style publishes
+that vehicle's pose under, as a Vicon room whose body is named that way would, e.g. the
+``frame:=crazyflie1`` of a launch file; also as a YAML string holding that list, or the path of a
 YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri`` + ``name`` for one vehicle;
 ``dongles``
 (simulated Crazyradios, default: enough for the URIs); ``speed`` (1.0); ``seed``; ``mocap``
@@ -51,6 +53,7 @@ class VehicleSpec:
     position: tuple
     yaw: float = 0.0
     firmware: str = "current"
+    frame: str = ""          # vicon style: tf child frame of its pose; "" = vicon/<name>/<name>
 
 
 @dataclass(frozen=True)
@@ -85,6 +88,17 @@ def _parse_vehicles_text(text: str) -> Any:
         raise SimConfigError("~vehicles is neither a readable YAML file nor a YAML list: %s" % e) from None
 
 
+def _frame(where: str, value: Any) -> str:
+    """A vehicle's optional tf frame as tf2 wants it (no leading '/'); "" when not given."""
+    if value is None:
+        return ""
+    frame = str(value).strip().strip("/")
+    if not frame or not all(c.isalnum() or c in "_/-." for c in frame):
+        raise SimConfigError("%s: frame %r is not a tf frame name (letters, digits, '_', '-', '.', '/')"
+                             % (where, value))
+    return frame
+
+
 def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
     """``~vehicles`` (or ``~uri``/``~name``) checked; names must be valid ROS names, URIs unique."""
     raw = params.get("vehicles")
@@ -105,7 +119,7 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         where = "~vehicles[%d]" % i
         if not isinstance(item, dict) or "uri" not in item:
             raise SimConfigError("%s needs at least a 'uri' (got %r)" % (where, item))
-        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware"}
+        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame"}
         if unknown:
             raise SimConfigError("%s has unknown keys %s" % (where, ", ".join(sorted(unknown))))
         try:
@@ -129,7 +143,7 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         seen_names.add(name)
         seen_uris.add(uri)
         out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
-                               str(item.get("firmware", "current"))))
+                               str(item.get("firmware", "current")), _frame(where, item.get("frame"))))
     return out
 
 
@@ -236,7 +250,8 @@ class MocapPublisher:
     the same stamp (``StampGuard``). Per-body topics are published only while someone subscribes.
     """
 
-    def __init__(self, config: MocapConfig, names: Sequence[str]) -> None:
+    def __init__(self, config: MocapConfig, names: Sequence[str],
+                 vicon_frames: Optional[Dict[str, str]] = None) -> None:
         import rospy
         from geometry_msgs.msg import PoseStamped, TransformStamped
         from tf2_msgs.msg import TFMessage
@@ -252,6 +267,7 @@ class MocapPublisher:
         self._tf = rospy.Publisher("/tf", TFMessage, queue_size=100) if (self.vicon or self.vrpn) else None
         self._bodies: Dict[str, Any] = {}
         self.guard = StampGuard()
+        self.vicon_frames = dict(vicon_frames or {})   # name -> tf child frame, where not vicon/<name>/<name>
         for n in names:
             self._body(n)
 
@@ -263,7 +279,8 @@ class MocapPublisher:
 
             rospy, parent = self._rospy, self.config.world_frame
             body = _MocapBody(
-                TransformWire(parent, "vicon/%s/%s" % (name, name)) if self.vicon else None,
+                TransformWire(parent, self.vicon_frames.get(name) or "vicon/%s/%s" % (name, name))
+                if self.vicon else None,
                 rospy.Publisher("/vicon/%s/%s" % (name, name), self._TransformStamped, queue_size=10)
                 if self.vicon else None,
                 TransformWire(parent, name) if self.vrpn else None,
@@ -399,7 +416,7 @@ def main() -> None:
 
     names = [v.name for v in vehicles]
     model = mocap_model(world, mocap, None if seed is None else int(seed))
-    publisher = MocapPublisher(mocap, names)
+    publisher = MocapPublisher(mocap, names, {v.name: v.frame for v in vehicles if v.frame})
     _advertise_mocap_switches(model, names)
     clock_pub = rospy.Publisher("/clock", Clock, queue_size=10) if params.get("publish_clock", False) else None
     stop = threading.Event()
