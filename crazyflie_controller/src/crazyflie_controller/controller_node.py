@@ -4,8 +4,8 @@ Thin glue around :class:``PositionController``. The pose is the tf transform ``w
 its stamp is the pose's age, so a motion-capture stream that stops is noticed (the original used
 the latest transform whatever its age). The state and the safety status ("Automatic: ok",
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).
-The server's ``emergency_stopped`` topic puts it in "Idle: emergency stop ..." until the Crazyflie is
-added again; idle without a pose, it says so in the log every few seconds.
+The server's ``status`` topic (its ``emergency`` value) puts it in "Idle: emergency stop ..." until the
+Crazyflie is added again; idle without a pose, it says so in the log every few seconds.
 """
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ import rospy
 import tf2_ros
 import yaml
 from geometry_msgs.msg import PoseStamped, Twist
-from std_msgs.msg import Bool, String
+from diagnostic_msgs.msg import DiagnosticStatus
+from std_msgs.msg import String
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
@@ -90,6 +91,14 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
         raise ConfigError(str(e))
 
 
+def emergency_of(values) -> Optional[bool]:
+    """The ``emergency`` value of the server's status (KeyValue list), or None if it has none."""
+    for kv in values:
+        if kv.key == "emergency":
+            return kv.value.strip().lower() == "true"
+    return None
+
+
 class ControllerNode:
     def __init__(self, params: Dict[str, Any]) -> None:
         # tf2 refuses a leading '/', which the chapter's frames have (/vicon/crazyflie/crazyflie)
@@ -111,7 +120,7 @@ class ControllerNode:
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
         self.state_pub = rospy.Publisher("~state", String, queue_size=1, latch=True)
         rospy.Subscriber("goal", PoseStamped, self._on_goal, queue_size=1)
-        rospy.Subscriber("emergency_stopped", Bool, self._on_emergency_stopped, queue_size=1)
+        rospy.Subscriber("status", DiagnosticStatus, self._on_server_status, queue_size=5)
         rospy.Service("takeoff", Empty, self._on_takeoff)
         rospy.Service("land", Empty, self._on_land)
         self._publish_status()
@@ -189,10 +198,13 @@ class ControllerNode:
         with self._lock:
             self.controller.set_goal(p.x, p.y, p.z, yaw)
 
-    def _on_emergency_stopped(self, msg: Bool) -> None:
-        """The server's word on this Crazyflie: stopped by emergency (True) or added afresh (False)."""
+    def _on_server_status(self, msg: DiagnosticStatus) -> None:
+        """The server's word on this Crazyflie: stopped by emergency, or added afresh."""
+        emergency = emergency_of(msg.values)
+        if emergency is None:
+            return
         with self._lock:
-            if msg.data:
+            if emergency:
                 self.controller.emergency()
             else:
                 self.controller.clear_emergency()

@@ -74,6 +74,7 @@ class Safety(enum.Enum):
     HOLDING = "pose stale: holding level"       # airborne, pose older than pose_timeout
     BLIND_DESCENT = "pose lost: descending"     # stale longer than lost_pose_land_timeout
     LANDED_BLIND = "pose lost: motors stopped"  # blind descent over, idle until a new take-off
+    EMERGENCY = "emergency stop: re-add the Crazyflie to fly"   # the server's emergency service was called
 
 
 class Command(NamedTuple):
@@ -242,6 +243,9 @@ class PositionController:
         """Starts the thrust ramp from Idle; refused (False) without a fresh pose or when not idle."""
         if pose is not None:
             self._observe(pose)
+        if self.safety == Safety.EMERGENCY:
+            self._log("error", "takeoff refused: the Crazyflie was stopped by emergency; remove and add it again")
+            return False
         if self.state != State.IDLE:
             self._log("warn", "takeoff ignored: state is %s" % self.state.value)
             return False
@@ -273,6 +277,20 @@ class PositionController:
             return True
         return False
 
+    def emergency(self) -> None:
+        """The motors were stopped behind the controller's back: back to Idle, and say so until cleared."""
+        if self.safety != Safety.EMERGENCY:
+            self._log("warn", "emergency stop reported: %s -> Idle" % self.state.value)
+        self._drop_ramp()
+        self._hover_fit = None
+        self._stale_since = self._blind_since = None
+        self._set_state(State.IDLE, Safety.EMERGENCY)
+
+    def clear_emergency(self) -> None:
+        """The Crazyflie was added again: take-off is possible once a pose comes in."""
+        if self.safety == Safety.EMERGENCY:
+            self.safety = Safety.NO_POSE
+
     # ----------------------------------------------------------------- main step
     def update(self, now: float, pose: Optional[PoseSample]) -> Command:
         """One control cycle at time ``now``; ``pose`` is the newest pose known (or None)."""
@@ -283,7 +301,7 @@ class PositionController:
         if self.state != State.AUTOMATIC:
             self._hover_fit = None
         if self.state == State.IDLE:
-            if self.safety != Safety.LANDED_BLIND:
+            if self.safety not in (Safety.LANDED_BLIND, Safety.EMERGENCY):
                 self.safety = Safety.OK if self._fresh(now) else Safety.NO_POSE
             return self._emit(ZERO)
         if not self._fresh(now):
