@@ -221,6 +221,7 @@ class Joystick:
             raise ValueError("retry_interval must be > 0 seconds, got %r" % retry_interval)
         self.device = JoystickDevice(dev)
         self.model = JoystickModel(deadzone)
+        self.autorepeat_rate = float(autorepeat_rate)
         self.autorepeat_interval = 1.0 / autorepeat_rate if autorepeat_rate > 0 else None
         self.coalesce_interval = float(coalesce_interval)
         self.retry_interval = float(retry_interval)

@@ -34,6 +34,14 @@ def make_goal(frame_id: str, x: float, y: float, z: float, yaw_rad: float,
     return msg
 
 
+def say_launch_note() -> None:
+    """Log the private parameter ``~note`` once, if set: a launch file's one line on what it does
+    differently from the chapter's and how to get the chapter's behaviour."""
+    note = str(rospy.get_param("~note", "")).strip()
+    if note:
+        rospy.loginfo(note)
+
+
 def wait_for_service(name: str, timeout: float) -> bool:
     """Wait for a service; False (and a log line) instead of an exception on timeout.
 

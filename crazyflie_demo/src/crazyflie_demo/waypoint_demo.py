@@ -91,9 +91,10 @@ def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land
     from geometry_msgs.msg import PoseStamped
     from std_msgs.msg import Bool, Int32
     from std_srvs.srv import Empty
-    from crazyflie_demo.rosutil import make_goal, take_off_when_ready, wait_for_service
+    from crazyflie_demo.rosutil import make_goal, say_launch_note, take_off_when_ready, wait_for_service
     from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
 
+    say_launch_note()
     follower = follower_for(demo.goals)
     rospy.set_param("~waypoints", demo.goals)       # for monitors, in the chapter's units
     buffer = tf2_ros.Buffer()

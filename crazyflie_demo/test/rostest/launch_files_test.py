@@ -34,30 +34,34 @@ def _ns(ns: str, names: List[str]) -> List[str]:
 
 HOVER = ["crazyflie_add", "joystick_controller", "autopilot", "controller", "pose"]
 WAYPOINT = ["crazyflie_add", "joystick_controller", "controller", "demo"]
-TELEOP = ["crazyflie_add", "joy", "quadrotor_teleop", "joystick_controller"]
+TELEOP = ["crazyflie_add", "joy", "quadrotor_teleop", "crazyflie_demo_controller"]
 PAD = ["joy", "quadrotor_teleop"]
+BASELINK = ["baselink_broadcaster"]     # the chapter's static tf mocap frame -> <name>/base_link
 
 # launch file -> (expected nodes with sim:=true gui:=false, namespaces of Crazyflies, extra args)
 EXPECTED: Dict[str, Tuple[List[str], List[str], List[str]]] = {
     "customLogBlocks.launch": (SIM + ["/crazyflie/crazyflie_add"], ["crazyflie"], []),
-    "hover_vicon.launch": (SIM + _ns("crazyflie", HOVER), ["crazyflie"], []),
+    "hover_vicon.launch": (SIM + _ns("crazyflie", HOVER + BASELINK), ["crazyflie"], []),
     "hover_vrpn.launch": (SIM + _ns("crazyflie", HOVER), ["crazyflie"], []),
-    "teleop_vicon.launch": (SIM + _ns("crazyflie", HOVER), ["crazyflie"], []),
-    "multi_hover_vicon.launch": (SIM + _ns("crazyflie1", HOVER) + _ns("crazyflie2", HOVER),
+    "teleop_vicon.launch": (SIM + _ns("crazyflie", HOVER + BASELINK), ["crazyflie"], []),
+    "multi_hover_vicon.launch": (SIM + _ns("crazyflie1", HOVER + BASELINK) + _ns("crazyflie2", HOVER + BASELINK),
                                  ["crazyflie1", "crazyflie2"], []),
     "multi_hover_vrpn.launch": (SIM + _ns("crazyflie1", HOVER) + _ns("crazyflie2", HOVER),
                                 ["crazyflie1", "crazyflie2"], []),
-    "multi_waypoint_vicon.launch": (SIM + _ns("crazyflie1", WAYPOINT) + _ns("crazyflie2", WAYPOINT),
+    "multi_waypoint_vicon.launch": (SIM + _ns("crazyflie1", WAYPOINT + BASELINK)
+                                    + _ns("crazyflie2", WAYPOINT + BASELINK),
                                     ["crazyflie1", "crazyflie2"], []),
     "teleop_xbox360.launch": (SIM + _ns("crazyflie", TELEOP), ["crazyflie"], []),
     "teleop_ps3.launch": (SIM + _ns("crazyflie", TELEOP), ["crazyflie"], []),
-    "multi_teleop_xbox360.launch": (SIM + _ns("crazyflie1", TELEOP) + _ns("crazyflie2", TELEOP),
+    "multi_teleop_xbox360.launch": (SIM + _ns("crazyflie1", TELEOP + ["crazyflie1_broadcaster"])
+                                    + _ns("crazyflie2", TELEOP + ["crazyflie2_broadcaster"]),
                                     ["crazyflie1", "crazyflie2"], []),
-    "multi_teleop_ps3.launch": (SIM + _ns("crazyflie1", TELEOP) + _ns("crazyflie2", TELEOP),
+    "multi_teleop_ps3.launch": (SIM + _ns("crazyflie1", TELEOP + ["crazyflie1_broadcaster"])
+                                + _ns("crazyflie2", TELEOP + ["crazyflie2_broadcaster"]),
                                 ["crazyflie1", "crazyflie2"], []),
     "xbox360.launch": (["/" + n for n in PAD], [], []),
     "ps3.launch": (["/" + n for n in PAD], [], []),
-    "sim_mission.launch": (SIM + _ns("crazyflie1", WAYPOINT) + _ns("crazyflie2", WAYPOINT)
+    "sim_mission.launch": (SIM + _ns("crazyflie1", WAYPOINT + BASELINK) + _ns("crazyflie2", WAYPOINT + BASELINK)
                            + ["/mission_monitor"], ["crazyflie1", "crazyflie2"], ["plot:={tmp}/mission.png"]),
 }
 # nodes that finish by design once their work is done

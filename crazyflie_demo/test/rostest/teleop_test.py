@@ -9,7 +9,9 @@ joy node -> teleop node -> crazyflie_server -> fake radio -> simulated Crazyflie
 Like a human pilot, the test holds the height itself with the thrust stick (from the world's
 true height) while it checks each stick moves the vehicle the right way, judged by the world's
 true state: thrust stick up climbs; right stick forward flies +x; right stick left flies +y;
-left stick left turns counter-clockwise (positive yaw rate).
+left stick left turns counter-clockwise (positive yaw rate). Then a stick held still, as a pilot
+holding a steady climb does: no joystick event for longer than the firmware's 2 s setpoint watchdog,
+and the Crazyflie must keep flying (the joy node repeats the state, so setpoints keep flowing).
 """
 from __future__ import annotations
 
@@ -32,6 +34,8 @@ NAME = "crazyflie"
 JS_EVENT_BUTTON, JS_EVENT_AXIS, JS_EVENT_INIT = 0x01, 0x02, 0x80
 YAW_STICK, THRUST_STICK, ROLL_STICK, PITCH_STICK = 0, 1, 3, 4     # xpad: left x, left y, right x, right y
 AXES, BUTTONS = 8, 11
+STILL_THRUST = 37500.0      # counts: a little above the ~36300 a hover needs
+STILL_S = 3.5               # s without a joystick event: longer than the firmware's 2 s watchdog
 
 
 def js_event(ms: int, value: int, kind: int, number: int) -> bytes:
@@ -126,6 +130,32 @@ class TeleopXbox360(unittest.TestCase):
         self.probe.sleep(seconds)
         self.pad.stick(axis, 0.0)
         return {"before": before, "after": self.probe.state(NAME)}
+
+    def test_still_stick_keeps_flying(self):
+        """After test_each_...: one thrust setting a little above hover, then no event for 3.5 s."""
+        self.assertTrue(wait_until(lambda: self.probe.state(NAME)["on_ground"], 15.0), "not back on the ground")
+        self.pad.stick(THRUST_STICK, STILL_THRUST / self.thrust_max)
+        self.assertTrue(wait_until(lambda: not self.probe.state(NAME)["on_ground"], 10.0), "did not lift off")
+        t0 = rospy.Time.now()
+        z0 = self.probe.state(NAME)["position"][2]
+        time.sleep(STILL_S)                                    # nothing written to the pad meanwhile
+        s = self.probe.state(NAME)
+        repeats = [m for m in self.joy if m.header.stamp > t0]
+        print("TELEOP still stick: %d Joy messages in %.1f s, z %.2f -> %.2f m, motors %s, locked %s"
+              % (len(repeats), STILL_S, z0, s["position"][2], s["motors"], s.get("locked")))
+        try:
+            self.assertFalse(s["on_ground"], "the Crazyflie came down with the stick held still")
+            self.assertGreater(min(s["motors"]), 0, "motors cut with the stick held still")
+            self.assertFalse(s.get("locked"), "the firmware locked the Crazyflie with the stick held still")
+            self.assertGreater(s["position"][2], z0, "a thrust above hover must keep climbing")
+            span = (repeats[-1].header.stamp - repeats[0].header.stamp).to_sec() if len(repeats) > 1 else 0.0
+            self.assertGreater(span, STILL_S - 1.0, "Joy messages stopped while the stick was still")
+        finally:
+            pilot = HeightPilot(self.pad, self.probe, self.thrust_max, 0.0)   # bring it down gently
+            wait_until(lambda: self.probe.state(NAME)["position"][2] < 0.1, 10.0)
+            pilot.stop.set()
+            pilot.thread.join(2.0)
+            self.pad.stick(THRUST_STICK, 0.0)
 
     def test_each_stick_moves_the_vehicle_the_right_way(self):
         # resting on the ground with the sticks centred: nothing moves
