@@ -3,6 +3,7 @@ and turning the library's errors into one clear line and exit code 1 (no traceba
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import Callable, Optional
 
@@ -60,6 +61,10 @@ def run(main: Callable[[argparse.Namespace], int], args: argparse.Namespace,
         return main(args)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # the reader went away (`listParams ... | head`): stop quietly, as other command-line tools do
+        sys.stdout = open(os.devnull, "w")
+        return 0
     except (CrazyflieError, OSError, ValueError) as error:
         # OSError covers pyusb's USBError; ValueError covers bad option values.
         print("%s: error: %s" % (prog, describe_error(error)), file=sys.stderr)

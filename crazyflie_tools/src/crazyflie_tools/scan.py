@@ -7,6 +7,7 @@ from typing import List, Optional
 from crazyflie_driver import usb_choice
 from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.radio.scan import parse_address, scan
+from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri
 
 from .common import parser, run
 
@@ -14,6 +15,12 @@ from .common import parser, run
 def dongle_line(version: float) -> str:
     """The first line of the output, as the chapter shows it: the dongle's firmware version."""
     return "Configured Dongle with version %g" % version
+
+
+def uri_line(uri: RadioUri) -> str:
+    """The URI as the chapter's scan prints it: the address only when it is not the default one."""
+    text = str(uri)
+    return text.rsplit("/", 1)[0] if uri.address == DEFAULT_ADDRESS else text
 
 
 def _scan(args) -> int:
@@ -25,7 +32,7 @@ def _scan(args) -> int:
     finally:
         radio.close()
     for uri in found:
-        print(uri)
+        print(uri_line(uri))
     if not found:
         print("no Crazyflie answered at address %s" % address.hex().upper(), file=sys.stderr)
     return 0

@@ -105,6 +105,23 @@ def test_scan_default_address_finds_nothing_here(sim, capsys):
     assert "no Crazyflie answered at address E7E7E7E7E7" in captured.err
 
 
+class ClosedPipe:
+    """stdout of `tool | head -1` once head has exited."""
+
+    def write(self, text):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def flush(self):
+        pass
+
+
+def test_output_into_a_closed_pipe_is_quiet(sim, capsys, monkeypatch):
+    sim.add(URI1)
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    assert list_params.main(["--uri", URI1]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_scan_bad_address(sim, capsys):
     assert scan.main(["--address", "XYZ"]) == 1
     assert "scan: error: address 'XYZ' is not up to 10 hex digits" in capsys.readouterr().err

@@ -127,6 +127,21 @@ def test_scan_finds_both(server, tmp_path):
     assert a.stdout.splitlines() == [dongle, URI1] and b.stdout.splitlines() == [dongle, URI2]
 
 
+def test_scan_default_address_prints_the_chapter_s_uri(tmp_path):
+    """As the chapter shows it: the dongle line, then radio://0/100/2M (no address when it is the default)."""
+    world = make_world()
+    srv = WorldServer(world, port=0)
+    srv.add_crazyflie("radio://0/100/2M", "cf", (0.0, 0.0, 0.0), "current", 0.0)
+    host, port = srv.start()
+    world.start()
+    try:
+        r = run_tool("%s:%d" % (host, port), tmp_path, "scan")
+    finally:
+        srv.stop()
+        world.stop()
+    assert (r.returncode, r.stdout) == (0, "Configured Dongle with version 0.53\nradio://0/100/2M\n"), r.stderr
+
+
 def run_without_sim_backend(tmp_path, name, sim_address, *args):
     """A tool as the chapter types it: no CRAZYFLIE_BACKEND, so it looks for a real Crazyradio."""
     env = {k: v for k, v in os.environ.items() if k != "CRAZYFLIE_BACKEND"}
