@@ -10,6 +10,7 @@ Private params: ``sim_address``, ``joy_dev`` (the FIFO), ``vehicles`` = [{name, 
 """
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -21,7 +22,9 @@ from sensor_msgs.msg import Joy
 from std_msgs.msg import String
 
 from crazyflie_demo.fake_joystick import FakeJoystick
-from flight_support import WorldProbe, inbound_connected, wait_until
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.flight_support import WorldProbe, inbound_connected, wait_until  # noqa: E402
 
 TAKEOFF, EMERGENCY = 2, 1            # the chapter's buttons
 EMERGENCY_STATUS = "Idle: emergency stop: re-add the Crazyflie to fly"
