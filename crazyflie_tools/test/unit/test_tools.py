@@ -106,7 +106,7 @@ def test_scan_default_address_finds_nothing_here(sim, capsys):
 
 
 class ClosedPipe:
-    """stdout of `tool | head -1` once head has exited."""
+    """stdout of ``tool | head -1`` once head has exited."""
 
     def write(self, text):
         raise BrokenPipeError(32, "Broken pipe")
