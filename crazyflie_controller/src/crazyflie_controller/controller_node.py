@@ -4,6 +4,14 @@ Thin glue around :class:``PositionController``. The pose is the tf transform ``w
 its stamp is the pose's age, so a motion-capture stream that stops is noticed (the original used
 the latest transform whatever its age). The state and the safety status ("Automatic: ok",
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).
+
+By default the command is computed by a free-running timer at ``~frequency`` (the chapter's 50 Hz),
+from the newest pose in the tf buffer: a motion-capture sample then waits up to one period before
+it is used. With ``~computeOnPose: true`` the command is computed as each pose arrives on ``/tf``
+(taken from the message itself, no buffer lookup), and the timer only steps the controller when no
+pose came for a period (take-off ramp, stale-pose handling). ``~cmd_vel_stamped``
+(geometry_msgs/TwistStamped) repeats each command stamped with the pose it was computed from,
+for measuring the control path's latency; it costs nothing while nobody subscribes.
 """
 from __future__ import annotations
 
@@ -13,8 +21,9 @@ from typing import Any, Dict, Optional
 
 import rospy
 import tf2_ros
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
@@ -95,18 +104,26 @@ class ControllerNode:
         self.frequency = float(params.get("frequency", 50.0))
         if not 0 < self.frequency <= 1000:
             raise ConfigError("~frequency must be in (0, 1000] Hz, got %r" % self.frequency)
+        self.compute_on_pose = params.get("computeOnPose", False)
+        if not isinstance(self.compute_on_pose, bool):
+            raise ConfigError("~computeOnPose must be true or false, got %r" % (self.compute_on_pose,))
         self.controller = PositionController(config_from_params(params), log=self._log)
         self._lock = threading.Lock()
         self._status = ""
         self._last_lookup_error = ""
+        self._pose_stamp = rospy.Time()          # stamp of the newest pose the controller has seen
+        self._last_step = -1e9                   # rospy time of the last control step
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(2.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
+        self.stamped_pub = rospy.Publisher("~cmd_vel_stamped", TwistStamped, queue_size=10)
         self.state_pub = rospy.Publisher("~state", String, queue_size=1, latch=True)
         rospy.Subscriber("goal", PoseStamped, self._on_goal, queue_size=1)
         rospy.Service("takeoff", Empty, self._on_takeoff)
         rospy.Service("land", Empty, self._on_land)
         self._publish_status()
+        if self.compute_on_pose:
+            rospy.Subscriber("/tf", TFMessage, self._on_tf, queue_size=10, tcp_nodelay=True)
         self.timer = rospy.Timer(rospy.Duration(1.0 / self.frequency), self._on_timer)
 
     @staticmethod
@@ -123,20 +140,50 @@ class ControllerNode:
                 self._last_lookup_error = text
             return None
         self._last_lookup_error = ""
+        return self._pose_of(tf)
+
+    @staticmethod
+    def _pose_of(tf) -> PoseSample:
         t, q = tf.transform.translation, tf.transform.rotation
         return PoseSample(tf.header.stamp.to_sec(), t.x, t.y, t.z, yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
+    def _on_tf(self, msg: TFMessage) -> None:
+        """computeOnPose: one control step per pose of our frame, as it arrives."""
+        for tf in msg.transforms:
+            if tf.child_frame_id.lstrip("/") != self.frame:
+                continue
+            if tf.header.frame_id.lstrip("/") == self.world_frame:
+                pose = self._pose_of(tf)
+            else:            # our frame hangs below another one: let the buffer chain it to the world
+                pose = self._lookup_pose()
+            self._step(pose, tf.header.stamp)
+            return
+
     def _on_timer(self, _event) -> None:
+        if self.compute_on_pose and rospy.get_time() - self._last_step < 1.0 / self.frequency:
+            return           # poses are arriving and each one computed a command
         pose = self._lookup_pose()
-        with self._lock:
-            cmd = self.controller.update(rospy.get_time(), pose)
+        self._step(pose, None if pose is None else rospy.Time.from_sec(pose.stamp))
+
+    def _step(self, pose: Optional[PoseSample], stamp: Optional[rospy.Time]) -> None:
+        """One control cycle; publishes cmd_vel (and ~cmd_vel_stamped when listened to)."""
         msg = Twist()
-        msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z = cmd
         try:
-            self.cmd_pub.publish(msg)
+            with self._lock:
+                now = rospy.get_time()
+                cmd = self.controller.update(now, pose)
+                self._last_step = now
+                if stamp is not None:
+                    self._pose_stamp = stamp
+                msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z = cmd
+                self.cmd_pub.publish(msg)
+                if self.stamped_pub.get_num_connections() > 0:
+                    stamped = TwistStamped(twist=msg)
+                    stamped.header.stamp, stamped.header.frame_id = self._pose_stamp, self.world_frame
+                    self.stamped_pub.publish(stamped)
             self._publish_status()
         except rospy.ROSException:
-            # a timer tick racing the node's shutdown is not an error: rospy closes the topics
+            # a step racing the node's shutdown is not an error: rospy closes the topics
             # before is_shutdown() turns true, so ask whether a shutdown has begun
             if not shutting_down():
                 raise
