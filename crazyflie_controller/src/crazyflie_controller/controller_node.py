@@ -7,9 +7,10 @@ the latest transform whatever its age). The state and the safety status ("Automa
 
 By default the command is computed by a free-running timer at ``~frequency`` (the chapter's 50 Hz),
 from the newest pose in the tf buffer: a motion-capture sample then waits up to one period before
-it is used. With ``~computeOnPose: true`` the command is computed as each pose arrives on ``/tf``
-(taken from the message itself, no buffer lookup), and the timer only steps the controller when no
-pose came for a period (take-off ramp, stale-pose handling). ``~cmd_vel_stamped``
+it is used. With ``~computeOnPose: true`` the command is computed as a pose arrives on ``/tf`` (taken from
+the message itself, no buffer lookup), still at about ``~frequency`` (set it to the mocap's rate
+to use every pose), and the timer only steps the controller when no pose came for a period
+(take-off ramp, stale-pose handling). ``~cmd_vel_stamped``
 (geometry_msgs/TwistStamped) repeats each command stamped with the pose it was computed from,
 for measuring the control path's latency; it costs nothing while nobody subscribes.
 """
@@ -53,6 +54,10 @@ EXTRA_PARAMS = {
     "zIntegration": "z_integration",
     "hoverRefineTime": "hover_refine_time",
 }
+# computeOnPose: a pose arriving sooner than this fraction of a period after the last step is
+# skipped, so the commands keep to about ``frequency`` (every other pose of a 100 Hz mocap at
+# 50 Hz) without a timer's wait; the tolerance keeps jitter from skipping two poses in a row
+ON_POSE_MIN_GAP = 0.75
 TEXT_PARAMS = ("takeoff_handover", "derivative", "goal_change", "z_integration")
 BOOL_PARAMS = ("tilt_compensation",)
 AXES = (("x", "X"), ("y", "Y"), ("z", "Z"), ("yaw", "Yaw"))
@@ -148,16 +153,18 @@ class ControllerNode:
         return PoseSample(tf.header.stamp.to_sec(), t.x, t.y, t.z, yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
     def _on_tf(self, msg: TFMessage) -> None:
-        """computeOnPose: one control step per pose of our frame, as it arrives."""
-        for tf in msg.transforms:
-            if tf.child_frame_id.lstrip("/") != self.frame:
-                continue
-            if tf.header.frame_id.lstrip("/") == self.world_frame:
-                pose = self._pose_of(tf)
-            else:            # our frame hangs below another one: let the buffer chain it to the world
-                pose = self._lookup_pose()
-            self._step(pose, tf.header.stamp)
+        """computeOnPose: a control step as a pose of our frame arrives (at most ~``frequency``)."""
+        tf = None
+        for t in msg.transforms:
+            if t.child_frame_id.lstrip("/") == self.frame:
+                tf = t                   # the newest of ours, should a message carry several
+        if tf is None or rospy.get_time() - self._last_step < ON_POSE_MIN_GAP / self.frequency:
             return
+        if tf.header.frame_id.lstrip("/") == self.world_frame:
+            pose = self._pose_of(tf)
+        else:                # our frame hangs below another one: let the buffer chain it to the world
+            pose = self._lookup_pose()
+        self._step(pose, tf.header.stamp)
 
     def _on_timer(self, _event) -> None:
         if self.compute_on_pose and rospy.get_time() - self._last_step < 1.0 / self.frequency:
