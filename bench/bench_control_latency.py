@@ -210,11 +210,14 @@ def run_case(compute_on_pose: bool, logging_on: bool, seconds: float, settle_s: 
     cmd = [sys.executable, os.path.abspath(__file__), "--child", out, "--seconds", str(seconds),
            "--settle", str(settle_s)] + (["--compute-on-pose"] if compute_on_pose else []) + \
         (["--logging"] if logging_on else [])
-    subprocess.run(cmd, check=False, timeout=seconds + settle_s + 240)
     result: dict = {}
+    try:
+        subprocess.run(cmd, check=False, timeout=seconds + settle_s + 240)
+    except subprocess.TimeoutExpired:
+        result["error"] = "the case did not finish in time"
     if os.path.exists(out):
         with open(out) as f:
-            result = json.load(f)
+            result.update(json.load(f))
         os.unlink(out)
     return result
 
@@ -238,6 +241,13 @@ def child(out: str, compute_on_pose: bool, logging_on: bool, seconds: float, set
             time.sleep(0.2)
         tap = AirTap()
         tap.install()
+
+        def watch() -> None:     # the graph died (e.g. a required node): end the case, do not hang
+            roslaunch.wait()
+            import rospy
+            result.setdefault("error", "roslaunch ended early (exit %s); logs in %s" % (roslaunch.returncode, work))
+            rospy.signal_shutdown("roslaunch ended")
+        threading.Thread(target=watch, daemon=True).start()
         sys.argv = [sys.argv[0], "__name:=crazyflie_sim"]
         threading.Thread(target=measure, args=(tap, seconds, settle_s, result), daemon=True).start()
         from crazyflie_driver.nodes import sim_node
