@@ -234,6 +234,7 @@ def child(out: str, compute_on_pose: bool, logging_on: bool, seconds: float, set
     roslaunch = subprocess.Popen(["roslaunch", "--port", str(port), launch], env=env,
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     result: dict = {}
+    finished = threading.Event()
     try:
         import rosgraph
         deadline = time.monotonic() + 30.0
@@ -244,6 +245,8 @@ def child(out: str, compute_on_pose: bool, logging_on: bool, seconds: float, set
 
         def watch() -> None:     # the graph died (e.g. a required node): end the case, do not hang
             roslaunch.wait()
+            if finished.is_set():
+                return
             import rospy
             result.setdefault("error", "roslaunch ended early (exit %s); logs in %s" % (roslaunch.returncode, work))
             rospy.signal_shutdown("roslaunch ended")
@@ -253,6 +256,7 @@ def child(out: str, compute_on_pose: bool, logging_on: bool, seconds: float, set
         from crazyflie_driver.nodes import sim_node
         sim_node.main()
     finally:
+        finished.set()
         roslaunch.terminate()
         try:
             roslaunch.wait(20)
