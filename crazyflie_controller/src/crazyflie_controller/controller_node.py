@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import sys
 import threading
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Optional, Sequence
 
 import rospy
 import tf2_ros
@@ -99,6 +99,15 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
         raise ConfigError(str(e))
 
 
+def newest_transform_of(transforms: Sequence[Any], frame: str) -> Optional[Any]:
+    """The last transform whose child is ``frame`` (leading '/' ignored), should a tf message carry several."""
+    found = None
+    for t in transforms:
+        if t.child_frame_id.strip("/") == frame:
+            found = t
+    return found
+
+
 class ControllerNode:
     def __init__(self, params: Dict[str, Any]) -> None:
         # tf2 refuses a leading '/', which the chapter's frames have (/vicon/crazyflie/crazyflie)
@@ -154,13 +163,10 @@ class ControllerNode:
 
     def _on_tf(self, msg: TFMessage) -> None:
         """computeOnPose: a control step as a pose of our frame arrives (at most ~``frequency``)."""
-        tf = None
-        for t in msg.transforms:
-            if t.child_frame_id.lstrip("/") == self.frame:
-                tf = t                   # the newest of ours, should a message carry several
+        tf = newest_transform_of(msg.transforms, self.frame)
         if tf is None or rospy.get_time() - self._last_step < ON_POSE_MIN_GAP / self.frequency:
             return
-        if tf.header.frame_id.lstrip("/") == self.world_frame:
+        if tf.header.frame_id.strip("/") == self.world_frame:
             pose = self._pose_of(tf)
         else:                # our frame hangs below another one: let the buffer chain it to the world
             pose = self._lookup_pose()
