@@ -28,7 +28,6 @@ import os
 import platform
 import socket
 import statistics
-import struct
 import subprocess
 import sys
 import tempfile
