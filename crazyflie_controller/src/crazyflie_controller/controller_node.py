@@ -6,19 +6,29 @@ the latest transform whatever its age). The state and the safety status ("Automa
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).
 The server's ``status`` topic (its ``emergency`` value) puts it in "Idle: emergency stop ..." until the
 Crazyflie is added again; idle without a pose, it says so in the log every few seconds.
+
+By default the command is computed by a free-running timer at ``~frequency`` (the chapter's 50 Hz),
+from the newest pose in the tf buffer: a motion-capture sample then waits up to one period before
+it is used. With ``~computeOnPose: true`` the command is computed as a pose arrives on ``/tf`` (taken from
+the message itself, no buffer lookup), still at about ``~frequency`` (set it to the mocap's rate
+to use every pose), and the timer only steps the controller when no pose came for a period
+(take-off ramp, stale-pose handling). ``~cmd_vel_stamped``
+(geometry_msgs/TwistStamped) repeats each command stamped with the pose it was computed from,
+for measuring the control path's latency; it costs nothing while nobody subscribes.
 """
 from __future__ import annotations
 
 import sys
 import threading
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Optional, Sequence
 
 import rospy
 import tf2_ros
 import yaml
-from geometry_msgs.msg import PoseStamped, Twist
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
@@ -50,6 +60,10 @@ EXTRA_PARAMS = {
     "zIntegration": "z_integration",
     "hoverRefineTime": "hover_refine_time",
 }
+# computeOnPose: a pose arriving sooner than this fraction of a period after the last step is
+# skipped, so the commands keep to about ``frequency`` (every other pose of a 100 Hz mocap at
+# 50 Hz) without a timer's wait; the tolerance keeps jitter from skipping two poses in a row
+ON_POSE_MIN_GAP = 0.75
 TEXT_PARAMS = ("takeoff_handover", "derivative", "goal_change", "z_integration")
 BOOL_PARAMS = ("tilt_compensation",)
 AXES = (("x", "X"), ("y", "Y"), ("z", "Z"), ("yaw", "Yaw"))
@@ -99,6 +113,15 @@ def emergency_of(values) -> Optional[bool]:
     return None
 
 
+def newest_transform_of(transforms: Sequence[Any], frame: str) -> Optional[Any]:
+    """The last transform whose child is ``frame`` (leading '/' ignored), should a tf message carry several."""
+    found = None
+    for t in transforms:
+        if t.child_frame_id.strip("/") == frame:
+            found = t
+    return found
+
+
 class ControllerNode:
     def __init__(self, params: Dict[str, Any]) -> None:
         # tf2 refuses a leading '/', which the chapter's frames have (/vicon/crazyflie/crazyflie)
@@ -109,21 +132,29 @@ class ControllerNode:
         self.frequency = float(params.get("frequency", 50.0))
         if not 0 < self.frequency <= 1000:
             raise ConfigError("~frequency must be in (0, 1000] Hz, got %r" % self.frequency)
+        self.compute_on_pose = params.get("computeOnPose", False)
+        if not isinstance(self.compute_on_pose, bool):
+            raise ConfigError("~computeOnPose must be true or false, got %r" % (self.compute_on_pose,))
         self.controller = PositionController(config_from_params(params), log=self._log)
         self._lock = threading.Lock()
         self._status = ""
         self._last_lookup_error = ""
         self._no_pose_since: Optional[float] = None
         self._no_pose_said = 0.0
+        self._pose_stamp = rospy.Time()          # stamp of the newest pose the controller has seen
+        self._last_step = -1e9                   # rospy time of the last control step
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(2.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
+        self.stamped_pub = rospy.Publisher("~cmd_vel_stamped", TwistStamped, queue_size=10)
         self.state_pub = rospy.Publisher("~state", String, queue_size=1, latch=True)
         rospy.Subscriber("goal", PoseStamped, self._on_goal, queue_size=1)
         rospy.Subscriber("status", DiagnosticStatus, self._on_server_status, queue_size=5)
         rospy.Service("takeoff", Empty, self._on_takeoff)
         rospy.Service("land", Empty, self._on_land)
         self._publish_status()
+        if self.compute_on_pose:
+            rospy.Subscriber("/tf", TFMessage, self._on_tf, queue_size=10, tcp_nodelay=True)
         self.timer = rospy.Timer(rospy.Duration(1.0 / self.frequency), self._on_timer)
 
     @staticmethod
@@ -140,21 +171,50 @@ class ControllerNode:
                 self._last_lookup_error = text
             return None
         self._last_lookup_error = ""
+        return self._pose_of(tf)
+
+    @staticmethod
+    def _pose_of(tf) -> PoseSample:
         t, q = tf.transform.translation, tf.transform.rotation
         return PoseSample(tf.header.stamp.to_sec(), t.x, t.y, t.z, yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
+    def _on_tf(self, msg: TFMessage) -> None:
+        """computeOnPose: a control step as a pose of our frame arrives (at most ~``frequency``)."""
+        tf = newest_transform_of(msg.transforms, self.frame)
+        if tf is None or rospy.get_time() - self._last_step < ON_POSE_MIN_GAP / self.frequency:
+            return
+        if tf.header.frame_id.strip("/") == self.world_frame:
+            pose = self._pose_of(tf)
+        else:                # our frame hangs below another one: let the buffer chain it to the world
+            pose = self._lookup_pose()
+        self._step(pose, tf.header.stamp)
+
     def _on_timer(self, _event) -> None:
+        if self.compute_on_pose and rospy.get_time() - self._last_step < 1.0 / self.frequency:
+            return           # poses are arriving and each one computed a command
         pose = self._lookup_pose()
-        with self._lock:
-            cmd = self.controller.update(rospy.get_time(), pose)
+        self._step(pose, None if pose is None else rospy.Time.from_sec(pose.stamp))
+
+    def _step(self, pose: Optional[PoseSample], stamp: Optional[rospy.Time]) -> None:
+        """One control cycle; publishes cmd_vel (and ~cmd_vel_stamped when listened to)."""
         msg = Twist()
-        msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z = cmd
-        self._remind_no_pose(rospy.get_time())
         try:
-            self.cmd_pub.publish(msg)
+            with self._lock:
+                now = rospy.get_time()
+                cmd = self.controller.update(now, pose)
+                self._last_step = now
+                if stamp is not None:
+                    self._pose_stamp = stamp
+                msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z = cmd
+                self.cmd_pub.publish(msg)
+                self._remind_no_pose(now)
+                if self.stamped_pub.get_num_connections() > 0:
+                    stamped = TwistStamped(twist=msg)
+                    stamped.header.stamp, stamped.header.frame_id = self._pose_stamp, self.world_frame
+                    self.stamped_pub.publish(stamped)
             self._publish_status()
         except rospy.ROSException:
-            # a timer tick racing the node's shutdown is not an error: rospy closes the topics
+            # a step racing the node's shutdown is not an error: rospy closes the topics
             # before is_shutdown() turns true, so ask whether a shutdown has begun
             if not shutting_down():
                 raise

@@ -74,3 +74,17 @@ def test_node_parameters_are_checked():
         node.config_from_params({"PIDs": pids, "tiltCompensation": "yes"})
     with pytest.raises(node.ConfigError, match="goal_speed must be a positive number"):
         node.config_from_params({"PIDs": pids, "goalSpeed": 0})
+
+
+def test_compute_on_pose_takes_the_newest_transform_of_its_frame():
+    node = pytest.importorskip("crazyflie_controller.controller_node")
+    from geometry_msgs.msg import TransformStamped
+
+    def tf(child, x):
+        t = TransformStamped()
+        t.header.frame_id, t.child_frame_id, t.transform.translation.x = "world", child, x
+        return t
+    msgs = [tf("vicon/cf1/cf1", 1.0), tf("vicon/cf2/cf2", 2.0), tf("/vicon/cf1/cf1", 3.0), tf("vicon/cf3/cf3", 4.0)]
+    assert node.newest_transform_of(msgs, "vicon/cf1/cf1").transform.translation.x == 3.0
+    assert node.newest_transform_of(msgs, "vicon/cf3/cf3").transform.translation.x == 4.0
+    assert node.newest_transform_of(msgs, "vicon/cf9/cf9") is None

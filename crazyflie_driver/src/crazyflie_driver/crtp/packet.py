@@ -34,6 +34,21 @@ def is_null_header(header: int) -> bool:
     return (header & 0xF3) == 0xF3
 
 
+# ports whose packets steer the motors: setpoints, high-level commands, stops and emergency stops
+MOTOR_COMMAND_PORTS = frozenset((PORT_COMMANDER, PORT_GENERIC_SETPOINT, PORT_HIGH_LEVEL, PORT_SUPERVISOR))
+LOCALIZATION_GENERIC_CHANNEL = 1       # carries the emergency stop on firmware without the supervisor port
+
+
+def is_motor_command(raw: bytes) -> bool:
+    """Whether a raw packet (header byte first) steers the motors (see MOTOR_COMMAND_PORTS); such
+    packets may go before polls on a shared dongle."""
+    if not raw:
+        return False
+    port = raw[0] >> 4
+    return port in MOTOR_COMMAND_PORTS or (port == PORT_LOCALIZATION
+                                           and raw[0] & 0x03 == LOCALIZATION_GENERIC_CHANNEL)
+
+
 @dataclass(frozen=True)
 class CRTPPacket:
     """One CRTP packet; ``data`` is the payload after the header byte."""

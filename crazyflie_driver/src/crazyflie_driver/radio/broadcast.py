@@ -36,13 +36,18 @@ def _raw(packet: Packet) -> bytes:
 
 def pair_transfers(packets: Sequence[bytes], two_per_transfer: bool) -> List[bytes]:
     """The USB transfers for ``packets`` in order: consecutive packets of equal length joined in
-    pairs when the dongle splits such transfers, else one packet per transfer."""
+    pairs when the dongle splits such transfers, else one packet per transfer.
+
+    The splitting dongle firmware halves only a transfer longer than one radio packet (32 bytes), so
+    two packets of 16 bytes or less joined would go out as one 32-byte packet: those stay single.
+    """
     if not two_per_transfer:
         return list(packets)
     transfers = []
     i = 0
     while i < len(packets):
-        if i + 1 < len(packets) and len(packets[i]) == len(packets[i + 1]):
+        if (i + 1 < len(packets) and len(packets[i]) == len(packets[i + 1])
+                and 2 * len(packets[i]) > MAX_RADIO_PACKET):
             transfers.append(packets[i] + packets[i + 1])
             i += 2
         else:

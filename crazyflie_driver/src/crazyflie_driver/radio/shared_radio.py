@@ -12,6 +12,7 @@ import threading
 import time
 from typing import Callable, Dict, Optional, TypeVar
 
+from crazyflie_driver.crtp.packet import is_motor_command
 from crazyflie_driver.errors import CrazyflieError, RadioUnplugged
 from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck
 from crazyflie_driver.radio.fair_lock import FairLock
@@ -39,20 +40,23 @@ class SharedRadio:
         self._next_reopen = 0.0
 
     def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
-        """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack."""
+        """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack.
+
+        Setpoints and stops go before the other Crazyflies' waiting polls (see ``is_motor_command``).
+        """
         def trip(radio: Crazyradio) -> RadioAck:
             if channel != radio._channel or datarate != radio._datarate or address != radio._address:
                 radio.configure(channel, datarate, address)
             if not radio.ack_enabled:
                 radio.set_ack_enable(True)   # a broadcast switched acks off
             return radio.send_packet(data)
-        return self.run(trip)
+        return self.run(trip, urgent=is_motor_command(data))
 
-    def run(self, use: Callable[[Crazyradio], _T]) -> _T:
+    def run(self, use: Callable[[Crazyradio], _T], urgent: bool = False) -> _T:
         """``use(radio)`` holding the dongle for one turn of the FIFO (a broadcast burst), with the
-        unplug handling of ``round_trip``."""
+        unplug handling of ``round_trip``; ``urgent`` turns go before the plain ones (FairLock)."""
         lock = self.lock
-        lock.acquire()
+        lock.acquire(urgent=urgent)
         try:
             radio = self.radio
             if radio is None:

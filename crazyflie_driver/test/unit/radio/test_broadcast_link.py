@@ -69,6 +69,13 @@ def test_pairs_only_equal_lengths_in_order():
     assert pair_transfers([], True) == []
 
 
+def test_short_packets_stay_single_because_the_dongle_splits_only_transfers_over_32_bytes():
+    short = [b"\x04" * 16, b"\x05" * 16, b"\x06" * 10, b"\x07" * 10]
+    assert pair_transfers(short, True) == short
+    long_pair = [b"\x08" * 17, b"\x09" * 17]
+    assert pair_transfers(long_pair, True) == [long_pair[0] + long_pair[1]]
+
+
 class RecordingRadio:
     """The Crazyradio interface the shared radio and the broadcast link use, recording transfers."""
 

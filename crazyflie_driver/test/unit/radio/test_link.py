@@ -382,6 +382,37 @@ def test_fair_lock_serves_waiters_in_arrival_order():
     assert not lock.locked()
 
 
+def test_fair_lock_lets_urgent_waiters_go_first_in_their_own_arrival_order():
+    lock = FairLock()
+    order = []
+    lock.acquire()
+    threads = []
+    for k, urgent in enumerate((False, False, True, True)):
+        t = threading.Thread(target=lambda k=k, u=urgent: (lock.acquire(urgent=u), order.append(k), lock.release()))
+        t.start()
+        threads.append(t)
+        while len(lock._waiters) + len(lock._urgent) < k + 1:
+            time.sleep(0.001)
+    lock.release()
+    for t in threads:
+        t.join(5)
+    assert order == [2, 3, 0, 1]
+    assert not lock.locked()
+
+
+def test_setpoints_and_stops_go_first_polls_and_log_traffic_do_not():
+    from crazyflie_driver.crtp.packet import is_motor_command
+    from crazyflie_driver.protocol.commander import emergency_stop_packet, rpyt_packet, stop_packet
+    assert is_motor_command(rpyt_packet(1.0, 2.0, 0.0, 30000).to_bytes())
+    assert is_motor_command(stop_packet(12).to_bytes())
+    assert is_motor_command(emergency_stop_packet(12).to_bytes())
+    assert is_motor_command(emergency_stop_packet(4).to_bytes())     # localization channel 1, older firmware
+    assert not is_motor_command(bytes([0xFF]))                       # null packet (poll)
+    assert not is_motor_command(bytes([0x5C, 0x03]))                 # log port, safelink bits set
+    assert not is_motor_command(bytes([0x20, 0x00, 0x01]))           # param read
+    assert not is_motor_command(b"")
+
+
 def test_safelink_drops_a_downlink_packet_with_the_old_sequence_bit():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
