@@ -32,6 +32,7 @@ from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCraz
 
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
+from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
@@ -285,6 +286,8 @@ class CrazyflieServer:
     def __init__(self, registry: CrazyflieRegistry, add_timeout: float) -> None:
         self.registry = registry
         self.add_timeout = add_timeout
+        # An empty tf_prefix makes every name of that Crazyflie global: only when asked for.
+        self.allow_empty_tf_prefix = bool(rospy.get_param("~allow_empty_tf_prefix", False))
         self._ros: Dict[str, RosCrazyflie] = {}
         self._gone: Dict[str, DiagnosticStatus] = {}    # removed after their worker gave up, until added again
         self._lock = threading.Lock()
@@ -334,11 +337,13 @@ class CrazyflieServer:
 
     def _on_add(self, req) -> AddCrazyflieResponse:
         try:
-            config = config_from_request(req)
+            config = check_config(config_from_request(req), self.allow_empty_tf_prefix)
             key = self.registry.canonical_uri(config.uri)
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)
             raise rospy.ServiceException(str(e))
+        if not config.tf_prefix:
+            rospy.logwarn("add_crazyflie: %s with an empty tf_prefix: its topics and services are global", key)
         taken = [w for w in self.registry.workers()
                  if w.uri == key or self.registry.canonical_uri(w.uri) == key or w.config.tf_prefix == config.tf_prefix]
         if taken:   # refused before any publisher is made, so the served one's topics stay untouched
@@ -356,7 +361,14 @@ class CrazyflieServer:
             msg = "could not add %s: %s" % (key, e)
             rospy.logerr(msg)
             raise rospy.ServiceException(msg)
-        ros.attach(worker)
+        try:
+            ros.attach(worker)
+        except Exception as e:      # a name the master refuses: never a Crazyflie without its emergency service
+            ros.detach()
+            self.registry.remove(key)
+            msg = "could not add %s: its topics or services could not be registered: %s" % (key, e)
+            rospy.logerr(msg)
+            raise rospy.ServiceException(msg)
         with self._lock:
             self._ros[key] = ros
             self._gone.pop(key, None)

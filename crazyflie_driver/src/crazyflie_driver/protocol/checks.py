@@ -2,10 +2,12 @@
 naming the argument, before anything is sent."""
 from __future__ import annotations
 
-import math
 import numbers
 
+from crazyflie_driver.crtp.ctypes import ctype
 from crazyflie_driver.errors import CommandValueError
+
+_FLOAT32 = ctype("float")
 
 #: Largest value of a signed 16-bit wire field (positions in mm: +-32.767 m).
 INT16_MAX = 32767
@@ -14,9 +16,15 @@ GROUP_MASK_MAX = 0xFF
 
 
 def finite(name: str, value) -> float:
-    """``value`` as a float; CommandValueError unless it is a finite real number."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise CommandValueError("%s must be a finite number, got %r" % (name, value))
+    """``value`` as a float; CommandValueError unless it is a finite real number a 32-bit float holds
+    (every such value goes into a float32 field or a narrower one)."""
+    try:
+        ok = not isinstance(value, bool) and isinstance(value, numbers.Real) and _FLOAT32.holds(float(value))
+    except OverflowError:
+        ok = False
+    if not ok:
+        raise CommandValueError("%s must be a finite number within the 32-bit float range (|x| <= %.4g), got %r"
+                                % (name, _FLOAT32.high, value))
     return float(value)
 
 

@@ -9,9 +9,11 @@ Crazyflie's log TOC, so the server checks those and its error comes back through
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, List, Mapping, Tuple
 
 from crazyflie_driver.errors import UriError
+from crazyflie_driver.server.setpoint import check_trim
 from crazyflie_driver.server.log_plan import LogBlockSpec, validate_log_block_specs
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.server.worker import WorkerConfig
@@ -19,6 +21,49 @@ from crazyflie_driver.server.worker import WorkerConfig
 
 class AddConfigError(ValueError):
     """A crazyflie_add parameter that is missing or wrong; the message names it."""
+
+
+#: Longest tf_prefix we accept (our choice: it prefixes every topic, service and frame id).
+TF_PREFIX_MAX_CHARS = 64
+
+
+def check_tf_prefix(tf_prefix: Any, allow_empty: bool = False) -> str:
+    """``tf_prefix`` as a namespace by ROS's name rules (without leading/trailing ``/``).
+
+    Each ``/``-separated part starts with an ASCII letter and holds only ASCII letters, digits and
+    ``_``; no ``~``, ``..``, ``-``, spaces or empty parts. Empty (every name global) only with
+    ``allow_empty``. AddConfigError naming the rule otherwise.
+    """
+    if not isinstance(tf_prefix, str):
+        raise AddConfigError("tf_prefix must be a string, got %r" % (tf_prefix,))
+    name = tf_prefix.strip().strip("/")
+    if not name:
+        if allow_empty:
+            return ""
+        raise AddConfigError("tf_prefix is empty: every topic and service of the Crazyflie would be global "
+                             "(set crazyflie_server's ~allow_empty_tf_prefix to allow it)")
+    if len(name) > TF_PREFIX_MAX_CHARS:
+        raise AddConfigError("tf_prefix %r has %d characters, at most %d are accepted"
+                             % (name, len(name), TF_PREFIX_MAX_CHARS))
+    for part in name.split("/"):
+        if not part or not (part[0].isascii() and part[0].isalpha()) or \
+                not all(c.isascii() and (c.isalnum() or c == "_") for c in part):
+            raise AddConfigError("tf_prefix %r is not a valid ROS namespace: each '/'-separated part must start "
+                                 "with a letter and hold only letters, digits and '_' (part %r)" % (name, part))
+    return name
+
+
+def check_config(config: WorkerConfig, allow_empty_tf_prefix: bool = False) -> WorkerConfig:
+    """An add request checked where it enters the server: tf_prefix, trims, log blocks.
+
+    Returns it with the tf_prefix normalised; AddConfigError naming the first fault."""
+    tf_prefix = check_tf_prefix(config.tf_prefix, allow_empty_tf_prefix)
+    try:
+        trims = [check_trim(name, getattr(config, name)) for name in ("roll_trim", "pitch_trim")]
+        validate_log_block_specs(config.log_blocks)
+    except ValueError as e:
+        raise AddConfigError(str(e)) from None
+    return replace(config, tf_prefix=tf_prefix, roll_trim=trims[0], pitch_trim=trims[1])
 
 
 def _as_bool(name: str, value: Any) -> bool:
@@ -84,13 +129,11 @@ def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
         parse_uri(uri)
     except UriError as e:
         raise AddConfigError("parameter ~uri: %s" % e) from None
-    tf_prefix = params.get("tf_prefix", "")
-    if not isinstance(tf_prefix, str):
-        raise AddConfigError("parameter ~tf_prefix must be a string, got %r" % (tf_prefix,))
-    tf_prefix = tf_prefix.strip().strip("/")
-    if tf_prefix and not all(c.isalnum() or c in "_/" for c in tf_prefix):
-        raise AddConfigError("parameter ~tf_prefix %r is not a valid ROS name" % (tf_prefix,))
-    return WorkerConfig(
+    try:
+        tf_prefix = check_tf_prefix(params.get("tf_prefix", ""), allow_empty=True)   # the server decides
+    except AddConfigError as e:
+        raise AddConfigError("parameter ~%s" % e) from None
+    config = WorkerConfig(
         uri=uri,
         tf_prefix=tf_prefix,
         roll_trim=_as_float("roll_trim", params.get("roll_trim", 0.0)),
@@ -99,3 +142,4 @@ def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
         enable_parameters=_as_bool("enable_parameters", params.get("enable_parameters", True)),
         log_blocks=log_blocks_from_params(params),
     )
+    return check_config(config, allow_empty_tf_prefix=True)

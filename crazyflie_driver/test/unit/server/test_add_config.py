@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.server.add_config import AddConfigError, config_from_params
+from crazyflie_driver.server.add_config import AddConfigError, check_config, check_tf_prefix, config_from_params
 from crazyflie_driver.server.log_plan import LogBlockSpec
+from crazyflie_driver.server.worker import WorkerConfig
 
 
 def test_defaults_like_the_original():
@@ -46,3 +47,31 @@ def test_custom_log_blocks_period_in_ms():
 def test_errors_name_the_parameter(params, message):
     with pytest.raises(AddConfigError, match=message.replace("~", "~").replace(".", r"\.")):
         config_from_params(params)
+
+
+@pytest.mark.parametrize("prefix", ["bad prefix!", "a-b", "~priv", "ns/../x", "\u00fc", "x" * 65, "1cf", "a//b",
+                                    "cf 1", "cf.1"])
+def test_tf_prefixes_ros_refuses_are_refused_by_name(prefix):
+    with pytest.raises(AddConfigError, match="tf_prefix"):
+        check_tf_prefix(prefix)
+    with pytest.raises(AddConfigError, match="tf_prefix"):
+        check_config(WorkerConfig(uri="radio://0/80/2M/E7E7E7E701", tf_prefix=prefix))
+
+
+@pytest.mark.parametrize("prefix, name", [("cf1", "cf1"), ("/swarm/cf_2/", "swarm/cf_2"), ("x" * 64, "x" * 64)])
+def test_valid_tf_prefixes_are_normalised(prefix, name):
+    assert check_tf_prefix(prefix) == name
+
+
+def test_empty_tf_prefix_only_when_allowed():
+    with pytest.raises(AddConfigError, match="allow_empty_tf_prefix"):
+        check_tf_prefix(" / ")
+    assert check_tf_prefix("", allow_empty=True) == ""
+
+
+@pytest.mark.parametrize("field, value", [("roll_trim", float("nan")), ("pitch_trim", float("inf")),
+                                          ("roll_trim", 1e9), ("pitch_trim", -1e39)])
+def test_bad_trims_refuse_the_add(field, value):
+    config = WorkerConfig(uri="radio://0/80/2M/E7E7E7E701", tf_prefix="cf1", **{field: value})
+    with pytest.raises(AddConfigError, match=field):
+        check_config(config)
