@@ -1,7 +1,8 @@
 """The world server: one process owning the simulated world that every tool and node shares.
 
 ``WorldServer`` owns a world (``sim.world.World``), the ``LocalMedium`` and one ``SimulatedCrazyflie`` per
-vehicle; it serves ``RemoteMedium`` clients on loopback TCP (one thread per connection), runs the
+vehicle; it serves ``RemoteMedium`` clients on loopback TCP only, without authentication (one thread per
+connection, freed when the client hangs up), runs the
 firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
 
 CLI: ``rosrun crazyflie_driver crazyflie_world_server --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``.
@@ -56,8 +57,8 @@ class WorldServer:
         self._crazyflies: Tuple[SimulatedCrazyflie, ...] = ()     # replaced whole: the ticking thread reads it
         self._lock = threading.RLock()
         self._listener: Optional[socket.socket] = None
-        self._clients: List[socket.socket] = []
-        self._threads: List[threading.Thread] = []
+        self._clients: Dict[socket.socket, threading.Thread] = {}     # connected clients and their threads
+        self._threads: List[threading.Thread] = []                    # the accept thread
         self._running = threading.Event()
         self._udp_next = 0
         world.add_tick_listener(self._tick, FIRMWARE_TICK_S)
@@ -205,11 +206,10 @@ class WorldServer:
                 break
             client.settimeout(None)
             client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            with self._lock:
-                self._clients.append(client)
             t = threading.Thread(target=self._serve, args=(client,), name="world-server-client", daemon=True)
+            with self._lock:
+                self._clients[client] = t         # forgotten again when the client goes (_serve's finally)
             t.start()
-            self._threads.append(t)
 
     def _serve(self, client: socket.socket) -> None:
         conn = framing.Connection(client)
@@ -242,8 +242,7 @@ class WorldServer:
         finally:
             conn.close()
             with self._lock:
-                if client in self._clients:
-                    self._clients.remove(client)
+                self._clients.pop(client, None)
 
     def stop(self) -> None:
         self._running.clear()
@@ -253,7 +252,8 @@ class WorldServer:
             except OSError:
                 pass
         with self._lock:
-            for c in self._clients:
+            clients = dict(self._clients)
+            for c in clients:
                 try:
                     c.shutdown(socket.SHUT_RDWR)
                 except OSError:
@@ -263,7 +263,7 @@ class WorldServer:
             for entry in self._entries.values():
                 if entry.udp is not None:
                     entry.udp.stop()
-        for t in self._threads:
+        for t in self._threads + list(clients.values()):
             if t is not threading.current_thread():
                 t.join(timeout=2.0)
         self._threads.clear()
