@@ -85,6 +85,7 @@ class RosCrazyflie(WorkerListener):
         self._status_pub: Optional[rospy.Publisher] = None
         self._status_lock = threading.Lock()
         self._last_status: Optional[CrazyflieStatus] = None
+        self._said_ignored = False
         self._onboard: Optional[RosOnboardCommands] = None
 
     # -- after the Crazyflie answered --------------------------------------------------------------
@@ -158,9 +159,10 @@ class RosCrazyflie(WorkerListener):
         if setpoint.notes:
             rospy.logwarn_throttle(1.0, "%s: cmd_vel held to the firmware's limits: %s"
                                    % (self.config.uri, "; ".join(setpoint.notes)))
-        if not self.worker.set_setpoint(setpoint):
-            rospy.logwarn_throttle(5.0, "%s: cmd_vel ignored after emergency (remove and add the "
-                                        "Crazyflie again to fly)" % self.config.uri)
+        if not self.worker.set_setpoint(setpoint) and not self._said_ignored:
+            self._said_ignored = True       # once: the status topic keeps saying it
+            rospy.logwarn("%s: cmd_vel ignored after emergency (remove and add the Crazyflie again to fly)"
+                          % self.config.uri)
 
     def _on_emergency(self, _req) -> EmptyResponse:
         self.worker.emergency()
@@ -198,8 +200,9 @@ class RosCrazyflie(WorkerListener):
         for group, entries in groups.items():        # one call per group, not per parameter
             rospy.set_param("%s/%s" % (self.ns, group), entries)
 
-    def on_log(self, topic: str, onboard_timestamp_ms: int, values: List[float]) -> None:
-        stamp = rospy.Time.now()
+    def on_log_stamped(self, topic: str, onboard_timestamp_ms: int, values: List[float], age_s: float) -> None:
+        # stamped when the Crazyflie sampled it: arrival time minus its age (see server.log_timing)
+        stamp = rospy.Time.now() - rospy.Duration.from_sec(max(0.0, age_s))
         pub = self._pubs.get(topic)
         custom = self._custom
         if topic == IMU_TOPIC and pub:
@@ -241,6 +244,9 @@ class RosCrazyflie(WorkerListener):
         self.publish_status()       # the worker logged it through the forwarded logger
 
     def on_link_restored(self) -> None:
+        self.publish_status()
+
+    def on_log_late(self, message: str, late: bool) -> None:
         self.publish_status()
 
     def on_emergency(self) -> None:
@@ -313,7 +319,7 @@ class CrazyflieServer:
                 with self._lock:
                     served = list(self._ros.values())
                 for ros in served:
-                    ros.publish_status()    # changes the worker did not announce (e.g. quality)
+                    ros.publish_status(force=True)      # its figures (ages, rates) change all the time
                 publish_unless_shutting_down(self._diag_pub, self.diagnostics())
             except Exception as e:  # never let bookkeeping end the node
                 rospy.logerr("crazyflie_server: diagnostics failed: %r", e)

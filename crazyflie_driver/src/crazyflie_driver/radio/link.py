@@ -23,6 +23,10 @@ _log = logging.getLogger(__name__)
 
 SAFELINK_ON = b"\xff\x05\x01"
 NULL_PACKET = b"\xff"
+#: Packets a Crazyflie's transmit queue can hold ahead of an answer (the simulated firmware's CRTP
+#: TX queue; see docs). A request whose answer is queued behind log data waits while packets keep
+#: arriving, until this many drained after it.
+TX_QUEUE_PACKETS = 200
 # Every one-byte packet (a header alone, e.g. a null packet with safelink bits) preallocated.
 _ONE_BYTE = tuple(bytes((h,)) for h in range(256))
 
@@ -53,6 +57,7 @@ class RadioLink:
         self.uri: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
         self.manager = manager if manager is not None else default_manager()
         self.stats = LinkStatistics(lost_threshold)
+        self.downlink_packets = 0       # non-empty downlink packets received (progress of a request)
         self.use_safelink = safelink
         self.safelink_attempts = safelink_attempts
         self.safelink_resends = safelink_resends
@@ -195,6 +200,7 @@ class RadioLink:
             if len(payload) >= 3 and payload[1] == 0x01:
                 self.stats.rssi = payload[2]
             return
+        self.downlink_packets += 1
         port = header >> 4
         subs = self._subs.get(port)
         waiter = self._waiter
@@ -247,7 +253,10 @@ class RadioLink:
 
         Without safelink the packet is re-sent every ``resend_interval`` s (the reply may have been
         lost); with safelink only while it is unacked. The matching packet also reaches subscribers.
-        Raises LinkTimeout naming the URI and ``what``.
+        ``timeout`` is the longest silence: while other downlink packets keep arriving (the answer
+        is queued behind log data in the Crazyflie's transmit queue) the wait goes on, until up to
+        twice ``TX_QUEUE_PACKETS`` have drained, so the time follows the link's round-trip time and
+        the queue's depth. Raises LinkTimeout naming the URI and ``what``.
         """
         if timeout <= 0:
             raise ValueError("timeout must be > 0, got %r" % (timeout,))
@@ -256,17 +265,19 @@ class RadioLink:
             self._waiter = waiter
             try:
                 start = time.monotonic()
-                deadline = start + timeout
+                first_packet = self.downlink_packets
+                seen, last_data = first_packet, start
                 acked = self.send(packet)
                 next_resend = start + resend_interval
                 while waiter.result is None:
                     if waiter.error is not None:
                         raise waiter.error
                     now = time.monotonic()
-                    if now >= deadline:
-                        raise LinkTimeout("%s: no answer to %s within %.2f s (ack ratio %.0f %%)"
-                                          % (self.uri, what or repr(packet), timeout,
-                                             100.0 * self.stats.ack_ratio))
+                    if self.downlink_packets != seen:
+                        seen, last_data = self.downlink_packets, now
+                    drained = seen - first_packet
+                    if now - last_data >= timeout or (now - start >= timeout and drained > 2 * TX_QUEUE_PACKETS):
+                        raise LinkTimeout(self._no_answer(what or repr(packet), now - start, drained))
                     if self.safelink:
                         resend = not acked
                     else:
@@ -281,6 +292,16 @@ class RadioLink:
                 return waiter.result
             finally:
                 self._waiter = None
+
+    def _no_answer(self, what: str, waited: float, drained: int) -> str:
+        ratio = self.stats.ack_ratio
+        text = "%s: no answer to %s within %.2f s (ack ratio %.0f %%, %d other packets received meanwhile)" % (
+            self.uri, what, waited, 100.0 * ratio, drained)
+        if ratio >= 0.9:
+            text += ("; the Crazyflie acknowledges every packet but does not answer this request: is another "
+                     "program (crazyflie_server, a tool) talking to it at the same time, through this or another "
+                     "Crazyradio?")
+        return text
 
     def __repr__(self) -> str:
         return "<RadioLink %s %s>" % (self.uri, "safelink" if self.safelink else

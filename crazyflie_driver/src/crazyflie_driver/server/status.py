@@ -34,6 +34,8 @@ def worker_status(worker: Any) -> CrazyflieStatus:
         level, message = ERROR, "link lost: retrying"
     elif state in (WorkerState.CONNECTING, WorkerState.STOPPED):
         level, message = STALE, state
+    elif worker.log_late:
+        level, message = WARN, "running; log data arrives late (%d log packets lost)" % worker.lost_log_packets()
     elif worker.restarts:
         level, message = WARN, "running; worker restarted %d time(s), last after: %s" % (
             worker.restarts, worker.last_unexpected_error)
@@ -49,5 +51,9 @@ def worker_status(worker: Any) -> CrazyflieStatus:
         ("restarts", str(worker.restarts)),
         ("last_error", worker.last_unexpected_error),
         ("listener_errors", str(worker.listener_errors)),
+        ("log_packets_lost", str(worker.lost_log_packets())),
     )
+    for topic, t in sorted(worker.topic_timing.items()):
+        values += (("%s age_s" % topic, "%.3f" % t.age), ("%s rate_hz" % topic, "%.1f" % t.rate),
+                   ("%s lost" % topic, str(t.lost)))
     return CrazyflieStatus(level, message, values)

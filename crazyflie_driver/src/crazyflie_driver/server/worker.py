@@ -37,6 +37,7 @@ from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUA
 from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
                        PlannedBlock, log_packet_rate, plan_log_blocks)
 from crazyflie_driver.protocol.param import param_value
+from crazyflie_driver.server.log_timing import LATE_DATA_WARNING_S, OnboardClock, TopicTiming
 from crazyflie_driver.server.poll_pacer import PollPacer
 from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
 from crazyflie_driver.protocol.toc import toc_types
@@ -69,6 +70,13 @@ class WorkerListener:
 
     def on_log(self, topic: str, onboard_timestamp_ms: int, values: List[float]) -> None:
         """One packet's values for a fixed topic (``imu``, ``battery``...) or a custom topic."""
+
+    def on_log_stamped(self, topic: str, onboard_timestamp_ms: int, values: List[float], age_s: float) -> None:
+        """:meth:`on_log` with the packet's age on arrival (s, see ``log_timing``). Default: ``on_log``."""
+        self.on_log(topic, onboard_timestamp_ms, values)
+
+    def on_log_late(self, message: str, late: bool) -> None:
+        """Log data started (``late``) or stopped arriving later than ``LATE_DATA_WARNING_S``."""
 
     def on_rssi(self, rssi: float) -> None:
         """Radio signal strength, -dBm, from the acks or the ``radio.rssi`` log variable."""
@@ -128,6 +136,8 @@ class CrazyflieWorker:
         self.last_unexpected_error = ""          # "Type: message" of the latest one
         self.listener_errors = 0                 # log packets a listener failed to handle
         self.param_values: Dict[str, Any] = {}   # as read after connecting and written since
+        self.topic_timing: Dict[str, TopicTiming] = {}   # per log topic: age, rate, lost packets
+        self.log_late = False                    # log data currently arrives late
 
         self._cond = threading.Condition()
         self._pending: Optional[Setpoint] = None
@@ -146,6 +156,9 @@ class CrazyflieWorker:
         self._pacer = PollPacer(keepalive_period, now=clock())
         self._log_plan: List[PlannedBlock] = []
         self._error_times: List[float] = []
+        self._onboard_clock = OnboardClock()
+        self._late_warned_at = -1e9
+        self._lost_at_late_warning = 0
         self._errors_seen: Dict[Tuple[str, str], int] = {}   # (type, where) -> count, for "traceback once"
 
     # ------------------------------------------------------------------ lifecycle
@@ -402,6 +415,8 @@ class CrazyflieWorker:
     def _start_log_blocks(self) -> None:
         self._blocks = []
         self.log_topics = []
+        self._onboard_clock.reset()
+        self.topic_timing = {t: TopicTiming(p.period_ms) for p in self._log_plan for t, _, _ in p.topics}
         for planned in self._log_plan:
             callback = self._make_log_callback(planned)
             try:
@@ -419,21 +434,67 @@ class CrazyflieWorker:
 
         def on_packet(onboard_timestamp_ms: int, values: List[float]) -> None:
             self._downlink_packets += 1
+            onboard_s = self._onboard_clock.onboard_seconds(onboard_timestamp_ms)
+            arrived = self._clock()
+            age = self._onboard_clock.age(onboard_s, arrived)
             for topic, start, stop in slices:
                 part = list(values[start:stop])
                 if len(part) != stop - start:
                     continue        # a truncated packet: never publish a partial message
+                timing = self.topic_timing.get(topic)
+                if timing is not None:
+                    timing.record(onboard_s, age, arrived)
                 try:
                     if topic == RADIO_RSSI_TOPIC:
                         listener.on_rssi(float(part[0]))
                     else:
-                        listener.on_log(topic, onboard_timestamp_ms, part)
+                        listener.on_log_stamped(topic, onboard_timestamp_ms, part, age)
                 except Exception:   # one bad message must not stop the setpoint stream
                     self.listener_errors += 1
                     if self.listener_errors == 1:
                         LOG.exception("%s: publishing %s failed (counted in the status from now on)",
                                       self.uri, topic)
+            self._check_late(age)
         return on_packet
+
+    def lost_log_packets(self) -> int:
+        """Log packets the onboard timestamps say never arrived (one count per block)."""
+        seen, lost = set(), 0
+        for planned in self._log_plan:
+            topic = planned.topics[0][0]
+            if topic in self.topic_timing and topic not in seen:
+                seen.add(topic)
+                lost += self.topic_timing[topic].lost
+        return lost
+
+    def _check_late(self, age: float) -> None:
+        """Say once when log data starts arriving late (again every 10 s while it stays late, with
+        the packets lost meanwhile), and once when it is on time again."""
+        now = self._clock()
+        if age > LATE_DATA_WARNING_S:
+            if self.log_late and now - self._late_warned_at < 10.0:
+                return
+            lost = self.lost_log_packets()
+            new_lost = lost - self._lost_at_late_warning
+            self._lost_at_late_warning = lost
+            self.log_late, self._late_warned_at = True, now
+            text = ("%s: log data arrives %.1f s late%s: the radio carries fewer packets than its log blocks "
+                    "send (fewer Crazyflies per Crazyradio, longer log periods or enable_logging false)" % (
+                        self.uri, age, "; %d log packets lost: the Crazyflie's transmit queue overflows"
+                        % new_lost if new_lost else ""))
+            LOG.warning(text)
+            self._tell_late(text, True)
+        elif self.log_late and age < LATE_DATA_WARNING_S / 2:
+            self.log_late = False
+            text = "%s: log data on time again (%.2f s old on arrival)" % (self.uri, age)
+            LOG.info(text)
+            self._tell_late(text, False)
+
+    def _tell_late(self, text: str, late: bool) -> None:
+        try:
+            self.listener.on_log_late(text, late)
+        except Exception:
+            LOG.exception("%s: late-data listener failed", self.uri)
 
     def _release_thrust_lock(self) -> None:
         """Zero setpoints until one is acked (the firmware unlocks thrust on a zero-thrust packet)."""
@@ -470,6 +531,8 @@ class CrazyflieWorker:
                 next_due = now + self._pacer.after_round_trip(self._downlink_packets - downlink_before, now)
             if acked is not None:
                 self._after_round_trip(acked, now)
+                if acked and self._downlink_packets == downlink_before:
+                    self._onboard_clock.drained()
 
     def _round_trip(self, setpoint: Optional[Setpoint]) -> Optional[bool]:
         """One packet to the Crazyflie. Returns acked, or None when the dongle failed."""

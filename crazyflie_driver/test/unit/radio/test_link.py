@@ -186,6 +186,55 @@ def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink():
     assert peer2.received == [b"\x20\x03"]               # safelink: sent (and delivered) once
 
 
+class SlowAir(Air):
+    """Each radio round trip takes ``delay`` s (a busy shared dongle)."""
+
+    def __init__(self, delay, *peers):
+        super().__init__(*peers)
+        self.delay = delay
+
+    def __call__(self, tx):
+        time.sleep(self.delay)
+        return super().__call__(tx)
+
+
+LOG_DATA = bytes([0x52, 0x01, 0, 0, 0]) + b"\x00" * 4      # port 5 channel 2: a log packet
+
+
+def test_an_answer_queued_behind_log_data_is_waited_for_while_packets_keep_coming():
+    peer = NrfPeer(safelink_capable=False)
+    medium = ScriptedMedium(SlowAir(0.002, peer))
+    manager = RadioManager(FakeUsbBackend(medium, timing=DongleTiming.instant()))
+    link = open_link(URI, manager)
+    answered = []
+
+    def on_packet(data):
+        if (data[0] & 0xF0) == 0x20 and data[1:] == b"\x03" and not answered:   # the answer joins the queue behind 150 log packets
+            answered.append(1)
+            peer.queue.extend([LOG_DATA] * 150 + [bytes([0x20, 0x03, 0x2A])])
+    peer.on_packet = on_packet
+    t0 = time.monotonic()
+    reply = link.request(CRTPPacket(2, 0, b"\x03"), lambda p: p.port == 2 and p.data[:1] == b"\x03",
+                         timeout=0.1, resend_interval=10.0, what="param TOC info")
+    assert reply.data == b"\x03\x2a"
+    assert time.monotonic() - t0 > 0.2          # far beyond the 0.1 s of silence allowed
+    assert link.downlink_packets >= 151
+
+
+def test_a_crazyflie_that_streams_but_never_answers_times_out_after_the_queue_drained():
+    peer = NrfPeer(safelink_capable=False)
+    medium, backend, manager = setup(peer)
+    link = open_link(URI, manager)
+    peer.on_packet = lambda data: peer.queue.extend([LOG_DATA] * 5000)
+    with pytest.raises(LinkTimeout) as info:
+        link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.05, resend_interval=10.0,
+                     what="param TOC info")
+    text = str(info.value)
+    assert "param TOC info" in text and "other packets received" in text
+    assert "another program" in text            # every packet acked: the likely cause is named
+    assert link.downlink_packets > 2 * 200
+
+
 def test_request_match_error_is_raised_in_the_requesting_thread():
     peer = NrfPeer()
     medium, backend, manager = setup(peer)

@@ -342,5 +342,42 @@ def test_update_params_refuses_non_finite_and_out_of_range_values_without_writin
         assert cf.params.values == {"ring.headlightEnable": 0, "pid_rate.roll_kp": 250.0, "flightmode.althold": 0}
         assert "pid_rate.roll_kp (float): nan is not a finite number" in " ".join(errors)
         assert "out of range 0..255" in " ".join(errors)
+
+class StampRecorder(Recorder):
+    def __init__(self):
+        super().__init__()
+        self.ages, self.late = [], []
+
+    def on_log_stamped(self, topic, ts, values, age_s):
+        self.ages.append((topic, age_s))
+        super().on_log_stamped(topic, ts, values, age_s)
+
+    def on_log_late(self, message, late):
+        self.late.append((message, late))
+
+
+def test_late_log_data_is_measured_from_onboard_stamps_and_said_once(caplog):
+    rec = StampRecorder()
+    w, cf, _ = started(listener=rec)
+    try:
+        imu = next(b for b in cf.log.blocks if b.period_ms == 10)
+        t0 = time.monotonic()
+        cf.downlink.append((imu, 5000, [0.0] * 6))    # on time: the reference
+        assert wait_for(lambda: rec.ages)
+        time.sleep(0.7)
+        # queued behind others: sampled 90 and 100 ms later, fetched ~0.7 s later; the 8 packets
+        # between the first two were lost (the transmit queue overflowed)
+        cf.downlink.extend([(imu, 5090, [0.0] * 6), (imu, 5100, [0.0] * 6)])
+        assert wait_for(lambda: len(rec.ages) == 3)
+        late_age = time.monotonic() - t0 - 0.1
+        assert rec.ages[-1][0] == "imu" and rec.ages[-1][1] == pytest.approx(late_age, abs=0.05)
+        assert [late for _, late in rec.late] == [True]       # said once for both
+        assert "late" in rec.late[0][0] and "8 log packets lost" in rec.late[0][0]
+        assert w.topic_timing["imu"].lost == 8 and w.log_late
+        # fresh data again (the queue drained): on time, said once
+        cf.downlink.append((imu, int((time.monotonic() - t0) * 1000) + 5000, [0.0] * 6))
+        assert wait_for(lambda: len(rec.late) == 2)
+        assert [late for _, late in rec.late] == [True, False] and not w.log_late
+        assert len([r for r in caplog.records if "arrives" in r.getMessage()]) == 1
     finally:
         w.stop()

@@ -1,0 +1,103 @@
+#!/usr/bin/env python3
+"""Twelve Crazyflies on two fake dongles, all added at once: every add succeeds, and what the
+server says about its data (rates, ages, the Crazyflies' transmit queues) is true."""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticStatus
+from rosgraph_msgs.msg import Log
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float32
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import TopicRecorder, rates_per_world_second, wait_until, world  # noqa: E402
+
+NAMES = ["cf%d" % i for i in range(1, 13)]
+
+
+class AddResults:
+    """What each crazyflie_add said on /rosout (they are anonymous nodes: matched by text)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.added, self.failed = set(), []
+        self._sub = rospy.Subscriber("/rosout", Log, self._on_log, queue_size=1000)
+
+    def _on_log(self, msg: Log) -> None:
+        if not msg.name.startswith("/crazyflie_add") and "/crazyflie_add" not in msg.name:
+            return
+        with self._lock:
+            if "added as" in msg.msg:
+                self.added.add(msg.msg.split("'")[1])
+            elif msg.level >= Log.ERROR:
+                self.failed.append(msg.msg)
+
+
+class DriverLoad(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("driver_load_test")
+        cls.world = world(rospy.get_param("~sim_address"))
+        cls.adds = AddResults()
+        cls.imu = {n: TopicRecorder("/%s/imu" % n, Imu) for n in NAMES}
+        cls.battery = {n: TopicRecorder("/%s/battery" % n, Float32) for n in NAMES}
+        cls.status = {n: TopicRecorder("/%s/status" % n, DiagnosticStatus) for n in NAMES}
+
+    def test_a_every_add_succeeds(self):
+        t0 = time.monotonic()
+        done = wait_until(lambda: len(self.adds.added) + len(self.adds.failed) >= len(NAMES), 90.0)
+        print("adds: %d ok, %d failed in %.1f s; failures: %s" % (
+            len(self.adds.added), len(self.adds.failed), time.monotonic() - t0, self.adds.failed))
+        self.assertTrue(done, (sorted(self.adds.added), self.adds.failed))
+        self.assertEqual(self.adds.failed, [])
+        self.assertEqual(sorted(self.adds.added), sorted(NAMES))
+
+    def test_b_rates_and_ages_are_reported_honestly(self):
+        """Six Crazyflies per dongle ask for more log packets than a Crazyradio carries: the
+        Crazyflies' transmit queues fill up. Whatever each one gets, its status says the rate it
+        gets (per onboard second), how old its data is (checked against the firmware's queue: a
+        full queue of N packets drained at R packets/s holds data N/R s old), and warns."""
+        self.assertTrue(wait_until(lambda: all(r.count() > 0 for r in self.imu.values()), 20.0))
+        time.sleep(3.0)         # let the queues reach their steady state
+        t_status = time.monotonic()
+        imu = rates_per_world_second(self.imu, self.world, 3.0)
+        print("imu per world second: %s" % {n: round(v, 1) for n, v in imu.items()})
+        self.assertTrue(wait_until(lambda: all(any(t >= t_status for t, _ in r.messages)
+                                               for r in self.status.values()), 5.0))
+        for name in NAMES:
+            fw = self.world.crazyflie_state(self.uri_of(name))
+            st = self.status[name].latest()
+            values = {kv.key: kv.value for kv in st.values}
+            # packets the firmware's log blocks produce per second, and what reaches the host
+            produced = sum(1000.0 / b["period_ms"] for b in fw["log_blocks"].values() if b["running"])
+            drained = imu[name] * produced / 100.0
+            reported_rate, reported_age = float(values["imu rate_hz"]), float(values["imu age_s"])
+            print("%s: imu %.1f/s (reported %.1f), tx queue %d (dropped %d), age reported %.2f s, "
+                  "queue/drain %.2f s; status %d %r" % (
+                      name, imu[name], reported_rate, fw["tx_pending"], fw["tx_dropped"], reported_age,
+                      fw["tx_pending"] / drained if drained else float("inf"), st.level, st.message))
+            self.assertGreater(imu[name], 0.0)
+            self.assertAlmostEqual(reported_rate, imu[name], delta=0.25 * imu[name] + 2.0)
+            if fw["tx_pending"] >= 100:         # a long queue: the data is old, and the status says so
+                expected_age = fw["tx_pending"] / drained
+                self.assertGreater(reported_age, 0.6 * expected_age, (name, values))
+                self.assertLess(reported_age, 1.6 * expected_age + 0.2, (name, values))
+                self.assertEqual(st.level, DiagnosticStatus.WARN, st.message)
+                self.assertIn("late", st.message)
+            elif fw["tx_pending"] <= 10:
+                self.assertLess(reported_age, 0.5, (name, values))
+
+    def uri_of(self, name: str) -> str:
+        i = int(name[2:])
+        return "radio://%d/%d/2M/E7E7E7E7%02X" % (0 if i <= 6 else 1, 80 if i <= 6 else 90, i)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("crazyflie_driver", "driver_load", DriverLoad, sys.argv)
