@@ -342,6 +342,9 @@ def test_update_params_refuses_non_finite_and_out_of_range_values_without_writin
         assert cf.params.values == {"ring.headlightEnable": 0, "pid_rate.roll_kp": 250.0, "flightmode.althold": 0}
         assert "pid_rate.roll_kp (float): nan is not a finite number" in " ".join(errors)
         assert "out of range 0..255" in " ".join(errors)
+    finally:
+        w.stop()
+
 
 class StampRecorder(Recorder):
     def __init__(self):
