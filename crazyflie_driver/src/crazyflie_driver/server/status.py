@@ -35,7 +35,8 @@ def worker_status(worker: Any) -> CrazyflieStatus:
     elif state in (WorkerState.CONNECTING, WorkerState.STOPPED):
         level, message = STALE, state
     elif worker.log_late:
-        level, message = WARN, "running; log data arrives late (%d log packets seen lost so far)" % worker.lost_log_packets()
+        level, message = WARN, "running; log data arrives late (%d log packets seen lost so far)" % (
+            worker.lost_log_packets())
     elif worker.restarts:
         level, message = WARN, "running; worker restarted %d time(s), last after: %s" % (
             worker.restarts, worker.last_unexpected_error)

@@ -209,7 +209,8 @@ def test_an_answer_queued_behind_log_data_is_waited_for_while_packets_keep_comin
     answered = []
 
     def on_packet(data):
-        if (data[0] & 0xF0) == 0x20 and data[1:] == b"\x03" and not answered:   # the answer joins the queue behind 150 log packets
+        # the answer joins the queue behind 150 log packets
+        if (data[0] & 0xF0) == 0x20 and data[1:] == b"\x03" and not answered:
             answered.append(1)
             peer.queue.extend([LOG_DATA] * 150 + [bytes([0x20, 0x03, 0x2A])])
     peer.on_packet = on_packet
