@@ -165,18 +165,31 @@ def test_request_returns_the_matching_reply():
     assert peer.received == [b"\xd1\x00"]
 
 
-def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink():
+class SteppingClock:
+    """A monotonic clock that advances ``step`` s per reading: the request loop's schedule, free of the host's load."""
+
+    def __init__(self, step: float):
+        self.now, self.step = 0.0, step
+
+    def monotonic(self) -> float:
+        self.now += self.step
+        return self.now
+
+
+def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink(monkeypatch):
+    import crazyflie_driver.radio.link as link_module
+    clock = SteppingClock(0.001)
+    monkeypatch.setattr(link_module, "time", clock)
     peer = NrfPeer(safelink_capable=False)
     medium, backend, manager = setup(peer)
     link = open_link(URI, manager)
-    t0 = time.monotonic()
     with pytest.raises(LinkTimeout) as info:
         link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.25, resend_interval=0.05,
                      what="param TOC info")
-    assert time.monotonic() - t0 < 1.0
     assert "radio://0/80/2M/E7E7E7E701" in str(info.value) and "param TOC info" in str(info.value)
+    assert "within 0.25 s" in str(info.value)            # gave up after 0.25 s of silence, on the clock it reads
     sends = sum(1 for r in peer.received if r == b"\x20\x03")
-    assert 4 <= sends <= 6                               # first send + one per 50 ms
+    assert sends == 5                                    # first send + one per 50 ms: 0.05, 0.10, 0.15, 0.20
 
     peer2 = NrfPeer()
     medium2, backend2, manager2 = setup(peer2)
