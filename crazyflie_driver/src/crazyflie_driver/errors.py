@@ -67,3 +67,7 @@ class NotSupported(CrazyflieError):
 
 class CommandRejected(CrazyflieError):
     """The Crazyflie answered a command with an error code."""
+
+
+class SwarmConfigError(CrazyflieError, ValueError):
+    """A swarm file that cannot be flown; the message names the file, the line or entry, and the fix."""

@@ -1,0 +1,389 @@
+"""The swarm file: every Crazyflie of a swarm and its type, loaded and checked without ROS.
+
+In the spirit of Crazyswarm's ``allCrazyflies.yaml`` + ``crazyflieTypes.yaml`` (both may sit in one
+file, or the types in a second one)::
+
+    crazyflies:
+      - id: 1                               # address 0xE7E7E7E7<id as 2 hex digits>, tf_prefix cf<id>
+        channel: 80
+        initialPosition: [0.0, 0.0, 0.0]    # m, world frame
+        type: default
+        # optional: uri, tf_prefix, groupMask, params: {group: {name: value}}
+    crazyflieTypes:
+      default:
+        firmwareParams: {stabilizer: {estimator: 2, controller: 1}}
+        batteryVoltageWarning: 3.8
+        batteryVoltageCritical: 3.7
+    firmwareParams: {...}                   # optional, for every Crazyflie
+
+Radios: Crazyflies without a ``uri`` go to one Crazyradio per channel, in the order the channels
+first appear (``radio://<dongle>/<channel>/2M/E7E7E7E7<id>``); an explicit ``uri`` keeps its dongle,
+and its channel then stays on that dongle. Firmware parameters are applied swarm-wide first, then
+the type's, then the Crazyflie's own (the last value of a name wins), as Crazyswarm pushes them.
+Every fault raises :class:`~crazyflie_driver.errors.SwarmConfigError` naming the file, the line and
+entry, and what to change.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import re
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+
+import yaml
+
+from crazyflie_driver.crtp.uri import DATARATE_NAMES, MAX_CHANNEL, parse_uri
+from crazyflie_driver.errors import SwarmConfigError, UriError
+
+#: Address of a Crazyflie given by id: these four bytes, then the id.
+ADDRESS_PREFIX = "E7E7E7E7"
+DEFAULT_DATARATE = 2                     # 2M
+DEFAULT_TYPE = "default"
+MAX_ID = 0xFF                            # the id is the address's last byte (packed mocap items carry it)
+#: The type used when the file defines none named ``default``: the Kalman estimator, the only one
+#: that takes motion capture (the complementary one ignores it).
+BUILTIN_DEFAULT_PARAMS = (("stabilizer.estimator", 2),)
+DEFAULT_BATTERY_WARNING_V = 3.8
+DEFAULT_BATTERY_CRITICAL_V = 3.7
+
+_ENTRY_KEYS = {"id", "channel", "initialPosition", "type", "uri", "tf_prefix", "groupMask", "params",
+               "firmwareParams"}
+# Crazyswarm's type keys this server does not use (marker and dynamics models) are accepted, so its
+# files load; "batteryVoltateCritical" is its spelling of the critical voltage.
+_TYPE_KEYS = {"firmwareParams", "batteryVoltageWarning", "batteryVoltageCritical", "batteryVoltateCritical",
+              "bigQuad", "markerConfiguration", "dynamicsConfiguration"}
+_TOP_KEYS = {"crazyflies", "crazyflieTypes", "firmwareParams", "markerConfigurations", "dynamicsConfigurations"}
+_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+ParamList = Tuple[Tuple[str, Any], ...]     # ("group.name", value) in the order they are written
+
+
+@dataclass(frozen=True)
+class CrazyflieType:
+    name: str
+    firmware_params: ParamList = ()
+    battery_voltage_warning: float = DEFAULT_BATTERY_WARNING_V
+    battery_voltage_critical: float = DEFAULT_BATTERY_CRITICAL_V
+
+
+@dataclass(frozen=True)
+class SwarmCrazyflie:
+    """One Crazyflie of the swarm, everything resolved."""
+
+    id: int
+    uri: str                                 # canonical
+    dongle: int
+    channel: int
+    tf_prefix: str
+    initial_position: Tuple[float, float, float]
+    type: str
+    params: ParamList                        # swarm-wide, then type, then own; last value per name
+    group_mask: int = 0                      # 0: leave the firmware's (every Crazyflie is in group 0 anyway)
+    line: int = 0                            # where the entry starts in the file (0: unknown)
+
+    @property
+    def name(self) -> str:
+        return self.tf_prefix
+
+
+@dataclass(frozen=True)
+class SwarmConfig:
+    source: str
+    crazyflies: Tuple[SwarmCrazyflie, ...]
+    types: Mapping[str, CrazyflieType] = field(default_factory=dict)
+
+    def radios(self) -> Dict[int, List[SwarmCrazyflie]]:
+        """The Crazyflies of each dongle index, in file order."""
+        out: Dict[int, List[SwarmCrazyflie]] = {}
+        for cf in self.crazyflies:
+            out.setdefault(cf.dongle, []).append(cf)
+        return dict(sorted(out.items()))
+
+    @property
+    def dongles_needed(self) -> int:
+        return 1 + max((cf.dongle for cf in self.crazyflies), default=-1)
+
+    def by_tf_prefix(self) -> Dict[str, SwarmCrazyflie]:
+        return {cf.tf_prefix: cf for cf in self.crazyflies}
+
+    def type_of(self, cf: SwarmCrazyflie) -> CrazyflieType:
+        return self.types[cf.type]
+
+
+# -- YAML with line numbers -----------------------------------------------------------------------
+class _Doc:
+    """A parsed YAML document that still knows the line of every node."""
+
+    def __init__(self, text: str, source: str) -> None:
+        self.source = source
+        try:
+            loader = yaml.SafeLoader(text)
+            try:
+                node = loader.get_single_node()
+                self.data = loader.construct_document(node) if node is not None else None
+            finally:
+                loader.dispose()
+        except yaml.YAMLError as e:
+            mark = getattr(e, "problem_mark", None)
+            where = "%s:%d" % (source, mark.line + 1) if mark is not None else source
+            raise SwarmConfigError("%s: not valid YAML (%s); fix the syntax there"
+                                   % (where, getattr(e, "problem", None) or e)) from None
+        self._root = node
+
+    def line(self, *path: Any) -> int:
+        """1-based line of the node at ``path`` (keys and list indices), or of its nearest parent."""
+        node, line = self._root, (self._root.start_mark.line + 1 if self._root is not None else 0)
+        for step in path:
+            child = None
+            if isinstance(node, yaml.MappingNode):
+                for k, v in node.value:
+                    if k.value == step:
+                        child = v
+                        line = k.start_mark.line + 1
+                        break
+            elif isinstance(node, yaml.SequenceNode) and isinstance(step, int) and step < len(node.value):
+                child = node.value[step]
+                line = child.start_mark.line + 1
+            if child is None:
+                break
+            node = child
+        return line
+
+    def error(self, path: Sequence[Any], what: str) -> SwarmConfigError:
+        return SwarmConfigError("%s:%d: %s" % (self.source, self.line(*path), what))
+
+
+def _read(path: str) -> str:
+    try:
+        with open(path) as f:
+            return f.read()
+    except OSError as e:
+        raise SwarmConfigError("swarm file %s cannot be read: %s; give the path of a YAML file listing the "
+                               "Crazyflies (see crazyflie_driver/config/swarm_example.yaml)"
+                               % (path, e.strerror or e)) from None
+
+
+# -- values ----------------------------------------------------------------------------------------
+def _number(doc: _Doc, path: Sequence[Any], where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
+        raise doc.error(path, "%s must be a finite number, got %r" % (where, value))
+    return float(value)
+
+
+def _params(doc: _Doc, path: Sequence[Any], where: str, value: Any) -> ParamList:
+    """``{group: {name: value}}`` as ("group.name", value) pairs; values numbers or booleans."""
+    if value is None:
+        return ()
+    if not isinstance(value, dict):
+        raise doc.error(path, "%s must be a mapping {group: {name: value}}, got %r" % (where, value))
+    out = []
+    for group, names in value.items():
+        if not isinstance(group, str) or not _IDENTIFIER.match(group):
+            raise doc.error(list(path) + [group], "%s: %r is not a parameter group name" % (where, group))
+        if not isinstance(names, dict) or not names:
+            raise doc.error(list(path) + [group], "%s.%s must be a mapping {name: value} (e.g. {estimator: 2}), "
+                                                  "got %r" % (where, group, names))
+        for name, v in names.items():
+            full = "%s.%s" % (group, name)
+            here = list(path) + [group, name]
+            if not isinstance(name, str) or not _IDENTIFIER.match(name):
+                raise doc.error(here, "%s: %r is not a parameter name" % (where, full))
+            if isinstance(v, bool):
+                v = int(v)
+            if not isinstance(v, numbers.Real) or not math.isfinite(float(v)):
+                raise doc.error(here, "%s: parameter %s must be a finite number, got %r" % (where, full, v))
+            out.append((full, v))
+    return tuple(out)
+
+
+def merge_params(*layers: ParamList) -> ParamList:
+    """Later layers win per name; a name keeps the position of its first appearance."""
+    merged: Dict[str, Any] = {}
+    for layer in layers:
+        for name, value in layer:
+            merged[name] = value
+    return tuple(merged.items())
+
+
+def _types(doc: _Doc, raw: Any, path: Sequence[Any]) -> Dict[str, CrazyflieType]:
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise doc.error(path, "crazyflieTypes must be a mapping of type name to {firmwareParams, ...}, got %r"
+                        % (raw,))
+    types = {}
+    for name, body in raw.items():
+        here = list(path) + [name]
+        where = "crazyflieTypes.%s" % name
+        body = {} if body is None else body
+        if not isinstance(body, dict):
+            raise doc.error(here, "%s must be a mapping (firmwareParams, batteryVoltageWarning, "
+                                  "batteryVoltageCritical), got %r" % (where, body))
+        unknown = sorted(set(body) - _TYPE_KEYS)
+        if unknown:
+            raise doc.error(here, "%s: unknown key(s) %s; known: %s" % (where, ", ".join(map(str, unknown)),
+                                                                      ", ".join(sorted(_TYPE_KEYS))))
+        critical_key = "batteryVoltageCritical" if "batteryVoltageCritical" in body else "batteryVoltateCritical"
+        warning = _number(doc, here + ["batteryVoltageWarning"], where + ".batteryVoltageWarning",
+                          body.get("batteryVoltageWarning", DEFAULT_BATTERY_WARNING_V))
+        critical = _number(doc, here + [critical_key], where + ".batteryVoltageCritical",
+                           body.get(critical_key, DEFAULT_BATTERY_CRITICAL_V))
+        if critical > warning:
+            raise doc.error(here, "%s: batteryVoltageCritical %.2f V is above batteryVoltageWarning %.2f V; the "
+                                  "critical level must be the lower one" % (where, critical, warning))
+        types[str(name)] = CrazyflieType(str(name), _params(doc, here + ["firmwareParams"], where + ".firmwareParams",
+                                                            body.get("firmwareParams")), warning, critical)
+    return types
+
+
+# -- the file --------------------------------------------------------------------------------------
+def load_swarm_file(path: str, types_path: Optional[str] = None, dongles: Optional[int] = None) -> SwarmConfig:
+    """The swarm in ``path`` (types there or in ``types_path``), checked; ``dongles``: the number of
+    Crazyradios present, when known (more radios needed than present is refused)."""
+    types_text = _read(types_path) if types_path else None
+    return parse_swarm(_read(path), path, types_text, types_path or "", dongles)
+
+
+def parse_swarm(text: str, source: str = "<swarm file>", types_text: Optional[str] = None,
+                types_source: str = "<types file>", dongles: Optional[int] = None) -> SwarmConfig:
+    """:func:`load_swarm_file` on text (tests and the sim node use it directly)."""
+    doc = _Doc(text, source)
+    data = doc.data
+    if not isinstance(data, dict) or "crazyflies" not in data:
+        raise doc.error([], "a swarm file is a mapping with a 'crazyflies' list (and 'crazyflieTypes'); "
+                            "see crazyflie_driver/config/swarm_example.yaml")
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        raise doc.error([unknown[0]], "unknown top-level key(s) %s; known: %s"
+                        % (", ".join(map(str, unknown)), ", ".join(sorted(_TOP_KEYS))))
+    types = _types(doc, data.get("crazyflieTypes"), ["crazyflieTypes"])
+    if types_text is not None:
+        tdoc = _Doc(types_text, types_source)
+        traw = tdoc.data
+        if not isinstance(traw, dict) or "crazyflieTypes" not in traw:
+            raise tdoc.error([], "a types file is a mapping with a 'crazyflieTypes' entry")
+        for name, t in _types(tdoc, traw["crazyflieTypes"], ["crazyflieTypes"]).items():
+            if name in types:
+                raise tdoc.error(["crazyflieTypes", name], "type %r is defined in %s too; define it once"
+                                 % (name, source))
+            types[name] = t
+    if DEFAULT_TYPE not in types:
+        types[DEFAULT_TYPE] = CrazyflieType(DEFAULT_TYPE, BUILTIN_DEFAULT_PARAMS)
+    swarm_params = _params(doc, ["firmwareParams"], "firmwareParams", data.get("firmwareParams"))
+    entries = data["crazyflies"]
+    if not isinstance(entries, list) or not entries:
+        raise doc.error(["crazyflies"], "'crazyflies' must be a non-empty list of {id, channel, initialPosition, "
+                                        "type}, got %r" % (entries,))
+    return SwarmConfig(source, _crazyflies(doc, entries, types, swarm_params, dongles), types)
+
+
+def _crazyflies(doc: _Doc, entries: List[Any], types: Dict[str, CrazyflieType], swarm_params: ParamList,
+                dongles: Optional[int]) -> Tuple[SwarmCrazyflie, ...]:
+    parsed = [_entry(doc, i, item, types) for i, item in enumerate(entries)]
+    # channels pinned to a dongle by explicit URIs, then the others one dongle each in order of appearance
+    dongle_of: Dict[int, int] = {}
+    for e in parsed:
+        if e["uri"] is not None:
+            dongle_of.setdefault(e["uri"].channel, e["uri"].index)
+    used = set(dongle_of.values())
+    next_free = 0
+    for e in parsed:
+        if e["uri"] is None and e["channel"] not in dongle_of:
+            while next_free in used:
+                next_free += 1
+            dongle_of[e["channel"]] = next_free
+            used.add(next_free)
+    out: List[SwarmCrazyflie] = []
+    seen_ids: Dict[int, int] = {}
+    seen_uris: Dict[str, int] = {}
+    seen_prefixes: Dict[str, int] = {}
+    for e in parsed:
+        i, where = e["index"], e["where"]
+        uri = e["uri"]
+        if uri is None:
+            uri = parse_uri("radio://%d/%d/%s/%s%02X" % (dongle_of[e["channel"]], e["channel"],
+                                                          DATARATE_NAMES[DEFAULT_DATARATE], ADDRESS_PREFIX, e["id"]))
+        key = str(uri)
+        # unique ids also keep packed motion capture unambiguous: it names a Crazyflie by its id
+        for table, value, what in ((seen_ids, e["id"], "id %s" % e["id"]), (seen_uris, key, "URI %s" % key),
+                                   (seen_prefixes, e["tf_prefix"], "tf_prefix %r" % e["tf_prefix"])):
+            if value in table:
+                first = table[value]
+                raise doc.error(["crazyflies", i], "%s: %s is already used by crazyflies[%d] (line %d); give each "
+                                                   "Crazyflie its own" % (where, what, first,
+                                                                          doc.line("crazyflies", first)))
+            table[value] = i
+        if dongles is not None and uri.index >= dongles:
+            raise doc.error(["crazyflies", i], "%s: needs Crazyradio %d (channel %d) but %d %s present; the swarm "
+                                               "uses %d channel(s), one Crazyradio each: plug in more Crazyradios or "
+                                               "put these Crazyflies on fewer channels"
+                            % (where, uri.index, uri.channel, dongles, "is" if dongles == 1 else "are",
+                               len(set(dongle_of.values()))))
+        params = merge_params(swarm_params, types[e["type"]].firmware_params, e["params"])
+        out.append(SwarmCrazyflie(e["id"], key, uri.index, uri.channel, e["tf_prefix"], e["position"], e["type"],
+                                  params, e["group_mask"], doc.line("crazyflies", i)))
+    return tuple(out)
+
+
+def _entry(doc: _Doc, i: int, item: Any, types: Dict[str, CrazyflieType]) -> Dict[str, Any]:
+    path = ["crazyflies", i]
+    where = "crazyflies[%d]" % i
+    if not isinstance(item, dict):
+        raise doc.error(path, "%s must be a mapping {id, channel, initialPosition, type}, got %r" % (where, item))
+    if "id" in item:
+        where = "crazyflies[%d] (id %s)" % (i, item["id"])
+    unknown = sorted(set(item) - _ENTRY_KEYS)
+    if unknown:
+        raise doc.error(path + [unknown[0]], "%s: unknown key(s) %s; known: %s"
+                        % (where, ", ".join(map(str, unknown)), ", ".join(sorted(_ENTRY_KEYS))))
+    ident = item.get("id")
+    uri = None
+    if "uri" in item:
+        try:
+            uri = parse_uri(item["uri"])
+        except UriError as e:
+            raise doc.error(path + ["uri"], "%s: %s" % (where, e)) from None
+    if ident is None:
+        if uri is None:
+            raise doc.error(path, "%s: give an 'id' (1..255: the address's last byte) or a 'uri'" % where)
+        ident = uri.address[-1]
+    if isinstance(ident, bool) or not isinstance(ident, int) or not 0 <= ident <= MAX_ID:
+        raise doc.error(path + ["id"], "%s: id must be an integer 0..%d (the last byte of the radio address), "
+                                       "got %r" % (where, MAX_ID, ident))
+    if uri is not None and "id" in item and uri.address[-1] != ident:
+        raise doc.error(path + ["uri"], "%s: uri %s ends in 0x%02X but id is %d (0x%02X); the packed motion "
+                                        "capture reaches a Crazyflie by that last byte: make them agree"
+                        % (where, uri, uri.address[-1], ident, ident))
+    channel = item.get("channel", uri.channel if uri is not None else None)
+    if isinstance(channel, bool) or not isinstance(channel, int) or not 0 <= channel <= MAX_CHANNEL:
+        raise doc.error(path + ["channel"], "%s: channel must be an integer 0..%d, got %r"
+                        % (where, MAX_CHANNEL, channel))
+    if uri is not None and channel != uri.channel:
+        raise doc.error(path + ["channel"], "%s: channel %d but uri %s is on channel %d; make them agree"
+                        % (where, channel, uri, uri.channel))
+    pos = item.get("initialPosition", [0.0, 0.0, 0.0])
+    if not isinstance(pos, (list, tuple)) or len(pos) != 3:
+        raise doc.error(path + ["initialPosition"], "%s: initialPosition must be [x, y, z] in metres, got %r"
+                        % (where, pos))
+    position = tuple(_number(doc, path + ["initialPosition"], where + ".initialPosition", v) for v in pos)
+    kind = item.get("type", DEFAULT_TYPE)
+    if kind not in types:
+        raise doc.error(path + ["type"], "%s: unknown type %r; defined types: %s (add it under crazyflieTypes)"
+                        % (where, kind, ", ".join(sorted(types))))
+    tf_prefix = item.get("tf_prefix", "cf%d" % ident)
+    if not isinstance(tf_prefix, str) or not all(_IDENTIFIER.match(p) and p[0].isalpha()
+                                                 for p in tf_prefix.strip("/").split("/")):
+        raise doc.error(path + ["tf_prefix"], "%s: tf_prefix %r is not a ROS namespace (letters, digits, '_', "
+                                              "starting with a letter)" % (where, tf_prefix))
+    mask = item.get("groupMask", 0)
+    if isinstance(mask, bool) or not isinstance(mask, int) or not 0 <= mask <= 0xFF:
+        raise doc.error(path + ["groupMask"], "%s: groupMask must be an integer 0..255 (bit i = group i), got %r"
+                        % (where, mask))
+    if "params" in item and "firmwareParams" in item:
+        raise doc.error(path + ["firmwareParams"], "%s: give params or firmwareParams, not both" % where)
+    own_key = "params" if "params" in item else "firmwareParams"
+    params = _params(doc, path + [own_key], where + "." + own_key, item.get(own_key))
+    return {"index": i, "where": where, "id": ident, "uri": uri, "channel": channel, "position": position,
+            "type": kind, "tf_prefix": tf_prefix.strip("/"), "group_mask": mask, "params": params}
+

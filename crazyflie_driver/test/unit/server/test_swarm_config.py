@@ -1,0 +1,168 @@
+"""The swarm file: radios assigned by channel, parameters layered, every fault named with its line."""
+from __future__ import annotations
+
+import os
+import textwrap
+
+import pytest
+
+from crazyflie_driver.errors import SwarmConfigError
+from crazyflie_driver.server.swarm_config import load_swarm_file, parse_swarm
+
+EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "config", "swarm_example.yaml")
+
+TYPES = """
+crazyflieTypes:
+  default:
+    firmwareParams: {stabilizer: {estimator: 2, controller: 1}}
+    batteryVoltageWarning: 3.8
+    batteryVoltageCritical: 3.7
+"""
+
+
+def swarm(entries: str, extra: str = TYPES, **kw):
+    body = textwrap.indent(textwrap.dedent(entries).lstrip("\n"), "  ")
+    return parse_swarm("crazyflies:\n" + body + extra, "s.yaml", **kw)
+
+
+def refused(entries: str, extra: str = TYPES, **kw) -> str:
+    with pytest.raises(SwarmConfigError) as e:
+        swarm(entries, extra, **kw)
+    return str(e.value)
+
+
+def test_example_file_loads_with_radios_by_channel():
+    config = load_swarm_file(EXAMPLE)
+    assert [(cf.tf_prefix, cf.uri) for cf in config.crazyflies] == [
+        ("cf1", "radio://0/80/2M/E7E7E7E701"), ("cf2", "radio://0/80/2M/E7E7E7E702"),
+        ("cf3", "radio://1/90/2M/E7E7E7E703")]
+    assert config.dongles_needed == 2
+    assert [cf.tf_prefix for cf in config.radios()[0]] == ["cf1", "cf2"]
+    cf3 = config.crazyflies[2]
+    # swarm-wide, then type, then own
+    assert dict(cf3.params) == {"commander.enHighLevel": 1, "locSrv.extQuatStdDev": 0.05,
+                                "stabilizer.estimator": 2, "stabilizer.controller": 2, "locSrv.extPosStdDev": 0.001}
+    assert config.crazyflies[1].group_mask == 1
+
+
+def test_channels_take_dongles_in_order_of_first_appearance():
+    config = swarm("""
+        - {id: 1, channel: 90}
+        - {id: 2, channel: 80}
+        - {id: 3, channel: 90}
+        - {id: 4, channel: 100}
+        """)
+    assert [cf.uri for cf in config.crazyflies] == [
+        "radio://0/90/2M/E7E7E7E701", "radio://1/80/2M/E7E7E7E702", "radio://0/90/2M/E7E7E7E703",
+        "radio://2/100/2M/E7E7E7E704"]
+
+
+def test_explicit_uri_pins_its_dongle_and_others_skip_it():
+    config = swarm("""
+        - {id: 1, channel: 80}
+        - {uri: "radio://0/90/2M/E7E7E7E70A"}
+        - {id: 2, channel: 90}
+        """)
+    assert [(cf.id, cf.uri) for cf in config.crazyflies] == [
+        (1, "radio://1/80/2M/E7E7E7E701"), (10, "radio://0/90/2M/E7E7E7E70A"), (2, "radio://0/90/2M/E7E7E7E702")]
+    assert config.crazyflies[1].tf_prefix == "cf10"
+
+
+def test_own_params_win_over_type_and_defaults_without_types():
+    config = parse_swarm("crazyflies:\n  - {id: 5, channel: 80, params: {stabilizer: {controller: 2}}}\n")
+    assert dict(config.crazyflies[0].params) == {"stabilizer.estimator": 2, "stabilizer.controller": 2}
+    assert config.crazyflies[0].initial_position == (0.0, 0.0, 0.0)
+
+
+def test_types_in_a_second_file(tmp_path):
+    main = tmp_path / "all.yaml"
+    main.write_text("crazyflies:\n  - {id: 1, channel: 80, type: big}\n")
+    types = tmp_path / "types.yaml"
+    types.write_text("crazyflieTypes:\n  big:\n    firmwareParams: {stabilizer: {controller: 2}}\n"
+                     "    batteryVoltateCritical: 3.6\n    markerConfiguration: 0\n")
+    config = load_swarm_file(str(main), str(types))
+    assert dict(config.crazyflies[0].params) == {"stabilizer.controller": 2}
+    assert config.types["big"].battery_voltage_critical == 3.6
+
+
+def test_duplicate_id_named_with_both_lines():
+    msg = refused("""
+        - {id: 1, channel: 80}
+        - {id: 2, channel: 80}
+        - {id: 1, channel: 90}
+        """)
+    assert msg.startswith("s.yaml:4: crazyflies[2] (id 1): id 1 is already used by crazyflies[0] (line 2)"), msg
+
+
+def test_duplicate_uri_refused():
+    msg = refused("""
+        - {uri: "radio://0/80/2M/E7E7E7E701", tf_prefix: a}
+        - {uri: "radio://0/80/2M/E7E7E7E701", id: 1, tf_prefix: b}
+        """)
+    assert msg.startswith("s.yaml:3: crazyflies[1] (id 1): id 1 is already used"), msg
+
+
+def test_same_last_address_byte_is_the_same_id():
+    # packed motion capture reaches a Crazyflie by the last address byte: on any radio, one per swarm
+    msg = refused("""
+        - {uri: "radio://0/80/2M/E7E7E7E701"}
+        - {uri: "radio://1/90/2M/E7E7E7E801", tf_prefix: other}
+        """)
+    assert msg.startswith("s.yaml:3: crazyflies[1]: id 1 is already used by crazyflies[0] (line 2)"), msg
+
+
+def test_unknown_type_names_the_defined_ones():
+    msg = refused("""
+        - {id: 1, channel: 80, type: heavy}
+        """)
+    assert msg == ("s.yaml:2: crazyflies[0] (id 1): unknown type 'heavy'; defined types: default "
+                   "(add it under crazyflieTypes)")
+
+
+@pytest.mark.parametrize("position", ["[0, 0]", "[0, .nan, 0]", "[0, x, 0]", "5"])
+def test_bad_initial_position(position):
+    msg = refused("- {id: 1, channel: 80, initialPosition: %s}\n" % position)
+    assert "initialPosition" in msg and msg.startswith("s.yaml:2:"), msg
+
+
+@pytest.mark.parametrize("entry, words", [
+    ("{id: 300, channel: 80}", "id must be an integer 0..255"),
+    ("{id: 1, channel: 126}", "channel must be an integer 0..125"),
+    ("{id: 1}", "channel must be an integer"),
+    ("{channel: 80}", "give an 'id'"),
+    ("{id: 1, channel: 80, colour: red}", "unknown key(s) colour"),
+    ("{id: 1, channel: 80, uri: 'radio://0/80/2M/E7E7E7E702'}", "ends in 0x02 but id is 1"),
+    ("{id: 1, channel: 90, uri: 'radio://0/80/2M/E7E7E7E701'}", "channel 90 but uri"),
+    ("{id: 1, channel: 80, uri: 'usb://0'}", "usb://"),
+    ("{id: 1, channel: 80, tf_prefix: '1cf'}", "not a ROS namespace"),
+    ("{id: 1, channel: 80, groupMask: 256}", "groupMask must be an integer 0..255"),
+    ("{id: 1, channel: 80, params: {stabilizer: {estimator: .inf}}}", "stabilizer.estimator must be a finite"),
+    ("{id: 1, channel: 80, params: {stabilizer: 2}}", "must be a mapping {name: value}"),
+])
+def test_bad_entries_named(entry, words):
+    msg = refused("- %s\n" % entry)
+    assert words in msg and msg.startswith("s.yaml:2: crazyflies[0]"), msg
+
+
+def test_too_many_channels_for_the_dongles_present():
+    msg = refused("""
+        - {id: 1, channel: 80}
+        - {id: 2, channel: 90}
+        - {id: 3, channel: 100}
+        """, dongles=2)
+    assert msg.startswith("s.yaml:4: crazyflies[2] (id 3): needs Crazyradio 2 (channel 100) but 2 are present"), msg
+    assert "plug in more Crazyradios or put these Crazyflies on fewer channels" in msg
+
+
+def test_bad_types_and_file_level_faults(tmp_path):
+    assert "batteryVoltageCritical 3.90 V is above" in refused(
+        "- {id: 1, channel: 80}\n", "crazyflieTypes:\n  default:\n    batteryVoltageCritical: 3.9\n")
+    assert "unknown top-level key(s) crazyflie" in refused("- {id: 1, channel: 80}\n", "crazyflie: []\n")
+    with pytest.raises(SwarmConfigError, match="'crazyflies' list"):
+        parse_swarm("- 1\n", "s.yaml")
+    with pytest.raises(SwarmConfigError, match=r"^s.yaml:3: not valid YAML"):
+        parse_swarm("crazyflies:\n  - {id: 1\n", "s.yaml")
+    with pytest.raises(SwarmConfigError, match="cannot be read"):
+        load_swarm_file(str(tmp_path / "missing.yaml"))
+    with pytest.raises(SwarmConfigError, match="non-empty list"):
+        parse_swarm("crazyflies: []\n", "s.yaml")
