@@ -21,12 +21,17 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air import server_framing as framing
+from crazyflie_driver.sim.air.faults import MAX_RADIO_LATENCY_S, ControlArgs, FaultError
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
+from crazyflie_driver.sim.world import battery as battery_model
 from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
 UDP_BASE_PORT = 19850
+CONTROL_OPS = ("time", "dongle_count", "list", "add_crazyflie", "remove_crazyflie", "state", "vehicle_state",
+               "reboot", "set_rssi", "power", "set_dongle_faults", "dongle_faults", "set_battery",
+               "set_mocap_faults", "faults", "clear_faults")
 
 
 @dataclass
@@ -61,6 +66,8 @@ class WorldServer:
         self._threads: List[threading.Thread] = []                    # the accept thread
         self._running = threading.Event()
         self._udp_next = 0
+        self.mocap = None        # the world's MocapModel where the process runs one (the sim node); faults reach it
+        self._battery_set: Dict[str, float] = {}      # vehicle -> charge a fault set it to
         world.add_tick_listener(self._tick, FIRMWARE_TICK_S)
 
     # --- Crazyflies --------------------------------------------------------------------------
@@ -134,42 +141,172 @@ class WorldServer:
 
     # --- control calls -----------------------------------------------------------------------
     def control(self, op: str, args: Dict[str, Any]) -> Any:
-        """Control operations for tests and tools (also reachable through RemoteMedium.control)."""
-        if op == "time":
-            return float(self.world.time)
-        if op == "dongle_count":
-            return self.medium.dongle_count()
-        if op == "set_dongle_faults":
-            self.medium.set_dongle_faults(int(args["dongle"]), args.get("packet_loss"), args.get("ack_loss"),
-                                          args.get("latency_s"), args.get("unplugged"))
-            return None
-        if op == "add_crazyflie":
-            self.add_crazyflie(args["uri"], args.get("name"), args.get("position") or (0.0, 0.0, 0.0),
-                               args.get("firmware") or "current")
-            return self._find(args["uri"]).describe()
-        if op == "remove_crazyflie":
-            self.remove_crazyflie(args["uri"])
-            return None
-        if op == "list":
-            return [e.describe() for e in self.entries()]
-        if op == "state":
-            return self.crazyflie(args["uri"]).snapshot()
-        if op == "vehicle_state":   # the body: position, velocity, motors, lock (World's Vehicle.state)
-            with self._lock:
-                name = self._find(args["uri"]).name
-            return self.world.vehicle(name).state()
-        if op == "power":
-            cf = self.crazyflie(args["uri"])
-            cf.power_on() if args.get("on") else cf.power_off()
-            return None
-        if op == "reboot":
-            self.crazyflie(args["uri"]).reboot()
-            return None
-        if op == "set_rssi":
-            entry = self._find(args["uri"])
-            self.medium.set_rssi(*entry.key, mean_dbm=float(args["mean_dbm"]), noise_db=args.get("noise_db"))
-            return None
-        raise ValueError("unknown control operation %r" % (op,))
+        """Control operations for tests and tools (also reachable through RemoteMedium.control).
+
+        Every operation reads its arguments through ``faults.ControlArgs``: a missing or wrong one is a
+        ``FaultError`` (a ValueError) naming the operation, the argument and what is allowed.
+        """
+        method = getattr(self, "_op_" + op, None) if op in CONTROL_OPS else None
+        if method is None:
+            raise ValueError("unknown control operation %r (known: %s)" % (op, ", ".join(CONTROL_OPS)))
+        return method(ControlArgs(op, args))
+
+    def _op_time(self, a: ControlArgs) -> float:
+        return float(self.world.time)
+
+    def _op_dongle_count(self, a: ControlArgs) -> int:
+        return self.medium.dongle_count()
+
+    def _dongle(self, a: ControlArgs) -> int:
+        dongle = a.integer("dongle")
+        if dongle >= self.medium.dongle_count():
+            raise FaultError("%s: no simulated dongle %d (this world has %d: 0..%d)"
+                             % (a.op, dongle, self.medium.dongle_count(), self.medium.dongle_count() - 1))
+        return dongle
+
+    def _op_set_dongle_faults(self, a: ControlArgs) -> Dict[str, Any]:
+        dongle = self._dongle(a)
+        self.medium.set_dongle_faults(dongle, a.number("packet_loss", None, 0.0, 100.0),
+                                      a.number("ack_loss", None, 0.0, 100.0),
+                                      a.number("latency_s", None, 0.0, MAX_RADIO_LATENCY_S), a.flag("unplugged", None))
+        return self._dongle_faults(dongle)
+
+    def _dongle_faults(self, dongle: int) -> Dict[str, Any]:
+        f = self.medium.dongle_faults(dongle)
+        return {"dongle": dongle, "packet_loss": f.packet_loss, "ack_loss": f.ack_loss, "latency_s": f.latency_s,
+                "unplugged": f.unplugged}
+
+    def _op_dongle_faults(self, a: ControlArgs) -> List[Dict[str, Any]]:
+        dongles = [self._dongle(a)] if a.has("dongle") else range(self.medium.dongle_count())
+        return [self._dongle_faults(d) for d in dongles]
+
+    def _op_add_crazyflie(self, a: ControlArgs) -> Dict[str, Any]:
+        uri = a.text("uri")
+        self.add_crazyflie(uri, a.text("name", None), a.args.get("position") or (0.0, 0.0, 0.0),
+                           a.text("firmware", "current"))
+        return self._find(uri).describe()
+
+    def _op_remove_crazyflie(self, a: ControlArgs) -> None:
+        self.remove_crazyflie(a.text("uri"))
+
+    def _op_list(self, a: ControlArgs) -> List[Dict[str, Any]]:
+        return [e.describe() for e in self.entries()]
+
+    def _op_state(self, a: ControlArgs) -> Dict[str, Any]:
+        return self.crazyflie(a.text("uri")).snapshot()
+
+    def _op_vehicle_state(self, a: ControlArgs) -> Dict[str, Any]:
+        """The body: position, velocity, motors, lock (World's Vehicle.state)."""
+        return self.world.vehicle(self._name(a)).state()
+
+    def _name(self, a: ControlArgs) -> str:
+        with self._lock:
+            return self._find(a.text("uri")).name
+
+    def _op_power(self, a: ControlArgs) -> Dict[str, Any]:
+        cf = self.crazyflie(a.text("uri"))
+        cf.power_on() if a.flag("on") else cf.power_off()
+        return {"powered": cf.powered}
+
+    def _op_reboot(self, a: ControlArgs) -> None:
+        self.crazyflie(a.text("uri")).reboot()
+
+    def _op_set_rssi(self, a: ControlArgs) -> None:
+        entry = self._find(a.text("uri"))
+        self.medium.set_rssi(*entry.key, mean_dbm=a.number("mean_dbm", low=-127.0, high=0.0),
+                             noise_db=a.number("noise_db", None, 0.0))
+
+    def _op_set_battery(self, a: ControlArgs) -> Dict[str, Any]:
+        """Drain or charge a vehicle's battery: ``voltage`` (V, read under the present load) or ``charge`` (0..1)."""
+        name = self._name(a)
+        vehicle = self.world.vehicle(name)
+        if a.has("voltage") == a.has("charge"):
+            raise FaultError("set_battery: give either 'voltage' (V) or 'charge' (0..1)")
+        if a.has("charge"):
+            charge = a.number("charge", low=0.0, high=1.0)
+        else:
+            try:
+                charge = battery_model.charge_for_voltage(a.number("voltage", low=0.0),
+                                                          vehicle.battery()["current"])
+            except ValueError as e:
+                raise FaultError("set_battery: %s" % e) from None
+        vehicle.set_battery_charge(charge)
+        if charge < 1.0:
+            self._battery_set[name] = charge
+        else:                                  # a full battery is no fault any more
+            self._battery_set.pop(name, None)
+        return vehicle.battery()
+
+    def _op_set_mocap_faults(self, a: ControlArgs) -> Dict[str, Any]:
+        """One body's motion-capture faults (``sim.world.mocap.MocapModel.set_body_faults``)."""
+        mocap = self._need_mocap(a)
+        name = self._name(a)
+        if a.flag("clear", False):
+            mocap.clear_body_faults(name)
+        now = float(self.world.time)
+        try:
+            f = mocap.set_body_faults(name, now, noise=a.number("noise_m", None, 0.0),
+                                      latency=a.number("latency_s", None, 0.0), rate=a.number("rate_hz", None, 0.0),
+                                      dropout=a.number("dropout", None, 0.0, 1.0), freeze=a.span("freeze_s"),
+                                      hide=a.span("hide_s"))
+        except ValueError as e:
+            raise FaultError("set_mocap_faults: %s" % e) from None
+        return {"name": name, "faults": f.describe(now) or "none"}
+
+    def _need_mocap(self, a: ControlArgs):
+        if self.mocap is None:
+            raise FaultError("%s: this world has no motion-capture system (crazyflie_sim_node, started by "
+                             "sim.launch, has one; crazyflie_world_server does not)" % a.op)
+        return self.mocap
+
+    def _op_faults(self, a: ControlArgs) -> List[List[str]]:
+        """The faults in force, as [target, description] pairs."""
+        return [list(pair) for pair in self.active_faults()]
+
+    def active_faults(self) -> List[Tuple[str, str]]:
+        out: List[Tuple[str, str]] = []
+        for d in range(self.medium.dongle_count()):
+            f = self.medium.dongle_faults(d)
+            parts = (["unplugged"] if f.unplugged else []) + \
+                (["packet loss %.0f %%" % f.packet_loss] if f.packet_loss else []) + \
+                (["ack loss %.0f %%" % f.ack_loss] if f.ack_loss else []) + \
+                (["latency %.0f ms" % (f.latency_s * 1000.0)] if f.latency_s else [])
+            if parts:
+                out.append(("dongle %d" % d, ", ".join(parts)))
+        now = float(self.world.time)
+        mocap_faults = self.mocap.body_faults(now) if self.mocap is not None else {}
+        for e in self.entries():
+            parts = []
+            if not e.crazyflie.powered:
+                parts.append("switched off")
+            if e.name in self._battery_set:
+                parts.append("battery set to %.0f %% (now %.2f V)" % (self._battery_set[e.name] * 100.0,
+                                                                      self.world.vehicle(e.name).battery()["vbat"]))
+            if e.name in mocap_faults:
+                parts.append("mocap " + mocap_faults[e.name].describe(now))
+            if self.mocap is not None and not self.mocap.visible(e.name):
+                parts.append("mocap hidden")
+            if parts:
+                out.append((e.name, ", ".join(parts)))
+        return out
+
+    def _op_clear_faults(self, a: ControlArgs) -> List[List[str]]:
+        """End radio and motion-capture faults: all, one dongle's (``dongle``) or one vehicle's (``uri``).
+        Power and battery stay as they are: they are the vehicle's state, not a fault of the air."""
+        if a.has("dongle"):
+            dongles, names = [self._dongle(a)], []
+        elif a.has("uri"):
+            dongles, names = [], [self._name(a)]
+        else:
+            dongles, names = list(range(self.medium.dongle_count())), None
+        for d in dongles:
+            self.medium.set_dongle_faults(d, 0.0, 0.0, 0.0, False)
+        if self.mocap is not None:
+            if names is None:
+                self.mocap.clear_body_faults()
+            for n in names or []:
+                self.mocap.clear_body_faults(n)
+        return self._op_faults(a)
 
     # --- serving -----------------------------------------------------------------------------
     def start(self) -> Tuple[str, int]:

@@ -77,3 +77,32 @@ def update(b: BatteryStates, dt: float, motor_thrust: np.ndarray) -> None:
 def battery_level(charge: float) -> int:
     """``pm.batteryLevel`` in percent."""
     return int(round(min(max(charge, 0.0), 1.0) * 100.0))
+
+
+def charge_for_voltage(voltage: float, current: float) -> float:
+    """State of charge at which the cell reads ``voltage`` (V) under ``current`` (A): the inverse of the
+    discharge curve; ValueError outside what the curve can read."""
+    ocv = float(voltage) + float(current) * INTERNAL_RESISTANCE
+    sag = float(current) * INTERNAL_RESISTANCE
+    low, high = float(OCV_POINTS[0]) - sag, float(OCV_POINTS[-1]) - sag
+    if not OCV_POINTS[0] <= ocv <= OCV_POINTS[-1]:
+        raise ValueError("a battery reads %.2f..%.2f V at the present %.2f A, not %r V"
+                         % (max(low, 0.0), high, current, voltage))
+    return float(np.interp(ocv, OCV_POINTS, SOC_POINTS))
+
+
+def set_charge(b: BatteryStates, i: int, charge: float) -> None:
+    """Row ``i``'s cell at state of charge ``charge`` (0..1) now, as if drained or charged to it.
+
+    The firmware's low/critical timers start again from the new reading; a cell charged back above
+    the critical voltage leaves the shut-down state (a fresh battery in a simulator).
+    """
+    if not 0.0 <= charge <= 1.0:
+        raise ValueError("battery charge must be within 0..1, got %r" % (charge,))
+    b.charge[i] = charge
+    b.vbat[i] = max(float(open_circuit_voltage(np.array([charge]))[0]) - float(b.current[i]) * INTERNAL_RESISTANCE,
+                    0.0)
+    b.low_time[i] = 0.0
+    b.critical_time[i] = 0.0
+    if b.vbat[i] >= CRITICAL_VOLTAGE and b.state[i] == PM_SHUTDOWN:
+        b.state[i] = PM_BATTERY

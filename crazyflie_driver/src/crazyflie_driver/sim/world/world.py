@@ -158,6 +158,21 @@ class Vehicle:
             i = self._row
             return i >= 0 and w.flight.measure(i, position, quaternion, w.bodies, w.time)
 
+    def battery(self) -> Dict[str, float]:
+        """The cell now: state of charge 0..1, voltage under load (V), current (A), power state."""
+        w = self._world
+        with w._lock:
+            b, i = w.battery, self._row
+            return {"charge": float(b.charge[i]), "vbat": float(b.vbat[i]), "current": float(b.current[i]),
+                    "state": int(b.state[i])}
+
+    def set_battery_charge(self, charge: float) -> None:
+        """Drain or charge the cell to ``charge`` (0..1) at once (fault injection)."""
+        w = self._world
+        with w._lock:
+            _battery.set_charge(w.battery, self._row, charge)
+            w.onboard.dirty = True
+
     def halt(self) -> None:
         """The STM32 stopped on an assert: motors off until a reboot."""
         w = self._world
