@@ -15,6 +15,7 @@ from tf2_msgs.msg import TFMessage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import wait_until  # noqa: E402
+from crazyflie_driver.mocap.vrpn_client import VrpnClient  # noqa: E402
 
 NAMES = ("cf1", "cf2", "cf3")
 CHILDREN = tuple("vicon/%s/%s" % (n, n) for n in NAMES) + NAMES
@@ -73,6 +74,30 @@ class SimMocapTf(unittest.TestCase):
         self.assertGreater(float(values["real-time factor"]), 0.0)
         self.assertIn(status.level, (0, 1))
         self.assertIn("ticks behind", values)
+
+    def test_c_the_motion_capture_is_served_as_vrpn_one_tracker_per_vehicle(self):
+        reports, lock = [], threading.Lock()
+
+        def on_pose(report):
+            with lock:
+                reports.append(report)
+
+        def of(name):
+            with lock:
+                return [r for r in reports if r.tracker == name]
+
+        port = int(rospy.get_param("~vrpn_port"))
+        with VrpnClient("127.0.0.1", port, on_pose=on_pose, retry_min=0.1, retry_max=0.5):
+            self.assertTrue(wait_until(lambda: all(len(of(n)) > 0.5 * RATE_HZ for n in NAMES), 30.0),
+                            "VRPN trackers: %s" % sorted({r.tracker for r in reports}))
+        for i, name in enumerate(NAMES):
+            got = of(name)
+            self.assertLess(max(abs(a - b) for a, b in zip(got[-1].position, (0.5 * i, 0.0, 0.0))), 0.01, name)
+            stamps = [r.server_sec + 1e-6 * r.server_usec for r in got]
+            # one report per capture: the stamps advance at the mocap rate (host clock, world near real time)
+            rate = (len(stamps) - 1) / (stamps[-1] - stamps[0])
+            self.assertTrue(0.5 * RATE_HZ < rate < 1.5 * RATE_HZ, "%s: %.0f reports/s" % (name, rate))
+            self.assertTrue(all(b > a for a, b in zip(stamps, stamps[1:])), name)
 
 
 if __name__ == "__main__":

@@ -57,7 +57,8 @@ class VrpnTestServer:
     def __init__(self, trackers: Iterable[str] = ("cf1",), host: str = "127.0.0.1", port: int = 0,
                  rate: float = 100.0, velocity: bool = False, y_up: bool = False,
                  pose_fn: Optional[PoseFn] = None, sender_id_offset: int = 3, type_id_offset: int = 7,
-                 fragment: bool = False, version: str = vp.SERVER_VERSION, seed: int = 0) -> None:
+                 fragment: bool = False, version: str = vp.SERVER_VERSION, seed: int = 0,
+                 stream: bool = True) -> None:
         if rate <= 0:
             raise ValueError("rate must be > 0 Hz, got %r" % (rate,))
         self.host = host
@@ -68,6 +69,7 @@ class VrpnTestServer:
         self.pose_fn = pose_fn
         self.fragment = fragment
         self.version = version
+        self.stream = stream            # False: no timer; the owner sends each cycle with send_poses()
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
         self._sender_ids: Dict[str, int] = {vp.CONTROL_SENDER: sender_id_offset}
@@ -133,8 +135,9 @@ class VrpnTestServer:
         self.port = ls.getsockname()[1]
         self._listener = ls
         self._stop.clear()
-        self._threads = [threading.Thread(target=self._accept_loop, name="vrpn-server-accept", daemon=True),
-                         threading.Thread(target=self._stream_loop, name="vrpn-server-stream", daemon=True)]
+        self._threads = [threading.Thread(target=self._accept_loop, name="vrpn-server-accept", daemon=True)]
+        if self.stream:
+            self._threads.append(threading.Thread(target=self._stream_loop, name="vrpn-server-stream", daemon=True))
         for t in self._threads:
             t.start()
         return self.host, self.port
@@ -339,6 +342,30 @@ class VrpnTestServer:
                     v = vp.Velocity(0, z_up_to_y_up_vector(v.linear), z_up_to_y_up_quaternion(v.rotation), v.dt)
                 out.append(vp.encode_message(vel, sid, vp.encode_velocity(v), sec, usec, self._seq))
         return b"".join(out), len(items)
+
+    def send_poses(self, poses: Sequence[Tuple[str, Sequence[float], Sequence[float]]], t: float) -> int:
+        """One report cycle of the given (name, position, quaternion xyzw) poses, stamped Unix time t.
+
+        For an owner that reports as its own source delivers (``stream=False``); trackers not yet
+        known are added. Returns how many poses went to how many clients.
+        """
+        for name, _, _ in poses:
+            if name not in self._sender_ids:
+                self.add_tracker(name)
+        sec, usec = vp.split_time(t)
+        pq = self._type_ids[vp.TYPE_POS_QUAT]
+        out = []
+        for name, pos, quat in poses:
+            if self.y_up:
+                pos, quat = z_up_to_y_up_vector(pos), z_up_to_y_up_quaternion(quat)
+            self._seq += 1
+            out.append(vp.encode_message(pq, self._sender_ids[name], vp.encode_pos_quat(
+                vp.PosQuat(0, tuple(float(v) for v in pos), tuple(float(v) for v in quat))), sec, usec, self._seq))
+        clients = self.client_count()
+        if out and clients:
+            self._broadcast(b"".join(out))
+            self.poses_sent += len(out) * clients
+        return len(out) * clients
 
     def _stream_loop(self) -> None:
         period = 1.0 / self.rate

@@ -20,7 +20,10 @@ YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri
 (vicon); ``mocap_rate`` (100 Hz); ``mocap_noise`` (position noise, m, standard deviation);
 ``mocap_latency`` (s); ``mocap_dropout`` (fraction of frames lost); ``world_frame`` (world);
 ``publish_clock`` (false: publish the world time on /clock; the node sets no global parameter,
-so set /use_sim_time yourself if you want ROS time to follow it).
+so set /use_sim_time yourself if you want ROS time to follow it); ``vrpn`` (false: also serve the
+motion capture as a VRPN server on loopback, one tracker per vehicle named after it, as a
+motion-capture PC would) and ``vrpn_port`` (default 3883 when free, else one the system picks;
+0 = any; the node logs which).
 
 The frames come from the world's own motion-capture model (``sim.mocap.MocapModel``), sampled on
 world time; a vehicle added to the world at run time is reported too.
@@ -161,6 +164,19 @@ def mocap_from_params(params: Mapping[str, Any]) -> MocapConfig:
         raise SimConfigError("~mocap_noise and ~mocap_latency must be >= 0 and ~mocap_dropout in [0, 1)")
     frame = str(params.get("world_frame", "world")).strip("/") or "world"
     return MocapConfig(style, rate, noise, latency, dropout, frame)
+
+
+def vrpn_port_from_params(params: Mapping[str, Any]) -> Tuple[bool, Optional[int]]:
+    """(serve VRPN?, port): ``~vrpn`` a bool; ``~vrpn_port`` None (3883 when free) or 0..65535."""
+    on = params.get("vrpn", False)
+    if isinstance(on, str):
+        on = on.strip().lower() in ("true", "1", "yes")
+    port = params.get("vrpn_port")
+    if port in (None, ""):
+        return bool(on), None
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise SimConfigError("~vrpn_port must be a TCP port 0..65535 (0: any free one), got %r" % (port,))
+    return bool(on), int(port)
 
 
 def dongles_needed(vehicles: Sequence[VehicleSpec], requested: Optional[int]) -> int:
@@ -398,6 +414,7 @@ def main() -> None:
         vehicles = vehicles_from_params(params)
         mocap = mocap_from_params(params)
         dongles = dongles_needed(vehicles, params.get("dongles"))
+        vrpn_on, vrpn_port = vrpn_port_from_params(params)
         host, port = parse_address(str(params.get("address", "127.0.0.1:19840")))
         speed = _number("~speed", params.get("speed", 1.0))
         seed = params.get("seed")
@@ -429,8 +446,23 @@ def main() -> None:
             delivered.extend(frames)
         frames_ready.set()
 
+    vrpn = None
+    if vrpn_on:
+        from crazyflie_driver.sim.world.mocap_vrpn import WorldVrpnServer
+        try:
+            vrpn = WorldVrpnServer(world, model, port=vrpn_port)
+            vrpn.start()
+        except OSError as e:
+            rospy.logfatal("crazyflie_sim: cannot serve VRPN on port %s: %s (choose another with ~vrpn_port, "
+                           "0 for any)", vrpn_port, e.strerror or e)
+            server.stop()
+            world.stop()
+            raise SystemExit(1)
+        rospy.loginfo("crazyflie_sim: motion capture served as VRPN on 127.0.0.1:%d (trackers %s)", vrpn.port,
+                      ", ".join(names))
     if mocap.style != "none":
         model.add_listener(on_frames)
+    if mocap.style != "none" or vrpn is not None:
         model.attach()
 
     def mocap_loop() -> None:
@@ -456,6 +488,8 @@ def main() -> None:
     def shutdown() -> None:
         stop.set()
         diagnostics.shutdown()
+        if vrpn is not None:
+            vrpn.stop()
         server.stop()
         world.stop()
     rospy.on_shutdown(shutdown)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.nodes.sim_node import (MocapConfig, SimConfigError, dongles_needed, mocap_from_params,
-                                             vehicles_from_params)
+                                             vehicles_from_params, vrpn_port_from_params)
 
 
 def test_vehicle_list_and_single_vehicle():
@@ -38,3 +38,13 @@ def test_mocap_params():
         mocap_from_params({"mocap": "optitrack"})
     with pytest.raises(SimConfigError, match="mocap_dropout"):
         mocap_from_params({"mocap_dropout": 1.5})
+
+
+def test_vrpn_params():
+    assert vrpn_port_from_params({}) == (False, None)
+    assert vrpn_port_from_params({"vrpn": True}) == (True, None)          # 3883 when free
+    assert vrpn_port_from_params({"vrpn": "true", "vrpn_port": 0}) == (True, 0)
+    assert vrpn_port_from_params({"vrpn": True, "vrpn_port": 3884}) == (True, 3884)
+    for bad in (-1, 70000, "x", 1.5, True):
+        with pytest.raises(SimConfigError, match="~vrpn_port"):
+            vrpn_port_from_params({"vrpn": True, "vrpn_port": bad})

@@ -2,6 +2,11 @@
 vehicle with the mocap model's poses; a body the model loses is not sent."""
 from __future__ import annotations
 
+import os
+import pathlib
+import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -11,6 +16,9 @@ from crazyflie_driver.mocap.vrpn_client import VrpnClient
 from crazyflie_driver.sim.world.mocap import MocapModel
 from crazyflie_driver.sim.world.mocap_vrpn import WorldVrpnServer, port_is_free
 from crazyflie_driver.sim.world.world import World
+
+
+SRC = pathlib.Path(__file__).resolve().parents[3] / "src"
 
 
 def wait_until(cond, timeout=5.0):
@@ -74,3 +82,84 @@ def test_default_port_is_3883_when_free_else_another():
             second.stop()
     finally:
         first.stop()
+
+
+def test_each_delivered_frame_is_sent_once_with_the_model_rate_and_dropouts():
+    """Reports follow the model's frames, not a timer of their own: 100 Hz of world time, 30 % of the
+    body's frames lost, no frame sent twice, stamps on the capture times' 10 ms grid."""
+    world = World(speed=1.0, seed=7)
+    world.add_vehicle("cf1", position=(0.0, 0.0, 0.0))
+    mocap = MocapModel(world, rate=100.0, dropout=0.3, latency=0.02, seed=7).attach()
+    got, lock = [], threading.Lock()
+
+    def on_pose(report):
+        with lock:
+            got.append((float(world.time), report.server_sec + report.server_usec * 1e-6))
+
+    server = WorldVrpnServer(world, mocap, port=0)
+    world.start()
+    try:
+        server.start()
+        with VrpnClient("127.0.0.1", server.port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
+            assert wait_until(lambda: len(got) > 150, timeout=20.0)
+    finally:
+        server.stop()
+        world.stop()
+    with lock:
+        reports = list(got)
+    world_span = reports[-1][0] - reports[0][0]
+    fraction = (len(reports) - 1) / (world_span * 100.0)
+    assert 0.6 < fraction < 0.8, fraction                 # 70 % of the captures arrive
+    stamps = [s for _, s in reports]
+    steps = np.diff(stamps)
+    assert (steps > 0.005).all()                          # never the same capture twice
+    # the stamps sit on the 10 ms capture grid (up to the host's jitter in mapping world to wall time)
+    ticks = steps / 0.01
+    assert np.median(np.abs(ticks - np.round(ticks))) < 0.2
+
+
+def test_world_server_command_line_serves_vrpn():
+    """``crazyflie_world_server --vrpn PORT``: a tracker per vehicle, named after it, at its position."""
+    env = dict(os.environ, PYTHONPATH=str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-m", "crazyflie_driver.sim.air.server", "--address", "127.0.0.1:0",
+                             "--uri", "radio://0/80/2M/E7E7E7E701", "--uri", "radio://0/80/2M/E7E7E7E702",
+                             "--vrpn", "0", "--mocap-noise", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    poses, lock = {}, threading.Lock()
+
+    def on_pose(report):
+        with lock:
+            poses[report.tracker] = report.position
+
+    try:
+        lines = []
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and not any("world served on" in ln for ln in lines):
+            lines.append(proc.stderr.readline())
+        served = [ln for ln in lines if "served as VRPN on 127.0.0.1:" in ln]
+        assert served, lines
+        port = int(served[0].split("127.0.0.1:")[1].split()[0])
+        with VrpnClient("127.0.0.1", port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
+            assert wait_until(lambda: len(poses) == 2, timeout=10.0)
+        assert np.allclose(poses["cf1"], (0.0, 0.0, 0.0), atol=1e-6)
+        assert np.allclose(poses["cf2"], (0.5, 0.0, 0.0), atol=1e-6)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_world_server_refuses_a_busy_vrpn_port(capsys):
+    from crazyflie_driver.sim.air.server import main
+    import socket
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    try:
+        assert main(["--uri", "radio://0/80/2M/E7E7E7E701", "--address", "127.0.0.1:0",
+                     "--vrpn", str(s.getsockname()[1])]) == 2
+    finally:
+        s.close()
+    assert "cannot serve VRPN on port" in capsys.readouterr().err

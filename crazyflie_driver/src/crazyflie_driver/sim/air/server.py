@@ -5,7 +5,8 @@ vehicle; it serves ``RemoteMedium`` clients on loopback TCP only, without authen
 connection, freed when the client hangs up), runs the
 firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
 
-CLI: ``rosrun crazyflie_driver crazyflie_world_server --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``.
+CLI: ``rosrun crazyflie_driver crazyflie_world_server --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``;
+``--vrpn [PORT]`` also serves the world's motion capture as a VRPN server (``sim.world.mocap_vrpn``).
 """
 from __future__ import annotations
 
@@ -443,7 +444,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dongles", type=int, default=1, help="number of simulated Crazyradios")
     p.add_argument("--udp", action="store_true", help="also serve udp://127.0.0.1:%d+i per Crazyflie" % UDP_BASE_PORT)
     p.add_argument("--seed", type=int, default=None, help="seed for noise and faults")
+    p.add_argument("--vrpn", nargs="?", type=int, const=-1, default=None, metavar="PORT",
+                   help="also serve the motion capture as VRPN on 127.0.0.1:PORT, one tracker per vehicle "
+                   "(no PORT: 3883 when free, else any; 0: any)")
+    p.add_argument("--mocap-rate", type=float, default=100.0, help="VRPN motion capture: frames per second")
+    p.add_argument("--mocap-noise", type=float, default=0.0005, help="... position noise, m (standard deviation)")
+    p.add_argument("--mocap-latency", type=float, default=0.008, help="... latency, s")
+    p.add_argument("--mocap-dropout", type=float, default=0.0, help="... fraction of frames that lose a body")
     return p
+
+
+def start_vrpn(world, args: argparse.Namespace, seed: Optional[int]):
+    """The ``--vrpn`` server: a motion-capture model with the ``--mocap-*`` settings, served over VRPN."""
+    from crazyflie_driver.sim.world.mocap import MocapModel
+    from crazyflie_driver.sim.world.mocap_vrpn import WorldVrpnServer
+
+    if args.vrpn > 65535:
+        raise ValueError("--vrpn port must be 0..65535, got %d" % args.vrpn)
+    model = MocapModel(world, rate=args.mocap_rate, position_noise=args.mocap_noise, latency=args.mocap_latency,
+                       dropout=args.mocap_dropout, seed=seed)
+    server = WorldVrpnServer(world, model, port=None if args.vrpn < 0 else args.vrpn)
+    try:
+        server.start()
+    except OSError as e:
+        raise ValueError("cannot serve VRPN on port %d: %s (choose another: --vrpn PORT, 0 for any)"
+                         % (args.vrpn, e.strerror or e)) from None
+    model.attach()
+    return server
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -471,6 +498,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             server.add_crazyflie(str(v["uri"]), v.get("name"), pos, str(v.get("firmware") or args.firmware),
                                  float(v.get("yaw") or 0.0))
         server.start()
+        try:
+            vrpn = start_vrpn(world, args, args.seed) if args.vrpn is not None else None
+        except ValueError:
+            server.stop()
+            raise
     except (ValueError, KeyError, CrazyflieError, ImportError) as e:
         print("crazyflie_world_server: error: %s" % (e,), file=sys.stderr)
         return 2
@@ -485,11 +517,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for e in server.entries():
         _log.info("%s (%s firmware) on %s%s", e.name, e.crazyflie.profile.generation, e.uri,
                   " and %s" % e.udp.uri if e.udp is not None else "")
+    if vrpn is not None:
+        _log.info("motion capture served as VRPN on 127.0.0.1:%d (%.0f Hz, one tracker per vehicle)", vrpn.port,
+                  args.mocap_rate)
     _log.info("world served on %s (speed %.2f); Ctrl-C to stop", server.address, args.speed)
     try:
         while not stop.wait(0.5):
             pass
     finally:
+        if vrpn is not None:
+            vrpn.stop()
         server.stop()
         world.stop()
         _log.info("stopped")
