@@ -15,6 +15,9 @@ Private parameters: ``vehicles`` (list of ``{uri, name, x, y, z}``; ``position: 
 that vehicle's pose under, as a Vicon room whose body is named that way would, e.g. the
 ``frame:=crazyflie1`` of a launch file; also as a YAML string holding that list, or the path of a
 YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri`` + ``name`` for one vehicle;
+or ``swarm_file``, the path of the swarm file crazyflie_server reads (``server.swarm_config``): every
+Crazyflie at its ``initialPosition`` on the URI the server derives from its id and channel (one
+dongle per channel), named after its tf_prefix, as the server's motion capture looks for it;
 ``dongles``
 (simulated Crazyradios, default: enough for the URIs); ``speed`` (1.0); ``seed``; ``mocap``
 (vicon); ``mocap_rate`` (100 Hz); ``mocap_noise`` (position noise, m, standard deviation);
@@ -148,6 +151,20 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
                                str(item.get("firmware", "current")), _frame(where, item.get("frame"))))
     return out
+
+
+def vehicles_from_swarm_file(path: str) -> Tuple[List[VehicleSpec], int]:
+    """The vehicles of a swarm file and the dongles they need (``SwarmConfigError`` names the fault)."""
+    from crazyflie_driver.server.swarm_config import load_swarm_file
+
+    config = load_swarm_file(path)
+    out = []
+    for cf in config.crazyflies:
+        if "/" in cf.name:
+            raise SimConfigError("%s: tf_prefix %r of id %d has a '/': the simulated body (and its motion-capture "
+                                 "name) must be one ROS name" % (path, cf.name, cf.id))
+        out.append(VehicleSpec(cf.uri, cf.name, tuple(cf.initial_position)))
+    return out, config.dongles_needed
 
 
 def mocap_from_params(params: Mapping[str, Any]) -> MocapConfig:
@@ -411,9 +428,13 @@ def main() -> None:
     init_node("crazyflie_sim")
     params = _private_params()
     try:
-        vehicles = vehicles_from_params(params)
+        if params.get("swarm_file"):
+            vehicles, need = vehicles_from_swarm_file(str(params["swarm_file"]))
+            dongles = dongles_needed(vehicles, params.get("dongles", need))
+        else:
+            vehicles = vehicles_from_params(params)
+            dongles = dongles_needed(vehicles, params.get("dongles"))
         mocap = mocap_from_params(params)
-        dongles = dongles_needed(vehicles, params.get("dongles"))
         vrpn_on, vrpn_port = vrpn_port_from_params(params)
         host, port = parse_address(str(params.get("address", "127.0.0.1:19840")))
         speed = _number("~speed", params.get("speed", 1.0))

@@ -48,3 +48,24 @@ def test_vrpn_params():
     for bad in (-1, 70000, "x", 1.5, True):
         with pytest.raises(SimConfigError, match="~vrpn_port"):
             vrpn_port_from_params({"vrpn": True, "vrpn_port": bad})
+
+
+def test_vehicles_from_the_servers_swarm_file(tmp_path):
+    import pathlib
+
+    from crazyflie_driver.errors import SwarmConfigError
+    from crazyflie_driver.nodes.sim_node import vehicles_from_swarm_file
+
+    example = pathlib.Path(__file__).resolve().parents[3] / "config" / "swarm_example.yaml"
+    vehicles, dongles = vehicles_from_swarm_file(str(example))
+    assert dongles == 2                                              # channels 80 and 90
+    assert [(v.name, v.uri, v.position) for v in vehicles] == [
+        ("cf1", "radio://0/80/2M/E7E7E7E701", (0.0, 0.0, 0.0)),
+        ("cf2", "radio://0/80/2M/E7E7E7E702", (0.5, 0.0, 0.0)),
+        ("cf3", "radio://1/90/2M/E7E7E7E703", (0.0, 0.5, 0.0))]
+    nested = tmp_path / "nested.yaml"
+    nested.write_text("crazyflies:\n  - {id: 4, channel: 80, tf_prefix: team/cf4}\n")
+    with pytest.raises(SimConfigError, match="has a '/'"):
+        vehicles_from_swarm_file(str(nested))
+    with pytest.raises(SwarmConfigError, match="cannot be read"):
+        vehicles_from_swarm_file(str(tmp_path / "missing.yaml"))

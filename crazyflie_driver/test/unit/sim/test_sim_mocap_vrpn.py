@@ -118,12 +118,14 @@ def test_each_delivered_frame_is_sent_once_with_the_model_rate_and_dropouts():
     assert np.median(np.abs(ticks - np.round(ticks))) < 0.2
 
 
-def test_world_server_command_line_serves_vrpn():
-    """``crazyflie_world_server --vrpn PORT``: a tracker per vehicle, named after it, at its position."""
+def test_world_server_command_line_places_a_swarm_file_and_serves_vrpn():
+    """``crazyflie_world_server --swarm FILE --vrpn PORT``: the swarm file's Crazyflies on the URIs the
+    server derives (one dongle per channel), at their initial positions, one VRPN tracker each."""
+    from crazyflie_driver.sim.air.medium import RemoteMedium
     env = dict(os.environ, PYTHONPATH=str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.Popen([sys.executable, "-m", "crazyflie_driver.sim.air.server", "--address", "127.0.0.1:0",
-                             "--uri", "radio://0/80/2M/E7E7E7E701", "--uri", "radio://0/80/2M/E7E7E7E702",
-                             "--vrpn", "0", "--mocap-noise", "0"],
+    swarm = SRC.parent / "config" / "swarm_example.yaml"          # ids 1, 2 on channel 80, id 3 on 90
+    proc = subprocess.Popen([sys.executable, str(SRC.parent / "scripts" / "crazyflie_world_server"),
+                             "--address", "127.0.0.1:0", "--swarm", str(swarm), "--vrpn", "0", "--mocap-noise", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     poses, lock = {}, threading.Lock()
 
@@ -134,21 +136,41 @@ def test_world_server_command_line_serves_vrpn():
     try:
         lines = []
         deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and not any("world served on" in ln for ln in lines):
+        while time.monotonic() < deadline and proc.poll() is None and not any("world served on" in ln for ln in lines):
             lines.append(proc.stderr.readline())
         served = [ln for ln in lines if "served as VRPN on 127.0.0.1:" in ln]
         assert served, lines
         port = int(served[0].split("127.0.0.1:")[1].split()[0])
+        world_port = int([ln for ln in lines if "world served on" in ln][0].split("127.0.0.1:")[1].split()[0])
+        medium = RemoteMedium("127.0.0.1", world_port)
+        try:
+            assert medium.dongle_count() == 2
+            listed = {e["name"]: e["uri"] for e in medium.control("list")}
+        finally:
+            medium.close()
+        assert listed == {"cf1": "radio://0/80/2M/E7E7E7E701", "cf2": "radio://0/80/2M/E7E7E7E702",
+                          "cf3": "radio://1/90/2M/E7E7E7E703"}
         with VrpnClient("127.0.0.1", port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
-            assert wait_until(lambda: len(poses) == 2, timeout=10.0)
-        assert np.allclose(poses["cf1"], (0.0, 0.0, 0.0), atol=1e-6)
-        assert np.allclose(poses["cf2"], (0.5, 0.0, 0.0), atol=1e-6)
+            assert wait_until(lambda: len(poses) == 3, timeout=10.0)
+        for name, where in (("cf1", (0.0, 0.0, 0.0)), ("cf2", (0.5, 0.0, 0.0)), ("cf3", (0.0, 0.5, 0.0))):
+            assert np.allclose(poses[name], where, atol=1e-6), name
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_world_server_refuses_a_bad_swarm_file(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    bad = tmp_path / "swarm.yaml"
+    bad.write_text("crazyflies:\n  - {id: 1, channel: 80}\n  - {id: 1, channel: 80}\n")
+    done = subprocess.run([sys.executable, str(SRC.parent / "scripts" / "crazyflie_world_server"),
+                           "--address", "127.0.0.1:0", "--swarm", str(bad)], env=env, capture_output=True, text=True,
+                          timeout=30)
+    assert done.returncode == 2
+    assert "id 1 is already used" in done.stderr and "swarm.yaml:3" in done.stderr
 
 
 def test_world_server_refuses_a_busy_vrpn_port(capsys):

@@ -6,7 +6,8 @@ connection, freed when the client hangs up), runs the
 firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
 
 CLI: ``rosrun crazyflie_driver crazyflie_world_server --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``;
-``--vrpn [PORT]`` also serves the world's motion capture as a VRPN server (``sim.world.mocap_vrpn``).
+``--swarm FILE`` places the Crazyflies of crazyflie_server's swarm file (the script passes the reader:
+this layer does not read the server's files); ``--vrpn [PORT]`` also serves the world's motion capture as a VRPN server (``sim.world.mocap_vrpn``).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import socket
 import sys
 import threading
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air import server_framing as framing
@@ -436,12 +437,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="crazyflie_world_server", description="Run the simulated Crazyflie world.")
     p.add_argument("--uri", action="append", default=[], help="radio URI of a simulated Crazyflie (repeatable)")
     p.add_argument("--config", help="YAML file listing vehicles (uri, name, position, firmware, yaw)")
+    p.add_argument("--swarm", metavar="FILE", help="crazyflie_server's swarm file: every Crazyflie at its "
+                   "initialPosition on its id's address and channel, one dongle per channel")
     p.add_argument("--address", default=None,
                    help="host:port to serve on (default $CRAZYFLIE_SIM_ADDRESS or %s:%d)"
                    % (DEFAULT_HOST, DEFAULT_PORT))
     p.add_argument("--speed", type=float, default=1.0, help="world time per real time (0 = as fast as possible)")
     p.add_argument("--firmware", default="current", choices=sorted(PROFILES), help="firmware of --uri vehicles")
-    p.add_argument("--dongles", type=int, default=1, help="number of simulated Crazyradios")
+    p.add_argument("--dongles", type=int, default=None, help="number of simulated Crazyradios (default: 1, or what "
+                   "the swarm file needs)")
     p.add_argument("--udp", action="store_true", help="also serve udp://127.0.0.1:%d+i per Crazyflie" % UDP_BASE_PORT)
     p.add_argument("--seed", type=int, default=None, help="seed for noise and faults")
     p.add_argument("--vrpn", nargs="?", type=int, const=-1, default=None, metavar="PORT",
@@ -473,13 +477,26 @@ def start_vrpn(world, args: argparse.Namespace, seed: Optional[int]):
     return server
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+SwarmReader = Callable[[str], Tuple[List[Dict[str, Any]], int]]
+
+
+def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader] = None) -> int:
+    """``read_swarm(path)``: the vehicles ({uri, name, position}) of a swarm file and the dongles they need."""
     logging.basicConfig(level=logging.INFO, format="crazyflie_world_server: %(message)s")
     args = build_parser().parse_args(argv)
     try:
         vehicles = [{"uri": u, "firmware": args.firmware} for u in args.uri]
         if args.config:
             vehicles += load_vehicle_config(args.config)
+        swarm_dongles = 1
+        if args.swarm:
+            if read_swarm is None:
+                raise ValueError("--swarm: start the world server with the crazyflie_world_server script, which "
+                                 "reads swarm files")
+            from_swarm, swarm_dongles = read_swarm(args.swarm)
+            vehicles += from_swarm
+        if args.dongles is None:
+            args.dongles = swarm_dongles
         if not vehicles:
             raise ValueError("no Crazyflies to simulate: give --uri radio://0/80/2M/E7E7E7E701 or --config FILE")
         for v in vehicles:
