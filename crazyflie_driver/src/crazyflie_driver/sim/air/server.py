@@ -7,7 +7,8 @@ firmware timers from a world tick listener and, if asked, opens UDP endpoints fo
 
 CLI: ``rosrun crazyflie_driver crazyflie_world_server --uri radio://0/80/2M/E7E7E7E701 [--uri ...]``;
 ``--swarm FILE`` places the Crazyflies of crazyflie_server's swarm file (the script passes the reader:
-this layer does not read the server's files); ``--vrpn [PORT]`` also serves the world's motion capture as a VRPN server (``sim.world.mocap_vrpn``).
+this layer does not read the server's files); ``--vrpn [PORT]`` also serves the world's motion capture
+as a VRPN server (``sim.world.mocap_vrpn``).
 """
 from __future__ import annotations
 
