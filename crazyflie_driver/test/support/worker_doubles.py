@@ -10,6 +10,7 @@ import threading
 import time
 from typing import Any, Dict, List, Optional
 
+from crazyflie_driver.crtp.firmware_limits import LOG_MAX_BLOCKS, LOG_MAX_OPS
 from crazyflie_driver.errors import RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.protocol.toc import Toc, TocEntry
 from crazyflie_driver.radio.statistics import LinkStatistics
@@ -41,6 +42,7 @@ class FakeLog:
         self.toc: Optional[Toc] = None
         self.blocks: List[FakeBlock] = []
         self.resets = 0
+        self.max_blocks, self.max_ops = LOG_MAX_BLOCKS, LOG_MAX_OPS     # as the TOC info reports them
 
     def reset(self):
         self.cf.calls.append("log.reset")

@@ -14,8 +14,9 @@ from typing import Callable, Dict, List, Sequence
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, PORT_LOG, CRTPPacket
 from crazyflie_driver.errors import LogConfigError, ProtocolError
 from crazyflie_driver.crtp.ctypes import ctype, type_size
-from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_PERIOD_MAX_MS,
-                                                   LOG_PERIOD_MIN_MS, LOG_PERIOD_UNIT_MS, LOG_PERIOD_V2_MAX_MS)
+from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_MAX_OPS,
+                                                   LOG_PERIOD_MAX_MS, LOG_PERIOD_MIN_MS, LOG_PERIOD_UNIT_MS,
+                                                   LOG_PERIOD_V2_MAX_MS)
 from crazyflie_driver.protocol.toc import TocEntry, TocPortClient
 
 _LOG = logging.getLogger(__name__)
@@ -101,17 +102,26 @@ class LogClient(TocPortClient):
     def __init__(self, link, cache=None, timeout: float = 1.0) -> None:
         super().__init__(link, PORT_LOG, "log", cache, timeout)
         self.max_blocks = LOG_MAX_BLOCKS
+        self.max_ops = LOG_MAX_OPS
         self.blocks: Dict[int, LogBlock] = {}
         self._unsubscribe = link.subscribe(PORT_LOG, CH_DATA, self._on_data)
 
     def fetch_toc(self) -> List[TocEntry]:
-        """Download the log TOC (or take it from the cache); it also tells how many blocks fit."""
+        """Download the log TOC (or take it from the cache); it also tells how many blocks and
+        variables (ops) fit."""
         with self._lock:
             info = self._download_toc()
             if info.max_blocks:
                 self.max_blocks = min(info.max_blocks, LOG_MAX_BLOCKS)
+            if info.max_ops:
+                self.max_ops = min(info.max_ops, LOG_MAX_OPS)
             assert self.toc is not None
             return list(self.toc)
+
+    @property
+    def ops_used(self) -> int:
+        """Log variables in the blocks created so far (the firmware counts them over all blocks)."""
+        return sum(len(b.variables) for b in self.blocks.values())
 
     def reset(self) -> None:
         """Delete every block on the Crazyflie (also those a previous session left running)."""
@@ -137,8 +147,13 @@ class LogClient(TocPortClient):
                     % (", ".join(variables), size, LOG_BLOCK_MAX_BYTES))
             period_ms = self._effective_period(period_ms)
             if len(self.blocks) >= self.max_blocks:
-                raise LogConfigError("cannot create log block %s: all %d log blocks are in use"
-                                     % (", ".join(variables), self.max_blocks))
+                raise LogConfigError("cannot create log block %s: all %d log blocks the firmware holds are in use "
+                                     "(delete one first)" % (", ".join(variables), self.max_blocks))
+            if self.ops_used + len(entries) > self.max_ops:
+                raise LogConfigError(
+                    "cannot create log block %s: it needs %d log variables and %d of the %d the firmware holds over "
+                    "all blocks are in use by %d blocks (delete one, or log fewer variables)"
+                    % (", ".join(variables), len(entries), self.ops_used, self.max_ops, len(self.blocks)))
             ident = next(i for i in range(1, 256) if i not in self.blocks)
             block = LogBlock(self, ident, entries, int(period_ms), callback)
             self._send_create(block)

@@ -14,7 +14,7 @@ from typing import Any, List, Mapping, Tuple
 
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.server.setpoint import check_trim
-from crazyflie_driver.server.log_plan import LogBlockSpec, validate_log_block_specs
+from crazyflie_driver.server.log_plan import LogBlockSpec, check_custom_log_limits, validate_log_block_specs
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.server.worker import WorkerConfig
 
@@ -61,6 +61,7 @@ def check_config(config: WorkerConfig, allow_empty_tf_prefix: bool = False) -> W
     try:
         trims = [check_trim(name, getattr(config, name)) for name in ("roll_trim", "pitch_trim")]
         validate_log_block_specs(config.log_blocks)
+        check_custom_log_limits(config.log_blocks, config.enable_logging)
     except ValueError as e:
         raise AddConfigError(str(e)) from None
     return replace(config, tf_prefix=tf_prefix, roll_trim=trims[0], pitch_trim=trims[1])

@@ -3,15 +3,19 @@
 The server publishes each topic from one log packet, so a topic's variables must fit one
 firmware log block (26 bytes of values). This module holds the fixed sensor topics, checks the
 custom ones a user asks for (before any radio traffic), and packs topics into as few blocks as
-fit: the fewer blocks, the fewer packets share the radio. Pure functions, no link.
+fit: the fewer blocks, the fewer packets share the radio. The firmware's limits on blocks and
+variables are counted over the driver's own topics and the custom ones together, before the first
+block is created: an add that asks for more is refused whole, with the numbers and what to change
+(a partial set of topics would leave the user's missing topic silent). Pure functions, no link.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Sequence, Tuple
+from typing import AbstractSet, Dict, List, Sequence, Tuple
 
 from crazyflie_driver.crtp.ctypes import type_size
-from crazyflie_driver.crtp.firmware_limits import LOG_BLOCK_MAX_BYTES, LOG_PERIOD_MAX_MS, LOG_PERIOD_MIN_MS
+from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_MAX_OPS, LOG_PERIOD_MAX_MS,
+                                                   LOG_PERIOD_MIN_MS)
 from crazyflie_driver.errors import LogConfigError, UnknownName
 
 
@@ -129,3 +133,55 @@ def plan_log_blocks(topics: Sequence[Tuple[str, int, Sequence[str]]], types: Dic
 def log_packet_rate(plan: Sequence[PlannedBlock]) -> float:
     """Log packets per second the planned blocks produce."""
     return sum(1000.0 / b.period_ms for b in plan if b.period_ms > 0)
+
+
+def check_custom_log_limits(blocks: Sequence[LogBlockSpec], enable_logging: bool,
+                            max_blocks: int = LOG_MAX_BLOCKS, max_ops: int = LOG_MAX_OPS) -> None:
+    """Custom log blocks alone against the firmware's block and variable limits (each custom topic
+    is one block): the check that needs no Crazyflie, so an add that can never fit is refused at
+    once. The driver's own topics come on top; :func:`check_log_limits` counts them once the
+    Crazyflie's log TOC is known. LogConfigError naming the limit and what to change."""
+    own = (" (with enable_logging the driver's own topics need at least %d blocks and %d variables more)"
+           % (len({p for _, p, _ in FIXED_LOG_TOPICS}), sum(len(v) for _, _, v in FIXED_LOG_TOPICS))
+           if enable_logging else "")
+    if len(blocks) > max_blocks:
+        raise LogConfigError(
+            "%d custom log topics need %d log blocks (one each), the Crazyflie's firmware holds at most %d%s: "
+            "remove at least %d custom topics, or put variables of the same period into one topic (up to %d bytes "
+            "each)" % (len(blocks), len(blocks), max_blocks, own, len(blocks) - max_blocks, LOG_BLOCK_MAX_BYTES))
+    ops = sum(len(b.variables) for b in blocks)
+    if ops > max_ops:
+        raise LogConfigError(
+            "the custom log topics hold %d log variables, the Crazyflie's firmware holds at most %d over all "
+            "blocks%s: remove at least %d variables" % (ops, max_ops, own, ops - max_ops))
+
+
+def _describe(blocks: Sequence[PlannedBlock]) -> str:
+    return "; ".join(", ".join(t for t, _, _ in b.topics) for b in blocks)
+
+
+def check_log_limits(plan: Sequence[PlannedBlock], custom_topics: AbstractSet[str],
+                     max_blocks: int = LOG_MAX_BLOCKS, max_ops: int = LOG_MAX_OPS) -> None:
+    """A whole plan (the driver's own topics and the custom ones) against the firmware's limits on
+    log blocks and log variables (the TOC info reports them), before any block is created.
+
+    LogConfigError naming the limit, what the driver's topics and the custom topics use and what
+    to change; nothing is sent when it raises."""
+    custom = [b for b in plan if any(t in custom_topics for t, _, _ in b.topics)]
+    own = [b for b in plan if b not in custom]
+    own_ops = sum(len(b.variables) for b in own)
+    custom_ops = sum(len(b.variables) for b in custom)
+    own_text = ("the driver's own topics use %d (%s)" % (len(own), _describe(own)) if own
+                else "the driver's own topics use none")
+    fix_own = (", or set enable_logging false to free the driver's %d blocks and %d variables"
+               % (len(own), own_ops) if own else "")
+    if len(plan) > max_blocks:
+        raise LogConfigError(
+            "%d log blocks needed, the Crazyflie's firmware holds at most %d: %s, the %d custom topics one each: "
+            "remove at least %d custom topics%s" % (len(plan), max_blocks, own_text, len(custom),
+                                                    len(plan) - max_blocks, fix_own))
+    if own_ops + custom_ops > max_ops:
+        raise LogConfigError(
+            "%d log variables needed, the Crazyflie's firmware holds at most %d over all blocks: the driver's own "
+            "topics use %d, the custom topics %d: remove at least %d custom variables%s"
+            % (own_ops + custom_ops, max_ops, own_ops, custom_ops, own_ops + custom_ops - max_ops, fix_own))

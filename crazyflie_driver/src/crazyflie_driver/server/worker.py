@@ -35,7 +35,7 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
-                       PlannedBlock, log_packet_rate, plan_log_blocks)
+                       PlannedBlock, check_log_limits, log_packet_rate, plan_log_blocks)
 from crazyflie_driver.protocol.param import param_value
 from crazyflie_driver.server.log_timing import LATE_DATA_WARNING_S, OnboardClock, TopicTiming
 from crazyflie_driver.server.poll_pacer import PollPacer
@@ -410,6 +410,8 @@ class CrazyflieWorker:
             plan.extend(plan_log_blocks(topics, types, share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
         plan.extend(plan_log_blocks(custom, types, share=False))
+        log = self.cf.log       # the firmware's limits over all blocks, before the first is created
+        check_log_limits(plan, {b.topic_name for b in cfg.log_blocks}, log.max_blocks, log.max_ops)
         return plan
 
     def _start_log_blocks(self) -> None:

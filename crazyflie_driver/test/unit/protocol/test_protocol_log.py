@@ -113,8 +113,24 @@ def test_16_block_limit():
     cf, link, fw = make_crazyflie(12)
     for _ in range(16):
         cf.log.create_block(["pm.vbat"], 100, lambda ts, v: None)
-    with pytest.raises(LogConfigError, match="all 16 log blocks are in use"):
+    with pytest.raises(LogConfigError, match="all 16 log blocks the firmware holds are in use"):
         cf.log.create_block(["pm.vbat"], 100, lambda ts, v: None)
+
+
+def test_variable_limit_is_counted_before_sending():
+    cf, link, fw = make_crazyflie(12)
+    cf.log.fetch_toc()
+    assert (cf.log.max_blocks, cf.log.max_ops) == (16, 128)        # from the TOC info
+    fw.max_ops = 1000           # the host refuses on its own count, not on the firmware's answer
+    names = ["acc.x", "acc.y", "acc.z", "pm.vbat"] * 5              # 20 variables, 80 bytes: too big for one
+    for _ in range(6):
+        cf.log.create_block(names[:5] * 1 + names[:1], 100, lambda ts, v: None)   # 6 variables, 24 bytes
+    assert cf.log.ops_used == 36
+    sent = len(control_packets(link))
+    cf.log.max_ops = 40
+    with pytest.raises(LogConfigError, match="needs 6 log variables and 36 of the 40 .* in use by 6 blocks"):
+        cf.log.create_block(names[:6], 100, lambda ts, v: None)
+    assert len(control_packets(link)) == sent
 
 
 def test_unknown_variable_is_named():
@@ -125,7 +141,8 @@ def test_unknown_variable_is_named():
 
 def test_firmware_error_becomes_a_message_and_block_is_freed():
     cf, link, fw = make_crazyflie(12)
-    fw.max_ops = 1
+    cf.log.fetch_toc()
+    fw.max_ops = 1              # fewer than the TOC info said (another session's blocks): the firmware refuses
     with pytest.raises(LogConfigError, match="ENOMEM"):
         cf.log.create_block(["acc.x", "acc.y"], 100, lambda ts, v: None)
     assert fw.blocks == {}

@@ -75,3 +75,16 @@ def test_bad_trims_refuse_the_add(field, value):
     config = WorkerConfig(uri="radio://0/80/2M/E7E7E7E701", tf_prefix="cf1", **{field: value})
     with pytest.raises(AddConfigError, match=field):
         check_config(config)
+
+
+def test_twenty_custom_log_blocks_are_refused_where_the_request_enters():
+    names = ["log%d" % i for i in range(20)]
+    params = {"uri": "radio://0/80/2M/E7E7E7E701", "tf_prefix": "cf1", "genericLogTopics": names,
+              "genericLogTopicFrequencies": [100] * 20}
+    params.update({"genericLogTopic_%s_Variables" % n: ["pm.vbat"] for n in names})
+    with pytest.raises(AddConfigError, match="20 custom log topics need 20 log blocks .* at most 16"):
+        config_from_params(params)
+    cfg = WorkerConfig(uri="radio://0/80/2M/E7E7E7E701", tf_prefix="cf1",
+                       log_blocks=tuple(LogBlockSpec(n, 100, ("pm.vbat",)) for n in names))
+    with pytest.raises(AddConfigError, match="remove at least 4 custom topics"):
+        check_config(cfg)

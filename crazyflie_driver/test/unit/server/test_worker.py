@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from crazyflie_driver.errors import RadioNotFound, UnknownName
+from crazyflie_driver.errors import LogConfigError, RadioNotFound, UnknownName
 from crazyflie_driver.server.log_plan import LogBlockSpec
 from crazyflie_driver.server.setpoint import Setpoint
 from crazyflie_driver.server.worker import MAX_RESTARTS, CrazyflieWorker, WorkerConfig, WorkerState
@@ -81,6 +81,23 @@ def test_unknown_custom_variable_fails_the_add_clearly():
     with pytest.raises(UnknownName, match="foo.bar"):
         w.wait_ready(2.0)
     assert w.state == WorkerState.FAILED
+
+
+def test_too_many_log_blocks_fail_the_add_before_any_block_is_created():
+    """14 custom topics fit next to the driver's 2 blocks; 15 do not: the add fails naming the
+    limit and what uses it, and no block was sent."""
+    custom = tuple(LogBlockSpec("t%d" % i, 100, ("pm.vbat",)) for i in range(15))
+    cf = FakeCrazyflie()
+    w = CrazyflieWorker(WorkerConfig(uri=cf.uri, tf_prefix="cf1", log_blocks=custom), cf, Recorder())
+    w.start()
+    with pytest.raises(LogConfigError, match="17 log blocks needed, the Crazyflie's firmware holds at most 16"):
+        w.wait_ready(2.0)
+    assert "log.create_block" not in cf.calls
+    w, cf, _ = started(config=WorkerConfig(uri=cf.uri, tf_prefix="cf1", log_blocks=custom[:14]))
+    try:
+        assert len(cf.log.blocks) == 16
+    finally:
+        w.stop()
 
 
 def test_keepalive_every_10ms_when_no_setpoints():
