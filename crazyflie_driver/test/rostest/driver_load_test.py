@@ -17,7 +17,8 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, rates_per_world_second, wait_until, world  # noqa: E402
+from support.rostest_support import (TopicRecorder, rates_per_world_second, wait_served, wait_until,  # noqa: E402
+                                     world)
 
 NAMES = ["cf%d" % i for i in range(1, 13)]
 
@@ -53,13 +54,12 @@ class DriverLoad(unittest.TestCase):
     def test_a_every_add_succeeds(self):
         # success: the Crazyflie's services exist (a crazyflie_add exits right after its last log
         # line, which may then never reach /rosout); failure: any error line of a crazyflie_add
-        t0 = time.monotonic()
-        served = lambda: [n for n in NAMES if _service_exists("/%s/update_params" % n)]
-        done = wait_until(lambda: len(served()) == len(NAMES) or self.adds.failed, 90.0, period=0.5)
-        print("adds: %d served, %d failed in %.1f s; failures: %s" % (
-            len(served()), len(self.adds.failed), time.monotonic() - t0, self.adds.failed))
+        served = wait_served(NAMES, 90.0, stop=lambda: self.adds.failed)
+        print("adds: %d served, %d failed; seconds to served (from the test's start): %s; failures: %s" % (
+            len(served), len(self.adds.failed), {n: round(t, 1) for n, t in sorted(served.items())},
+            self.adds.failed))
         self.assertEqual(self.adds.failed, [])
-        self.assertEqual(sorted(served()), sorted(NAMES), done)
+        self.assertEqual(sorted(served), sorted(NAMES))
 
     def test_b_rates_and_ages_are_reported_honestly(self):
         """Six Crazyflies per dongle ask for more log packets than a Crazyradio carries: the
@@ -99,14 +99,6 @@ class DriverLoad(unittest.TestCase):
     def uri_of(self, name: str) -> str:
         i = int(name[2:])
         return "radio://%d/%d/2M/E7E7E7E7%02X" % (0 if i <= 6 else 1, 80 if i <= 6 else 90, i)
-
-
-def _service_exists(name: str) -> bool:
-    try:
-        rospy.wait_for_service(name, timeout=0.05)
-        return True
-    except rospy.ROSException:
-        return False
 
 
 if __name__ == "__main__":

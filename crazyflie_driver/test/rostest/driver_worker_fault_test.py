@@ -14,10 +14,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 
 from crazyflie_driver.nodes.crazyflie_server import start_server
-from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
+from crazyflie_driver.srv import AddCrazyflieRequest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, wait_until, world  # noqa: E402
+from support.rostest_support import (TopicRecorder, add_crazyflies, service_registered, wait_until,  # noqa: E402
+                                     world)
 
 URI = "radio://0/80/2M/E7E7E7E701"
 THRUST = 20000.0        # below hover: the vehicle stays on the floor
@@ -35,9 +36,8 @@ class DriverWorkerFault(unittest.TestCase):
         cls.server = start_server(timeout=1.0, add_timeout=30.0)
         cls.status = TopicRecorder("/crazyflie1/status", DiagnosticStatus)
         cls.diagnostics = TopicRecorder("/diagnostics", DiagnosticArray)
-        req = AddCrazyflieRequest(uri=URI, tf_prefix="crazyflie1", enable_logging=True, enable_parameters=False)
-        rospy.wait_for_service("/add_crazyflie", 10.0)
-        rospy.ServiceProxy("/add_crazyflie", AddCrazyflie)(req)
+        add_crazyflies([AddCrazyflieRequest(uri=URI, tf_prefix="crazyflie1", enable_logging=True,
+                                            enable_parameters=False)])
         cls.worker = cls.server.registry.get(URI)
         cls.pub = rospy.Publisher("/crazyflie1/cmd_vel", Twist, queue_size=1)
         cls._stop = threading.Event()
@@ -103,21 +103,13 @@ class DriverWorkerFault(unittest.TestCase):
         self.assertTrue(wait_until(lambda: (lambda d: d is not None and d.message.startswith("removed"))(
             self.my_diagnostic()), 10.0), self.my_diagnostic())
         self.assertEqual(self.my_diagnostic().level, DiagnosticStatus.ERROR)
-        self.assertTrue(wait_until(lambda: not _service_exists("/crazyflie1/emergency"), 5.0))
+        self.assertTrue(wait_until(lambda: not service_registered("/crazyflie1/emergency"), 5.0))
         with self.assertRaises(KeyError):
             self.server.registry.get(URI)
         # nothing reaches the firmware any more: its watchdog takes it
         packets = sum(self.firmware()["packets_by_port"].values())
         rospy.sleep(0.5)
         self.assertEqual(sum(self.firmware()["packets_by_port"].values()), packets)
-
-
-def _service_exists(name: str) -> bool:
-    try:
-        rospy.wait_for_service(name, timeout=0.2)
-        return True
-    except rospy.ROSException:
-        return False
 
 
 if __name__ == "__main__":

@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
 
+import rosgraph
 import rospy
 from rosgraph_msgs.msg import Log
 
@@ -114,3 +115,45 @@ def world(address: str) -> RemoteMedium:
 def wait_for_crazyflie(tf_prefix: str, timeout: float = 60.0) -> None:
     """Until crazyflie_add finished for this Crazyflie (its services exist)."""
     rospy.wait_for_service("/%s/update_params" % tf_prefix, timeout=timeout)
+
+
+def registered_services() -> Set[str]:
+    """Every service name the master knows, from one call. Unlike ``wait_for_service`` with a short
+    timeout this does not probe each server's socket, which a busy server may answer late."""
+    return {name for name, _providers in rosgraph.Master(rospy.get_name()).getSystemState()[2]}
+
+
+def service_registered(name: str) -> bool:
+    return name in registered_services()
+
+
+def wait_served(tf_prefixes: Sequence[str], timeout: float,
+                stop: Callable[[], Any] = lambda: False) -> Dict[str, float]:
+    """Seconds until each Crazyflie was served (its ``update_params`` service registered), for
+    those served within ``timeout`` s or before ``stop()`` turns true (e.g. an add failed)."""
+    t0, served = time.monotonic(), {}
+    wanted = {p: "/%s/update_params" % p.strip("/") for p in tf_prefixes}
+
+    def check() -> bool:
+        names = registered_services()
+        for prefix, service in wanted.items():
+            if prefix not in served and service in names:
+                served[prefix] = time.monotonic() - t0
+        return len(served) == len(wanted) or bool(stop())
+    wait_until(check, timeout, period=0.1)
+    return served
+
+
+def add_crazyflies(requests: Sequence[Any], timeout: float = 30.0) -> Dict[str, float]:
+    """Waits for the server's ``/add_crazyflie``, then adds each request (``AddCrazyflieRequest``)
+    in turn; seconds each add took, by tf_prefix. The service's error propagates."""
+    from crazyflie_driver.srv import AddCrazyflie
+
+    rospy.wait_for_service("/add_crazyflie", timeout)
+    add = rospy.ServiceProxy("/add_crazyflie", AddCrazyflie)
+    took = {}
+    for req in requests:
+        t0 = time.monotonic()
+        add(req)
+        took[req.tf_prefix] = time.monotonic() - t0
+    return took
