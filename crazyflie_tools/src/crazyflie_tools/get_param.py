@@ -4,10 +4,13 @@ from __future__ import annotations
 import sys
 from typing import List, Optional
 
+from crazyflie_driver.protocol.toc import check_toc_name
+
 from .common import open_crazyflie, parser, run
 
 
 def _get(args) -> int:
+    check_toc_name(args.name, "parameter")      # a name no Crazyflie can have: said before connecting
     cf = open_crazyflie(args)
     try:
         value = cf.params.get(args.name)

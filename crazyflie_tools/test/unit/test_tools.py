@@ -185,6 +185,17 @@ def test_get_param_unknown_name(sim, capsys):
     assert "unknown parameter 'nope'" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("tool", [get_param, set_param])
+def test_a_name_no_crazyflie_can_have_is_refused_before_connecting(sim, capsys, tool):
+    fw = sim.add(URI1)
+    argv = ["--uri", URI1, "--name", "ring.eff\x00ect"] + (["--value", "1"] if tool is set_param else [])
+    assert tool.main(argv) == 1
+    err = capsys.readouterr().err
+    assert "unknown parameter 'ring.eff\\x00ect': it holds a NUL character at position 8" in err
+    assert "Traceback" not in err and err.count("\n") == 1
+    assert sum(fw.state.packets_by_port.values()) == 0         # not even a connect
+
+
 def test_console_prints_boot_text(sim, capsys):
     sim.add(URI1)
     assert console.main(["--uri", URI1, "--seconds", "0.2"]) == 0

@@ -32,6 +32,8 @@ from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCraz
 
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
+from crazyflie_driver.errors import UnknownName
+from crazyflie_driver.protocol.toc import check_toc_name
 from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
@@ -174,12 +176,19 @@ class RosCrazyflie(WorkerListener):
         for p in req.params:
             ros_name = "%s/%s" % (self.ns, p.strip("/"))
             if "/" not in p.strip("/"):
-                errors.append("%s: not of the form group/name" % p)
+                errors.append("%r: not of the form group/name" % p)
+                continue
+            try:       # NUL, control characters...: refused before the ROS parameter server (XML-RPC) sees them
+                name = check_toc_name(p.strip("/").replace("/", "."), "parameter")
+            except UnknownName as e:
+                errors.append("%r: %s" % (p, e))
                 continue
             try:
-                values[p.strip("/").replace("/", ".")] = rospy.get_param(ros_name)
+                values[name] = rospy.get_param(ros_name)
             except KeyError:
                 errors.append("%s: ROS parameter %s is not set" % (p, ros_name))
+            except Exception as e:      # the parameter server's own refusal, named
+                errors.append("%r: the ROS parameter server refused %s: %s" % (p, ros_name, e))
         written, write_errors = self.worker.update_params(values)
         errors.extend(write_errors)
         for name in written:

@@ -17,7 +17,7 @@ from crazyflie_driver.crtp.ctypes import ctype, type_size
 from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_MAX_OPS,
                                                    LOG_PERIOD_MAX_MS, LOG_PERIOD_MIN_MS, LOG_PERIOD_UNIT_MS,
                                                    LOG_PERIOD_V2_MAX_MS)
-from crazyflie_driver.protocol.toc import TocEntry, TocPortClient
+from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name
 
 _LOG = logging.getLogger(__name__)
 
@@ -135,6 +135,8 @@ class LogClient(TocPortClient):
     def create_block(self, variables: Sequence[str], period_ms: int,
                      callback: LogCallback) -> LogBlock:
         """Create and start a block of ``group.name`` variables sampled every ``period_ms``."""
+        for name in variables:
+            check_toc_name(name, "log variable")
         with self._lock:
             toc = self._ensure_toc()
             if not variables:

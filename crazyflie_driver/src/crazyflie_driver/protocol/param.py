@@ -15,7 +15,7 @@ from typing import Any, Callable, Dict, List, Union
 from crazyflie_driver.crtp.packet import PORT_PARAM, CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam
 from crazyflie_driver.crtp.ctypes import ctype, type_size
-from crazyflie_driver.protocol.toc import TocEntry, TocPortClient
+from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name
 
 _LOG = logging.getLogger(__name__)
 
@@ -115,12 +115,14 @@ class ParamClient(TocPortClient):
 
     def get(self, name: str) -> Value:
         """Read one parameter from the Crazyflie now."""
+        check_toc_name(name, "parameter")       # before a TOC download
         with self._lock:
             entry = self._ensure_toc().lookup(name, "parameter")
             return self._read(entry)
 
     def set(self, name: str, value) -> Value:
         """Convert ``value`` to the parameter's type and write it; returns the value written."""
+        check_toc_name(name, "parameter")
         with self._lock:
             entry = self._ensure_toc().lookup(name, "parameter")
             if entry.readonly:

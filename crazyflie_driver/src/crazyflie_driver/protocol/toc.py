@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Dict, Iterator, List, Optional
 
 from crazyflie_driver.crtp.ctypes import BY_LOG_CODE, BY_PARAM_CODE
+from crazyflie_driver.crtp.firmware_limits import TOC_NAME_MAX_BYTES
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ProtocolError, UnknownName
 from crazyflie_driver.protocol.platform import toc_version
@@ -87,6 +88,27 @@ class Toc:
                 hint = " (names are written group.name)"
             raise UnknownName("unknown %s %r: not in the Crazyflie's TOC%s" % (kind, name, hint))
         return entry
+
+
+def check_toc_name(full_name: object, kind: str = "variable") -> str:
+    """``group.name`` of a parameter or log variable, checked against what a TOC entry can be
+    before anything is sent: one ``.``, both parts non-empty printable ASCII without space, ``.`` or
+    ``/`` (a NUL would end the name on the Crazyflie), ``group NUL name NUL`` within the firmware's
+    TOC_NAME_MAX_BYTES. UnknownName naming the name and the rule; returns the name."""
+    if not isinstance(full_name, str):
+        raise UnknownName("unknown %s %r: a name is text" % (kind, full_name))
+    group, dot, name = full_name.partition(".")
+    if not dot or not group or not name:
+        raise UnknownName("unknown %s %r: not of the form group.name" % (kind, full_name))
+    for i, c in enumerate(full_name):
+        if not ("!" <= c <= "~") or (c in "./" and i != len(group)):
+            raise UnknownName("unknown %s %r: it holds %s at position %d; names on a Crazyflie are printable ASCII "
+                              "without spaces, '.' only between group and name" % (
+                                  kind, full_name, "a NUL character" if c == "\0" else "character %r" % c, i))
+    if len(group) + len(name) + 2 > TOC_NAME_MAX_BYTES:
+        raise UnknownName("unknown %s %r: %d characters long; the firmware's TOC names (group and name with their "
+                          "NULs) are at most %d bytes" % (kind, full_name, len(full_name), TOC_NAME_MAX_BYTES))
+    return full_name
 
 
 def toc_types(toc: Optional[Toc]) -> Dict[str, str]:

@@ -12,9 +12,9 @@ import threading
 import time
 from typing import Callable, Dict, Optional, Tuple, Union
 
-from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
-from crazyflie_driver.errors import CrazyflieError, LinkTimeout
+from crazyflie_driver.errors import CommandValueError, CrazyflieError, LinkTimeout
 from crazyflie_driver.radio.crazyradio import RadioAck
 from crazyflie_driver.radio.shared_radio import RadioManager, SharedRadio, default_manager
 from crazyflie_driver.radio.statistics import DEFAULT_LOST_THRESHOLD, LinkStatistics
@@ -161,6 +161,10 @@ class RadioLink:
 
     def send_bytes(self, data: bytes) -> bool:
         """``send`` for a raw packet (header byte + payload); safelink bits are set here."""
+        if not 1 <= len(data) <= 1 + MAX_PAYLOAD:
+            raise CommandValueError("%s: a CRTP packet is a header byte and 0..%d payload bytes, got %d bytes%s"
+                                    % (self.uri, MAX_PAYLOAD, len(data),
+                                       " (a null packet is b'\\xff')" if not data else ""))
         with self._send_lock:
             if not self.safelink:
                 ack = self._round_trip(data)

@@ -17,6 +17,7 @@ from crazyflie_driver.crtp.ctypes import type_size
 from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_MAX_OPS, LOG_PERIOD_MAX_MS,
                                                    LOG_PERIOD_MIN_MS)
 from crazyflie_driver.errors import LogConfigError, UnknownName
+from crazyflie_driver.protocol.toc import check_toc_name
 
 
 IMU_TOPIC = "imu"
@@ -75,6 +76,10 @@ def validate_log_block_specs(blocks: Sequence[LogBlockSpec]) -> None:
             if not dot or not group or not var:
                 raise ValueError("custom log topic %r: variable %r is not of the form group.name"
                                  % (name, v))
+            try:
+                check_toc_name(v, "log variable")
+            except UnknownName as e:
+                raise ValueError("custom log topic %r: %s" % (name, e)) from None
 
 
 @dataclass

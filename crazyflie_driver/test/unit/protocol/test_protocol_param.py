@@ -154,3 +154,20 @@ def test_value_updated_from_firmware_updates_cache_and_calls_back():
     link.drain()
     assert seen == [("ring.effect", 9)]
     assert cf.params.values["ring.effect"] == 9
+
+
+@pytest.mark.parametrize("name,rule", [
+    ("pid_rate.roll\x00kp", "a NUL character at position 13"),
+    ("pid_rate.roll kp", "character ' ' at position 13"),
+    ("pid_rate.roll.kp", "character '.' at position 13"),
+    ("pid_rate.rollü", "character 'ü'"),
+    ("roll_kp", "not of the form group.name"),
+    ("pid_rate.", "not of the form group.name"),
+    ("pid_rate." + "k" * 20, "at most 26 bytes"),
+])
+def test_names_no_crazyflie_can_have_are_refused_before_sending(name, rule):
+    params, link = client({}, 12)
+    for call in (lambda: params.get(name), lambda: params.set(name, 1.0)):
+        with pytest.raises(UnknownName, match=rule):
+            call()
+    assert link.sent == []

@@ -7,7 +7,7 @@ import time
 import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import CrazyflieError, LinkTimeout, RadioUnplugged
+from crazyflie_driver.errors import CommandValueError, CrazyflieError, LinkTimeout, RadioUnplugged
 from crazyflie_driver.radio.fair_lock import FairLock
 from crazyflie_driver.radio.link import RadioLink, open_link
 from crazyflie_driver.radio.shared_radio import RadioManager
@@ -488,3 +488,16 @@ def test_safelink_drops_a_downlink_packet_with_the_old_sequence_bit():
     assert [p.data for p in got] == [b"fresh", b"next"]
     downs = [t.data[0] & 0x04 for t in medium.transmits[-3:]]
     assert downs == [0x00, 0x00, 0x04]      # flipped only by the fresh packet
+
+
+@pytest.mark.parametrize("raw", [b"", bytes(32)])
+def test_a_packet_that_cannot_exist_is_refused_by_name_and_not_sent(raw):
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = RadioLink(URI, manager)
+    link.open()
+    before = len(medium.transmits)
+    with pytest.raises(CommandValueError, match="header byte and 0..30 payload bytes, got %d bytes" % len(raw)):
+        link.send_bytes(raw)
+    assert len(medium.transmits) == before
+    assert link.send_bytes(b"\xff")         # the link still works
