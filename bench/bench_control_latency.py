@@ -23,20 +23,13 @@ Usage (takes the ROS lock on a shared machine; ~1 min per case):
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
-import socket
 import statistics
-import subprocess
 import sys
-import tempfile
 import threading
 import time
 from typing import Dict, List, Optional, Tuple
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
+import bench_support as bs
 
 SIM_ADDRESS = "127.0.0.1:19899"
 TARGET_Z = 0.5
@@ -45,11 +38,6 @@ VEHICLES = [  # name, uri, x, y: four on dongle 0, two on dongle 1
      0.6 * (i % 3), 0.6 * (i // 3))
     for i, d in enumerate((0, 0, 0, 0, 1, 1))
 ]
-
-
-def percentile(values: List[float], p: float) -> float:
-    s = sorted(values)
-    return s[min(len(s) - 1, int(round(p / 100.0 * (len(s) - 1))))]
 
 
 def launch_text(compute_on_pose: bool, logging_on: bool) -> str:
@@ -115,7 +103,8 @@ def address_of(uri: str) -> bytes:
 
 
 def measure(tap: AirTap, seconds: float, settle_s: float, result: dict) -> None:
-    """The bench's thread inside the sim node's process: take off, settle, record, pair."""
+    """The bench's thread inside the sim node's process: take off, settle, record, pair (an exception
+    and the end of the case are handled by ``bench_support.ros_graph_with_sim_node``)."""
     import rospy
     from geometry_msgs.msg import TwistStamped
     from std_srvs.srv import Empty
@@ -124,53 +113,47 @@ def measure(tap: AirTap, seconds: float, settle_s: float, result: dict) -> None:
     from crazyflie_driver.server.setpoint import setpoint_from_twist
     from crazyflie_driver.sim.air.medium import RemoteMedium
 
-    try:
-        while not rospy.core.is_initialized():
-            time.sleep(0.05)
-        names = [v[0] for v in VEHICLES]
-        commands: Dict[str, List[Tuple[float, float, bytes]]] = {n: [] for n in names}
-        lock = threading.Lock()
+    bs.wait_for_ros()
+    names = [v[0] for v in VEHICLES]
+    commands: Dict[str, List[Tuple[float, float, bytes]]] = {n: [] for n in names}
+    lock = threading.Lock()
 
-        def on_cmd(name):
-            def cb(msg: TwistStamped) -> None:
-                t = msg.twist
-                sp = setpoint_from_twist(t.linear.x, t.linear.y, t.linear.z, t.angular.z)
-                payload = rpyt_packet(sp.roll, sp.pitch, sp.yawrate, sp.thrust).data
-                with lock:
-                    commands[name].append((time.time(), msg.header.stamp.to_sec(), bytes(payload)))
-            return cb
-        for n in names:
-            rospy.Subscriber("/%s/controller/cmd_vel_stamped" % n, TwistStamped, on_cmd(n), queue_size=1000)
-        for n in names:
-            rospy.wait_for_service("/%s/takeoff" % n, 120.0)
-        for n in names:
-            rospy.ServiceProxy("/%s/takeoff" % n, Empty)()
-        host, _, port = SIM_ADDRESS.rpartition(":")
-        world = RemoteMedium(host, int(port))
-        deadline = time.monotonic() + 60.0
-        while time.monotonic() < deadline:
-            zs = [world.control("vehicle_state", uri=n)["position"][2] for n in names]
-            if all(abs(z - TARGET_Z) < 0.05 for z in zs):
-                break
-            time.sleep(0.2)
-        else:
-            result["error"] = "not all hovering after 60 s: z = %s" % zs
-            return
-        time.sleep(settle_s)
-        t0 = time.time()
-        time.sleep(seconds)
-        t1 = time.time()
-        time.sleep(0.5)              # packets of the last commands
-        with lock:
-            cmds = {n: [c for c in v if t0 <= c[1] < t1] for n, v in commands.items()}
-        with tap.lock:
-            packets = {a: list(v) for a, v in tap.packets.items()}
-        result.update(pair(cmds, packets, {n: address_of(u) for n, u, _, _ in VEHICLES}))
-        result["positions"] = [world.control("vehicle_state", uri=n)["position"] for n in names]
-    except Exception as e:           # reported by the main thread
-        result["error"] = repr(e)
-    finally:
-        rospy.signal_shutdown("bench done")
+    def on_cmd(name):
+        def cb(msg: TwistStamped) -> None:
+            t = msg.twist
+            sp = setpoint_from_twist(t.linear.x, t.linear.y, t.linear.z, t.angular.z)
+            payload = rpyt_packet(sp.roll, sp.pitch, sp.yawrate, sp.thrust).data
+            with lock:
+                commands[name].append((time.time(), msg.header.stamp.to_sec(), bytes(payload)))
+        return cb
+    for n in names:
+        rospy.Subscriber("/%s/controller/cmd_vel_stamped" % n, TwistStamped, on_cmd(n), queue_size=1000)
+    for n in names:
+        rospy.wait_for_service("/%s/takeoff" % n, 120.0)
+    for n in names:
+        rospy.ServiceProxy("/%s/takeoff" % n, Empty)()
+    host, _, port = SIM_ADDRESS.rpartition(":")
+    world = RemoteMedium(host, int(port))
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        zs = [world.control("vehicle_state", uri=n)["position"][2] for n in names]
+        if all(abs(z - TARGET_Z) < 0.05 for z in zs):
+            break
+        time.sleep(0.2)
+    else:
+        result["error"] = "not all hovering after 60 s: z = %s" % zs
+        return
+    time.sleep(settle_s)
+    t0 = time.time()
+    time.sleep(seconds)
+    t1 = time.time()
+    time.sleep(0.5)              # packets of the last commands
+    with lock:
+        cmds = {n: [c for c in v if t0 <= c[1] < t1] for n, v in commands.items()}
+    with tap.lock:
+        packets = {a: list(v) for a, v in tap.packets.items()}
+    result.update(pair(cmds, packets, {n: address_of(u) for n, u, _, _ in VEHICLES}))
+    result["positions"] = [world.control("vehicle_state", uri=n)["position"] for n in names]
 
 
 def pair(cmds: Dict[str, List[Tuple[float, float, bytes]]], packets: Dict[bytes, List[Tuple[float, bytes]]],
@@ -195,92 +178,36 @@ def pair(cmds: Dict[str, List[Tuple[float, float, bytes]]], packets: Dict[bytes,
     return {"latencies": latencies, "commands": total, "never_sent": total - sent, "per_vehicle": per_vehicle}
 
 
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
 def run_case(compute_on_pose: bool, logging_on: bool, seconds: float, settle_s: float) -> dict:
     """Runs one case in a child process (one ROS graph each) and returns its figures."""
-    out = tempfile.mktemp(prefix="cf_latency_", suffix=".txt")
-    cmd = [sys.executable, os.path.abspath(__file__), "--child", out, "--seconds", str(seconds),
-           "--settle", str(settle_s)] + (["--compute-on-pose"] if compute_on_pose else []) + \
-        (["--logging"] if logging_on else [])
-    result: dict = {}
-    try:
-        subprocess.run(cmd, check=False, timeout=seconds + settle_s + 240)
-    except subprocess.TimeoutExpired:
-        result["error"] = "the case did not finish in time"
-    if os.path.exists(out):
-        with open(out) as f:
-            result.update(json.load(f))
-        os.unlink(out)
-    return result
+    return bs.run_child(__file__, ["--seconds", str(seconds), "--settle", str(settle_s)]
+                        + (["--compute-on-pose"] if compute_on_pose else []) + (["--logging"] if logging_on else []),
+                        timeout=seconds + settle_s + 240)
 
 
 def child(out: str, compute_on_pose: bool, logging_on: bool, seconds: float, settle_s: float) -> None:
     """One ROS graph: roslaunch (master, server, adds, controllers, goals) + the sim node in here."""
-    port = free_port()
-    os.environ["ROS_MASTER_URI"] = "http://127.0.0.1:%d" % port
-    work = tempfile.mkdtemp(prefix="cf_latency_")
-    launch = os.path.join(work, "bench.launch")
-    with open(launch, "w") as f:
-        f.write(launch_text(compute_on_pose, logging_on))
-    env = dict(os.environ, ROS_LOG_DIR=os.path.join(work, "log"), CRAZYFLIE_TOC_CACHE=os.path.join(work, "toc"))
-    roslaunch = subprocess.Popen(["roslaunch", "--port", str(port), launch], env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    result: dict = {}
-    finished = threading.Event()
-    try:
-        import rosgraph
-        deadline = time.monotonic() + 30.0
-        while not rosgraph.is_master_online() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        tap = AirTap()
-        tap.install()
-
-        def watch() -> None:     # the graph died (e.g. a required node): end the case, do not hang
-            roslaunch.wait()
-            if finished.is_set():
-                return
-            import rospy
-            result.setdefault("error", "roslaunch ended early (exit %s); logs in %s" % (roslaunch.returncode, work))
-            rospy.signal_shutdown("roslaunch ended")
-        threading.Thread(target=watch, daemon=True).start()
-        sys.argv = [sys.argv[0], "__name:=crazyflie_sim"]
-        threading.Thread(target=measure, args=(tap, seconds, settle_s, result), daemon=True).start()
-        from crazyflie_driver.nodes import sim_node
-        sim_node.main()
-    finally:
-        finished.set()
-        roslaunch.terminate()
-        try:
-            roslaunch.wait(20)
-        except subprocess.TimeoutExpired:
-            roslaunch.kill()
-        with open(out, "w") as f:
-            json.dump(result, f)
+    tap = AirTap()
+    tap.install()
+    bs.ros_graph_with_sim_node(launch_text(compute_on_pose, logging_on),
+                               lambda result, _roslaunch: measure(tap, seconds, settle_s, result), out,
+                               prefix="cf_latency_")
 
 
 def summary(r: dict) -> Optional[Tuple[float, float, float, int]]:
     lat = r.get("latencies") or []
     if not lat:
         return None
-    return (1000 * statistics.median(lat), 1000 * percentile(lat, 99),
+    return (1000 * statistics.median(lat), 1000 * bs.percentile(lat, 99),
             100.0 * r["never_sent"] / max(1, r["commands"]), r["commands"])
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seconds", type=float, default=15.0, help="measured hover, s (after settling)")
+    ap = bs.parser(__doc__, "control_latency.txt", 15.0)
     ap.add_argument("--settle", type=float, default=3.0)
     ap.add_argument("--compute-on-pose", action="store_true", help="controllers compute on each pose")
     ap.add_argument("--logging", action="store_true", help="the fixed log blocks on (the chapter: off)")
     ap.add_argument("--all", action="store_true", help="timer / on-pose x logging off / on, into --out")
-    ap.add_argument("--out", default=os.path.join(HERE, "results", "control_latency.txt"))
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -291,9 +218,7 @@ def main() -> int:
     lines = ["control path: mocap stamp -> tf -> controller -> cmd_vel -> crazyflie_server -> packet on the "
              "fake Crazyradio; 6 Crazyflies hovering, 4 + 2 on two dongles, Vicon-style tf at 100 Hz, "
              "%.0f s measured per case" % args.seconds,
-             "machine: %s, %s, Python %s, %d CPUs, load average %s" % (
-                 platform.machine(), platform.platform(terse=True), platform.python_version(),
-                 os.cpu_count() or 0, " ".join("%.2f" % x for x in os.getloadavg())),
+             bs.machine_line(),
              "",
              "%-22s %8s %10s %12s %9s %12s" % ("controller", "logging", "commands", "median ms", "p99 ms",
                                                "never sent %")]
@@ -310,10 +235,7 @@ def main() -> int:
         print(line, flush=True)
         lines.append(line)
     if args.all:
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as f:
-            f.write("\n".join(lines) + "\n")
-        print("written to %s" % args.out)
+        bs.write_lines(args.out, lines)
     return 0
 
 

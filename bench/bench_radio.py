@@ -25,17 +25,14 @@ not enter the figures), all in this process. Usage:
 """
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import struct
 import sys
 import threading
 import time
-from typing import Dict, List
+from typing import List
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
-
+import bench_support as bs
+from bench_support import IdleVehicle
 from crazyflie_driver.radio.link import RadioLink                            # noqa: E402
 from crazyflie_driver.radio.shared_radio import RadioManager                # noqa: E402
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming  # noqa: E402
@@ -45,33 +42,6 @@ from crazyflie_driver.sim.air.medium import LocalMedium                     # no
 
 SETPOINT = bytes([0x30]) + struct.pack("<fffH", 0.0, 0.0, 0.0, 0)   # port 3 ch 0 RPYT, thrust 0
 WARMUP_S = 0.2
-
-
-class IdleVehicle:
-    """A vehicle that accepts everything and does nothing (clock = wall clock)."""
-
-    name = "bench"
-
-    def __init__(self) -> None:
-        self._t0 = time.monotonic()
-
-    def time(self) -> float:
-        return time.monotonic() - self._t0
-
-    def read(self, name: str) -> float:
-        return 0.0
-
-    def param_defaults(self) -> Dict[str, float]:
-        return {}
-
-    def write_param(self, name: str, value: float) -> None:
-        pass
-
-    def set_rpyt(self, roll: float, pitch: float, yaw: float, thrust: int) -> None:
-        pass
-
-    def emergency_stop(self) -> None:
-        pass
 
 
 def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
@@ -141,11 +111,8 @@ def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seconds", type=float, default=2.0, help="measured time per case")
-    ap.add_argument("--counts", default="1,2,4,8")
+    ap = bs.parser(__doc__, "radio.txt", 2.0, counts="1,2,4,8")
     ap.add_argument("--modes", default="threads,round-robin")
-    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "radio.txt"))
     args = ap.parse_args()
     model = DongleTiming()
     lines = ["RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink -> Crazyradio -> pyusb ->",
@@ -153,8 +120,7 @@ def main() -> int:
              % (args.seconds, WARMUP_S),
              "timing model: bulk round trip %.2f ms, control transfer %.2f ms; 'off' = DongleTiming.instant()"
              % (1000 * model.bulk_round_trip_s, 1000 * model.control_transfer_s),
-             "machine: %s, %s, Python %s, %d CPUs" % (platform.machine(), platform.platform(terse=True),
-                                                    platform.python_version(), os.cpu_count() or 0),
+             bs.machine_line(),
              "",
              "%-6s %-11s %3s %10s %12s %13s %9s %12s %12s %10s" % (
                  "timing", "mode", "CFs", "packets/s", "slowest CF/s", "CPU us/packet", "CPU load",
@@ -162,7 +128,7 @@ def main() -> int:
     print("\n".join(lines), flush=True)
     for label, timing in (("model", model), ("off", DongleTiming.instant())):
         for mode in args.modes.split(","):
-            for n in [int(x) for x in args.counts.split(",")]:
+            for n in bs.counts_of(args.counts):
                 r = run_case(n, timing, mode, args.seconds)
                 if r["failures"] or abs(r["delivered_ratio"] - 1.0) > 0.01:
                     print("warning: %d unacked, delivered/acked = %.3f" % (r["failures"], r["delivered_ratio"]))
@@ -176,10 +142,7 @@ def main() -> int:
               "packets/s: acked setpoints of all Crazyflies together (each was delivered to the simulated",
               "commander once: safelink drops duplicates). CPU us/packet: process CPU time (all threads) /",
               "packets. capacity/s = 1 / model RTT, model RTT = bulk round trip + ctrl/packet x control transfer."]
-    os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    with open(args.out, "w") as f:
-        f.write("\n".join(lines) + "\n")
-    print("written to %s" % args.out)
+    bs.write_lines(args.out, lines)
     return 0
 
 

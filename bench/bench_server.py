@@ -13,16 +13,13 @@ in real time, sim.server.WorldServer's medium without TCP), so it measures the d
 """
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import statistics
 import sys
 import threading
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "crazyflie_driver", "src"))
-
+import bench_support as bs
+from bench_support import percentile
 from crazyflie_driver.protocol.crazyflie import Crazyflie                     # noqa: E402
 from crazyflie_driver.radio.shared_radio import RadioManager                       # noqa: E402
 from crazyflie_driver.server.registry import CrazyflieRegistry              # noqa: E402
@@ -58,11 +55,6 @@ class TimedCrazyflie(Crazyflie):
         if handed is not None:
             self.latencies.append(time.monotonic() - handed)
         return acked
-
-
-def percentile(values, p):
-    s = sorted(values)
-    return s[min(len(s) - 1, int(round(p / 100.0 * (len(s) - 1))))]
 
 
 def run_case(n: int, logging_on: bool, seconds: float, cache_dir: str) -> dict:
@@ -133,23 +125,19 @@ def run_case(n: int, logging_on: bool, seconds: float, cache_dir: str) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seconds", type=float, default=3.0)
-    ap.add_argument("--counts", default="1,2,4,8")
-    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "server.txt"))
+    ap = bs.parser(__doc__, "server.txt", 3.0, counts="1,2,4,8")
     args = ap.parse_args()
     import tempfile
     cache_dir = tempfile.mkdtemp(prefix="cf_bench_toc_")
     lines = ["crazyflie_server core on one fake Crazyradio PA (0.8 ms per round trip), cmd_vel offered at "
              "%.0f Hz per Crazyflie, %.1f s per case" % (CMD_RATE_HZ, args.seconds),
-             "machine: %s, %s, Python %s, %d CPUs" % (platform.machine(), platform.platform(terse=True),
-                                                    platform.python_version(), os.cpu_count() or 0),
+             bs.machine_line(),
              "",
              "%4s %8s %18s %16s %12s %14s %12s %12s %6s" % ("CFs", "logging", "setpoints/s/CF min", "mean",
                                                        "IMU/s/CF min", "latency med ms", "p99 ms", "radio RT/s",
                                                        "world RTF")]
     print("\n".join(lines), flush=True)
-    for n in [int(x) for x in args.counts.split(",")]:
+    for n in bs.counts_of(args.counts):
         for logging_on in (False, True):
             r = run_case(n, logging_on, args.seconds, cache_dir)
             line = "%4d %8s %18.1f %16.1f %12s %14.2f %12.2f %12.0f %6.2f" % (
@@ -158,10 +146,7 @@ def main() -> int:
                 r["round_trips_per_s"], r["world_rtf"])
             print(line, flush=True)
             lines.append(line)
-    os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    with open(args.out, "w") as f:
-        f.write("\n".join(lines) + "\n")
-    print("written to %s" % args.out)
+    bs.write_lines(args.out, lines)
     return 0
 
 

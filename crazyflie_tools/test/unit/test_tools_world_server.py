@@ -1,93 +1,22 @@
 """The installed-style scripts as separate processes with CRAZYFLIE_BACKEND=sim, against a world
-server in this process: the path a user takes with a running ``crazyflie_world_server``.
-
-The world is ``sim.world.World`` when it exists, else a still-standing stand-in with a real clock.
+server in this process (``bench/bench_support.served_world``, as the benchmarks start one): the path
+a user takes with a running ``crazyflie_world_server``.
 """
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
-import threading
-import time
 
 import pytest
 
-from crazyflie_driver.sim.air.server import WorldServer
-
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
+sys.path.insert(0, os.path.join(REPO, "bench"))
+from bench_support import served_world  # noqa: E402
 SCRIPTS = os.path.join(REPO, "crazyflie_tools", "scripts")
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"
-
-
-class StandInVehicle:
-    def __init__(self, name, world):
-        self.name = name
-        self._world = world
-
-    def time(self):
-        return self._world.time
-
-    def read(self, name):
-        return 3.95 if name == "pm.vbat" else 0.0
-
-    def param_defaults(self):
-        return {}
-
-    def write_param(self, name, value):
-        pass
-
-    def set_rpyt(self, *args):
-        pass
-
-    def emergency_stop(self):
-        pass
-
-
-class StandInWorld:
-    """The world contract without physics: time runs, tick listeners fire."""
-
-    def __init__(self):
-        self._t0 = time.monotonic()
-        self._listeners = []
-        self._stop = threading.Event()
-        self._thread = None
-
-    @property
-    def time(self):
-        return time.monotonic() - self._t0
-
-    def add_vehicle(self, name, position=(0.0, 0.0, 0.0), yaw=0.0, firmware="current", mass=None):
-        return StandInVehicle(name, self)
-
-    def remove_vehicle(self, name):
-        pass
-
-    def add_tick_listener(self, fn, period):
-        self._listeners.append(fn)
-
-    def start(self):
-        def run():
-            while not self._stop.wait(0.002):
-                for fn in self._listeners:
-                    fn(self.time)
-        self._thread = threading.Thread(target=run, daemon=True)
-        self._thread.start()
-
-    def stop(self):
-        self._stop.set()
-        if self._thread:
-            self._thread.join(1.0)
-
-
-def make_world():
-    try:
-        from crazyflie_driver.sim.world.world import World
-    except ImportError:
-        return StandInWorld()
-    return World(speed=1.0, seed=3)
 
 
 SERVERS = {}
@@ -95,17 +24,10 @@ SERVERS = {}
 
 @pytest.fixture(scope="module")
 def server():
-    world = make_world()
-    srv = WorldServer(world, port=0)
-    srv.add_crazyflie(URI1, "cf1", (0.0, 0.0, 0.0), "current", 0.0)
-    srv.add_crazyflie(URI2, "cf2", (0.5, 0.0, 0.0), "2016.02", 0.0)
-    host, port = srv.start()
-    world.start()
-    server_address = "%s:%d" % (host, port)
-    SERVERS[server_address] = srv
-    yield server_address
-    srv.stop()
-    world.stop()
+    with served_world([(URI1, "cf1", (0.0, 0.0, 0.0), "current"),
+                       (URI2, "cf2", (0.5, 0.0, 0.0), "2016.02")]) as (srv, server_address):
+        SERVERS[server_address] = srv
+        yield server_address
 
 
 def run_tool(server, tmp_path, name, *args):
@@ -129,16 +51,8 @@ def test_scan_finds_both(server, tmp_path):
 
 def test_scan_default_address_prints_the_chapter_s_uri(tmp_path):
     """As the chapter shows it: the dongle line, then radio://0/100/2M (no address when it is the default)."""
-    world = make_world()
-    srv = WorldServer(world, port=0)
-    srv.add_crazyflie("radio://0/100/2M", "cf", (0.0, 0.0, 0.0), "current", 0.0)
-    host, port = srv.start()
-    world.start()
-    try:
-        r = run_tool("%s:%d" % (host, port), tmp_path, "scan")
-    finally:
-        srv.stop()
-        world.stop()
+    with served_world([("radio://0/100/2M", "cf")]) as (_, address):
+        r = run_tool(address, tmp_path, "scan")
     assert (r.returncode, r.stdout) == (0, "Configured Dongle with version 0.53\nradio://0/100/2M\n"), r.stderr
 
 
