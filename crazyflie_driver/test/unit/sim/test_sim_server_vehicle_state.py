@@ -26,3 +26,21 @@ def test_vehicle_state_by_uri_and_name():
             medium.control("vehicle_state", uri="radio://0/80/2M/E7E7E7E7AA")
     finally:
         server.stop()
+
+
+def test_poses_of_every_body_at_one_instant():
+    world = World(speed=0.0, seed=1)
+    server = WorldServer(world, port=0, seed=1)
+    server.add_crazyflie("radio://0/80/2M/E7E7E7E701", "cf1", (0.5, -0.25, 0.0))
+    server.add_crazyflie("radio://0/90/2M/E7E7E7E702", "cf2", (-1.0, 2.0, 0.0))
+    host, port = server.start()
+    try:
+        world.step(250)
+        medium = RemoteMedium(host, port)
+        poses = medium.control("poses")
+        assert poses["time"] == pytest.approx(0.25)
+        assert poses["names"] == ["cf1", "cf2"]
+        assert poses["positions"][1][:2] == pytest.approx([-1.0, 2.0], abs=1e-6)
+        medium.close()
+    finally:
+        server.stop()

@@ -32,7 +32,7 @@ from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
 UDP_BASE_PORT = 19850
-CONTROL_OPS = ("time", "dongle_count", "list", "add_crazyflie", "remove_crazyflie", "state", "vehicle_state",
+CONTROL_OPS = ("time", "dongle_count", "list", "add_crazyflie", "remove_crazyflie", "state", "vehicle_state", "poses",
                "reboot", "set_rssi", "power", "set_dongle_faults", "dongle_faults", "set_battery",
                "set_mocap_faults", "faults", "clear_faults")
 
@@ -201,6 +201,13 @@ class WorldServer:
     def _op_vehicle_state(self, a: ControlArgs) -> Dict[str, Any]:
         """The body: position, velocity, motors, lock (World's Vehicle.state)."""
         return self.world.vehicle(self._name(a)).state()
+
+    def _op_poses(self, a: ControlArgs) -> Dict[str, Any]:
+        """Every body's true position at one instant of world time (a flight recorder reads it)."""
+        with self.world._lock:      # the world's RLock: time and positions of the same tick
+            names, positions, _ = self.world.poses()
+            now = float(self.world.time)
+        return {"time": now, "names": list(names), "positions": positions.tolist()}
 
     def _name(self, a: ControlArgs) -> str:
         with self._lock:
