@@ -35,6 +35,7 @@ from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC
 from crazyflie_driver.errors import UnknownName
 from crazyflie_driver.protocol.toc import check_toc_name
 from crazyflie_driver.server.add_config import check_config
+from crazyflie_driver.server.refusals import RefusalThrottle
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
@@ -88,6 +89,7 @@ class RosCrazyflie(WorkerListener):
         self._status_lock = threading.Lock()
         self._last_status: Optional[CrazyflieStatus] = None
         self._said_ignored = False
+        self._refusals = RefusalThrottle()
         self._onboard: Optional[RosOnboardCommands] = None
 
     # -- after the Crazyflie answered --------------------------------------------------------------
@@ -156,11 +158,14 @@ class RosCrazyflie(WorkerListener):
         try:
             setpoint = self.worker.setpoint_for_cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z)
         except ValueError as e:
-            rospy.logwarn_throttle(1.0, "%s: cmd_vel refused: %s" % (self.config.uri, e))
+            text = self._refusals.say(self.config.uri, "cmd_vel", str(e))     # once a second per field and rule
+            if text is not None:
+                rospy.logwarn("%s: cmd_vel refused: %s" % (self.config.uri, text))
             return
         if setpoint.notes:
-            rospy.logwarn_throttle(1.0, "%s: cmd_vel held to the firmware's limits: %s"
-                                   % (self.config.uri, "; ".join(setpoint.notes)))
+            text = self._refusals.say(self.config.uri, "cmd_vel held", "; ".join(setpoint.notes))
+            if text is not None:
+                rospy.logwarn("%s: cmd_vel held to the firmware's limits: %s" % (self.config.uri, text))
         if not self.worker.set_setpoint(setpoint) and not self._said_ignored:
             self._said_ignored = True       # once: the status topic keeps saying it
             rospy.logwarn("%s: cmd_vel ignored after emergency (remove and add the Crazyflie again to fly)"

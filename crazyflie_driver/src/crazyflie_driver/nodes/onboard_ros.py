@@ -18,6 +18,7 @@ from std_msgs.msg import Empty as EmptyMsg
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.msg import FullState, Hover, Position, VelocityWorld
 from crazyflie_driver.server.onboard_commands import OnboardCommands
+from crazyflie_driver.server.refusals import RefusalThrottle
 from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
                                   NotifySetpointsStopResponse, SetGroupMask, SetGroupMaskResponse, StartTrajectory,
                                   StartTrajectoryResponse, Stop, StopResponse, Takeoff, TakeoffResponse,
@@ -30,6 +31,7 @@ class RosOnboardCommands:
     def __init__(self, ns: str, uri: str, commands: OnboardCommands) -> None:
         self.uri = uri
         self.commands = commands
+        self._refusals = RefusalThrottle()
         name = lambda topic: ns + "/" + topic
         c = commands
         subs = [
@@ -80,7 +82,9 @@ class RosOnboardCommands:
                 if handler(msg) is False:
                     rospy.logwarn_throttle(5.0, "%s: %s ignored after emergency" % (self.uri, topic))
             except (ValueError, CrazyflieError) as e:
-                rospy.logwarn_throttle(1.0, "%s: %s refused: %s" % (self.uri, topic, e))
+                text = self._refusals.say(self.uri, topic, str(e))     # once a second per field and rule
+                if text is not None:
+                    rospy.logwarn("%s: %s refused: %s" % (self.uri, topic, text))
         return callback
 
     def _service(self, service: str, handler: Callable[[Any], Any], response: type) -> Callable[[Any], Any]:
