@@ -180,10 +180,11 @@ class HighLevelCommander:
         """Send one high-level packet and check the reply. A command that must not run twice (a
         relative go_to) is sent again only where safelink makes duplicates impossible."""
         cmd = packet.data[0]
-        head = packet.data[1:3]
+        head = packet.data[1:3]     # the reply echoes two request bytes; a shorter request (stop, set
+        # group mask: one byte after the command) is compared on the bytes it has
         reply = self._request(packet,
                               match=lambda p: (p.port == PORT_HIGH_LEVEL and len(p.data) >= _REPLY_LENGTH
-                                               and p.data[0] == cmd and p.data[1:3] == head),
+                                               and p.data[0] == cmd and p.data[1:1 + len(head)] == head),
                               timeout=self.timeout, resend_interval=0.2 if idempotent else self.timeout + 1.0,
                               what="high-level command %d (8:0)" % cmd)
         result = reply.data[3]
