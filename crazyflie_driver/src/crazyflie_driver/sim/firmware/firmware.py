@@ -20,6 +20,7 @@ from typing import Any, Callable, Deque, Dict, Optional, Sequence, Union
 from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
 from crazyflie_driver.sim.firmware import ports
 from crazyflie_driver.sim.firmware import tables as T
+from crazyflie_driver.sim.firmware.decoded_values import DecodedValues, trajectory_values
 from crazyflie_driver.sim.firmware.high_level_port import ENOEXEC, high_level_port
 from crazyflie_driver.sim.firmware.link import NrfLink, SYS_ALL_OFF, SYS_RESET, SYS_STM_OFF
 from crazyflie_driver.sim.firmware.log import LogService
@@ -82,6 +83,7 @@ class SimulatedCrazyflie:
         self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
                             self.profile.rssi_in_empty_ack, self._system_command)
         self._ports: Dict[int, Callable[[int, int, bytes], None]] = {}
+        self.decoded = DecodedValues()           # extremes of every value handed to the vehicle (tests read it)
         self._boot()
 
     # --- lifecycle ---------------------------------------------------------------------------
@@ -96,7 +98,12 @@ class SimulatedCrazyflie:
                                    self._vehicle_param_defaults(), self._write_param, self.send)
         self.logs = LogService(self.profile.generation, self._log_table, self.read_value, self.send, self.now)
         self.console = ports.Console(self.send)
-        state, hook, profile = self.state, ports.vehicle_hook(self.vehicle), self.profile
+        state, profile = self.state, self.profile
+        vehicle_hook, decoded = ports.vehicle_hook(self.vehicle), self.decoded
+
+        def hook(name: str, *args) -> bool:
+            decoded.observe(name, args)
+            return vehicle_hook(name, *args)
         self.trajectory_memory = TrajectoryMemory()           # RAM: empty after every boot
         memory = trajectory_memory_port(self.send, self.trajectory_memory) if 8 in profile.ports \
             else ports.memory_port(self.send)
@@ -201,6 +208,7 @@ class SimulatedCrazyflie:
             return {}
 
     def _write_param(self, name: str, value: float) -> None:
+        self.decoded.observe("param." + name, value)
         fn = getattr(self.vehicle, "write_param", None)
         if fn is not None:
             fn(name, value)
@@ -370,6 +378,7 @@ class SimulatedCrazyflie:
 
     def _high_level(self, command: str, **args) -> int:
         """A high-level commander command for the vehicle; ENOEXEC when the vehicle has no planner."""
+        self.decoded.observe("high_level." + command, args)
         fn = getattr(self.vehicle, "high_level", None)
         if fn is None:
             return ENOEXEC
@@ -434,4 +443,6 @@ class SimulatedCrazyflie:
                                               "variables": [self.logs.entries[v].full_name for v, _ in b.ops]}
                                for b in self.logs.blocks.values()},
                 "params": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)},
+                "decoded": self.decoded.summary(),
+                "trajectories": trajectory_values(self.trajectory_memory.pieces, self.trajectory_memory.descriptors),
             }
