@@ -7,7 +7,8 @@ log block (pubs); its parameters mirrored to ``/<tf_prefix>/<group>/<name>``; ``
 (``diagnostic_msgs/DiagnosticStatus``, latched, on every change) and one entry per Crazyflie on
 ``/diagnostics`` every second. A Crazyflie whose worker gave up is removed (its topics and
 services go) and stays on ``/diagnostics`` as an error until it is added again. Also per Crazyflie:
-crazyflie_ros HEAD's setpoint topics and high-level services (``nodes/onboard_ros.py``).
+crazyflie_ros HEAD's setpoint topics and high-level services (``nodes/onboard_ros.py``). With
+``~swarm_file``, swarm mode: every Crazyflie of the file and the swarm-wide services (``nodes/swarm_ros.py``).
 ``magnetic_field`` carries the firmware's ``mag.x/y/z`` values unscaled, as the original did.
 """
 from __future__ import annotations
@@ -39,9 +40,11 @@ from crazyflie_driver.server.refusals import RefusalThrottle
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
-from crazyflie_driver.nodes.onboard_ros import RosOnboardCommands
+from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
+from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.server.onboard_commands import OnboardCommands
+from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -91,6 +94,8 @@ class RosCrazyflie(WorkerListener):
         self._said_ignored = False
         self._refusals = RefusalThrottle()
         self._onboard: Optional[RosOnboardCommands] = None
+        self._pose: Optional[PosePublisher] = None        # HEAD's onboard pose topic, when asked for
+        self.frame_id_world = "world"
 
     # -- after the Crazyflie answered --------------------------------------------------------------
     def attach(self, worker: CrazyflieWorker) -> None:
@@ -105,7 +110,9 @@ class RosCrazyflie(WorkerListener):
             pubs[PRESSURE_TOPIC] = rospy.Publisher(name("pressure"), Float32, queue_size=10)
             pubs[BATTERY_TOPIC] = rospy.Publisher(name("battery"), Float32, queue_size=10)
         self._custom = {b.topic_name: rospy.Publisher(name(b.topic_name), GenericLogData, queue_size=10)
-                        for b in config.log_blocks}
+                        for b in config.log_blocks if not is_pose_block(b)}
+        self._pose = next((PosePublisher(name(b.topic_name), self.frame_id_world)
+                           for b in config.log_blocks if is_pose_block(b)), None)
         self._rssi_pub = rospy.Publisher(name("rssi"), Float32, queue_size=10)
         self._status_pub = rospy.Publisher(name("status"), DiagnosticStatus, queue_size=10, latch=True)
         self._pubs = pubs       # one assignment: the worker thread reads it meanwhile
@@ -116,6 +123,11 @@ class RosCrazyflie(WorkerListener):
         self._onboard = RosOnboardCommands(self.ns, config.uri, OnboardCommands(
             worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri))
         self.publish_status()
+
+    @property
+    def onboard_commands(self) -> Optional[OnboardCommands]:
+        """The HEAD API of this Crazyflie once attached (the swarm's services use it too)."""
+        return self._onboard.commands if self._onboard is not None else None
 
     def status(self) -> CrazyflieStatus:
         return worker_status(self.worker)
@@ -147,7 +159,9 @@ class RosCrazyflie(WorkerListener):
         with self._status_lock:
             status_pub, self._status_pub = self._status_pub, None
         pubs = list(self._pubs.values()) + list(self._custom.values()) + [self._rssi_pub, status_pub]
-        self._pubs, self._custom, self._rssi_pub = {}, {}, None
+        if self._pose is not None:
+            pubs.append(self._pose.pub)
+        self._pubs, self._custom, self._rssi_pub, self._pose = {}, {}, None, None
         for p in pubs:
             if p is not None:
                 p.unregister()
@@ -242,6 +256,8 @@ class RosCrazyflie(WorkerListener):
             pub.publish(msg)
         elif topic in (PRESSURE_TOPIC, BATTERY_TOPIC) and pub:
             pub.publish(Float32(values[0]))
+        elif topic == POSE_TOPIC and self._pose is not None:
+            self._pose.publish(stamp, values)
         elif topic in custom:
             msg = GenericLogData()
             msg.header.stamp, msg.header.frame_id = stamp, self.frame_id
@@ -358,10 +374,17 @@ class CrazyflieServer:
     def _on_add(self, req) -> AddCrazyflieResponse:
         try:
             config = check_config(config_from_request(req), self.allow_empty_tf_prefix)
-            key = self.registry.canonical_uri(config.uri)
+            self.registry.canonical_uri(config.uri)      # a malformed URI is refused here
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)
             raise rospy.ServiceException(str(e))
+        self.add(config)
+        return AddCrazyflieResponse()
+
+    def add(self, config: WorkerConfig) -> RosCrazyflie:
+        """Connect and serve a checked Crazyflie (``/add_crazyflie``, the swarm file); rospy.ServiceException
+        with the reason when it cannot be added."""
+        key = self.registry.canonical_uri(config.uri)
         if not config.tf_prefix:
             rospy.logwarn("add_crazyflie: %s with an empty tf_prefix: its topics and services are global", key)
         taken = [w for w in self.registry.workers()
@@ -396,7 +419,7 @@ class CrazyflieServer:
                       if worker.log_topics else "no logging",
                       "; no %s on this Crazyflie" % ", ".join(worker.missing_fixed_topics)
                       if worker.missing_fixed_topics else "")
-        return AddCrazyflieResponse()
+        return ros
 
     def _on_remove(self, req) -> RemoveCrazyflieResponse:
         try:
@@ -452,8 +475,9 @@ def main() -> None:
     timeout = float(rospy.get_param("~timeout", 1.0))
     add_timeout = float(rospy.get_param("~add_timeout", 30.0))
     try:
-        start_server(timeout, add_timeout)
-    except Exception as e:       # e.g. no usable USB backend
+        server = start_server(timeout, add_timeout)
+        start_swarm(server)      # only with ~swarm_file
+    except Exception as e:       # e.g. no usable USB backend, a bad swarm file
         rospy.logfatal("crazyflie_server cannot start: %s", e)
         raise SystemExit(1)
     rospy.loginfo("crazyflie_server ready (backend: %s)", os.environ.get("CRAZYFLIE_BACKEND", "usb"))

@@ -18,11 +18,30 @@ from std_msgs.msg import Empty as EmptyMsg
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.msg import FullState, Hover, Position, VelocityWorld
 from crazyflie_driver.server.onboard_commands import OnboardCommands
+from crazyflie_driver.server.onboard_pose import pose_from_log
 from crazyflie_driver.server.refusals import RefusalThrottle
 from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
                                   NotifySetpointsStopResponse, SetGroupMask, SetGroupMaskResponse, StartTrajectory,
                                   StartTrajectoryResponse, Stop, StopResponse, Takeoff, TakeoffResponse,
                                   UploadTrajectory, UploadTrajectoryResponse)
+
+
+class PosePublisher:
+    """HEAD's onboard ``pose`` topic: the estimator's pose (``server.onboard_pose``) as PoseStamped in
+    the world frame, stamped when the Crazyflie sampled it."""
+
+    def __init__(self, topic: str, frame_id: str = "world") -> None:
+        self.frame_id = frame_id
+        self.pub = rospy.Publisher(topic, PoseStamped, queue_size=10)
+
+    def publish(self, stamp, values) -> None:
+        (x, y, z), (qx, qy, qz, qw) = pose_from_log(values)
+        msg = PoseStamped()
+        msg.header.stamp, msg.header.frame_id = stamp, self.frame_id
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = qx, qy, qz, qw
+        self.pub.publish(msg)
 
 
 class RosOnboardCommands:

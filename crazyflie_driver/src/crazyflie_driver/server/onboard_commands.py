@@ -41,6 +41,13 @@ class OnboardCommands:
         self.label = label or str(getattr(cf, "uri", ""))
         self._lock = threading.Lock()
         self._low_level_active = True    # connect sends zero setpoints: assume low level owns it
+        self.group_mask = 0              # as last set by set_group_mask (the firmware starts with 0)
+
+    @property
+    def low_level_active(self) -> bool:
+        """Low-level setpoints (or the connect's zero setpoints) hold the firmware's priority: a
+        high-level command needs notify-setpoints-stop first."""
+        return self._low_level_active
 
     # -- streaming setpoints --------------------------------------------------------------------
     def _set(self, packet: CRTPPacket) -> bool:
@@ -117,6 +124,7 @@ class OnboardCommands:
         packet = high_level.set_group_mask_packet(group_mask)
         with self._lock:
             self.cf.high_level.command(packet)
+            self.group_mask = group_mask
 
     def upload_trajectory(self, trajectory_id: int, piece_offset: int, pieces) -> None:
         """``pieces``: (duration s, poly_x, poly_y, poly_z, poly_yaw) per piece; checked first."""

@@ -8,6 +8,8 @@ import struct
 
 import pytest
 
+from crazyflie_driver.crtp.packet import CRTPPacket
+
 from crazyflie_driver.errors import CommandRejected, CommandValueError, NotSupported, TrajectoryError
 from crazyflie_driver.protocol import high_level as hl
 from crazyflie_driver.protocol.localization import LocalizationSender
@@ -94,6 +96,15 @@ def test_an_overwritten_trajectory_is_forgotten():
     assert sorted(hlc.trajectories) == [2]
     with pytest.raises(TrajectoryError, match="not uploaded"):
         hlc.start_trajectory(1)
+
+
+def test_set_group_mask_takes_the_firmwares_reply_whatever_its_third_byte_holds():
+    # The firmware answers in the request's own buffer: [0, mask, <undefined>, result] for a 2-byte request.
+    hlc, link, fw = commander()
+    for third in (0x00, 0xA5):
+        fw.handle = lambda p, third=third: [CRTPPacket(8, 0, bytes([0, p.data[1], third, 0]))]
+        hlc.set_group_mask(0b101)
+    assert [p.data for p in link.sent] == [bytes([0, 0b101])] * 2
 
 
 @pytest.mark.parametrize("mask", [256, -1, 1.0, True, None])

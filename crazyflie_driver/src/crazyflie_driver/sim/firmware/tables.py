@@ -136,6 +136,7 @@ LOG_TABLE: Tuple[LogVar, ...] = tuple(
     + _lv("stabilizer", "thrust", "uint16_t", _OLD)
     + _lv("stateEstimate", "x y z vx vy vz roll pitch yaw qx qy qz qw", "float", _CUR)
     + _lv("stateEstimateZ", "x y z vx vy vz", "int16_t", _CUR)
+    + _lv("stateEstimateZ", "quat", "uint32_t", _CUR)
     + _lv("locSrv", "x y z qx qy qz qw", "float", _CUR)
     + _lv("locSrvZ", "tick", "uint16_t", _CUR)
     + _lv("ctrltarget", "x y z vx vy vz ax ay az", "float", _CUR)

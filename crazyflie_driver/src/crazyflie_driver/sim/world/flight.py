@@ -11,6 +11,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.sim.firmware.setpoint_decode import Setpoint
 from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, Estimator
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
@@ -187,10 +188,12 @@ class OnboardFlight:
         if group in ("stateEstimate", "stateEstimateZ"):
             p = est.position(i, bodies.position[i], ground_asl)
             v = est.velocity(i, bodies.velocity[i])
-            if group == "stateEstimateZ":
-                return {"stateEstimateZ.%s" % n: float(int(round(val * 1000.0)))
-                        for n, val in zip(("x", "y", "z", "vx", "vy", "vz"), list(p) + list(v))}
             q = bodies.quaternion[i]
+            if group == "stateEstimateZ":
+                out = {"stateEstimateZ.%s" % n: float(int(round(val * 1000.0)))
+                       for n, val in zip(("x", "y", "z", "vx", "vy", "vz"), list(p) + list(v))}
+                out["stateEstimateZ.quat"] = float(compress_quaternion(q))     # the compressed attitude
+                return out
             out = {"stateEstimate.%s" % n: float(val) for n, val in zip(("x", "y", "z", "vx", "vy", "vz"),
                                                                         list(p) + list(v))}
             out.update({"stateEstimate.roll": float(attitude_deg[0]), "stateEstimate.pitch": float(attitude_deg[1]),

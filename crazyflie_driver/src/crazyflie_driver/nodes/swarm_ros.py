@@ -1,0 +1,384 @@
+"""Swarm mode of ``crazyflie_server`` (``~swarm_file``): the ROS face of the swarm.
+
+Adds every Crazyflie of the swarm file at once, writes their firmware parameters, and serves at the
+root namespace, as Crazyswarm does: ``/takeoff``, ``/land``, ``/go_to``, ``/start_trajectory``,
+``/stop`` (broadcasts with group masks, ``server.swarm_commands``), ``/emergency`` (broadcast and
+unicast e-stop to all) and ``/update_params``. Streams motion capture (VRPN, tf or PoseStamped
+topics) to the onboard estimators in packed broadcasts (``server.mocap_stream``), lands a Crazyflie
+whose pose goes stale or whose link is lost (``server.swarm_watch``), and reports both in the log
+and on ``/diagnostics``.
+"""
+from __future__ import annotations
+
+import math
+import statistics
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, Dict, List, Optional
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from std_srvs.srv import Empty, EmptyResponse
+
+from crazyflie_driver import usb_choice
+from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.nodes import swarm_mocap_sources
+from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
+from crazyflie_driver.radio.crazyradio import list_radios
+from crazyflie_driver.server.mocap_stream import MocapStream
+from crazyflie_driver.server.onboard_pose import pose_block
+from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember
+from crazyflie_driver.server.swarm_config import SwarmConfig, SwarmCrazyflie, load_swarm_file
+from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
+from crazyflie_driver.server.swarm_watch import SwarmWatch
+from crazyflie_driver.server.worker import WorkerConfig, WorkerState
+from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, StartTrajectory, StartTrajectoryResponse,
+                                  Stop, StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
+
+WATCH_PERIOD_S = 0.02           # how often stale poses and lost links are checked
+DIAGNOSTICS_PERIOD_S = 1.0
+ALL_CFS_NAMESPACE = "/allcfs"   # /update_params reads /allcfs/<group>/<name> first
+
+
+def worker_config(cf: SwarmCrazyflie, options: SwarmOptions) -> WorkerConfig:
+    """No parameter read-back at connect: reading every parameter of 49 Crazyflies one by one takes
+    ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types."""
+    blocks = (pose_block(options.pose_period_ms),) if options.pose_period_ms else ()
+    return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
+                        enable_parameters=False, log_blocks=blocks)
+
+
+def count_dongles(wait_s: float) -> int:
+    """Crazyradios present (the simulated world's once it answers, waiting up to ``wait_s``)."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            n = len(list_radios(usb_choice.get_backend()))
+        except (CrazyflieError, OSError, ConnectionError) as e:
+            n, error = 0, e
+        else:
+            error = None
+        if n or time.monotonic() >= deadline or shutting_down():
+            if error is not None and not n:
+                rospy.logwarn("swarm: no Crazyradio found (%s)", error)
+            return n
+        time.sleep(0.5)
+
+
+class RosSwarm:
+    """Swarm mode inside a running ``CrazyflieServer``."""
+
+    def __init__(self, server, options: SwarmOptions, config: SwarmConfig) -> None:
+        self.server = server
+        self.options = options
+        self.config = config
+        self.members: List[SwarmMember] = []
+        self.failed: Dict[str, str] = {}
+        self.connect_s = float("nan")
+        self.commands: Optional[SwarmCommands] = None
+        self.broadcaster: Optional[SwarmBroadcaster] = None
+        self.stream: Optional[MocapStream] = None
+        self.watch = SwarmWatch([cf.tf_prefix for cf in config.crazyflies], options.stale_after, options.stale_hold)
+        self._watch_lock = threading.Lock()
+        self._emergency = False
+        self._services: List[Any] = []
+        self._sources: List[Any] = []
+        self._link_ok: Dict[str, bool] = {}
+        self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+
+    # -- start-up ---------------------------------------------------------------------------------
+    def start(self) -> None:
+        t0 = time.monotonic()
+        by_name = {cf.tf_prefix: cf for cf in self.config.crazyflies}
+        with ThreadPoolExecutor(max_workers=max(1, min(64, len(by_name)))) as pool:
+            results = list(pool.map(self._add, self.config.crazyflies))
+        self.connect_s = time.monotonic() - t0
+        for cf, (member, error) in zip(self.config.crazyflies, results):
+            if member is not None:
+                self.members.append(member)
+            else:
+                self.failed[cf.tf_prefix] = error
+                rospy.logerr("swarm: %s (%s) was not added: %s", cf.tf_prefix, cf.uri, error)
+        rospy.loginfo("swarm: %d of %d Crazyflies connected and configured in %.2f s", len(self.members),
+                      len(by_name), self.connect_s)
+        if not self.members:
+            rospy.logerr("swarm: no Crazyflie of %s could be added; no swarm services", self.config.source)
+            return
+        version = min(m.worker.cf.protocol_version for m in self.members)
+        self.broadcaster = SwarmBroadcaster([m.uri for m in self.members], version, usb_choice.radio_manager(),
+                                            repeats=self.options.broadcast_repeats,
+                                            interval_s=self.options.broadcast_interval)
+        self.broadcaster.open()
+        self.commands = SwarmCommands(self.live_members, self.broadcaster)
+        self._advertise()
+        self._start_mocap({m.name: m.uri for m in self.members})
+        threading.Thread(target=self._watch_loop, name="swarm watch", daemon=True).start()
+        threading.Thread(target=self._diagnostics_loop, name="swarm diagnostics", daemon=True).start()
+        rospy.loginfo("swarm ready: %d Crazyflies on %d radio link(s), motion capture: %s", len(self.members),
+                      len(self.broadcaster.links), self.options.mocap)
+
+    def _add(self, cf: SwarmCrazyflie):
+        """Connect one Crazyflie and configure it: (member, None) or (None, reason)."""
+        try:
+            ros = self.server.add(worker_config(cf, self.options))
+        except (rospy.ServiceException, CrazyflieError, ValueError) as e:
+            return None, str(e)
+        member = SwarmMember(cf.tf_prefix, str(ros.config.uri), ros.worker, ros.onboard_commands)
+        params = dict(cf.params)
+        if self.options.mocap == "none":
+            # no motion capture to take the first fix from: the file's initial position
+            params.update(initial_position_params(cf.initial_position))
+        written, errors = ros.worker.update_params(params)
+        for e in errors:
+            rospy.logerr("swarm: %s: firmware parameter from %s not written: %s", cf.tf_prefix,
+                         self.config.source, e)
+        try:
+            if cf.group_mask:
+                member.onboard.set_group_mask(cf.group_mask)
+            # the connect's zero setpoints hold the priority: hand it to the high-level commander
+            # now, on the ground, where its idle planner just keeps the motors off
+            member.onboard.notify_setpoints_stop(0)
+        except (CrazyflieError, ValueError) as e:
+            rospy.logwarn("swarm: %s: %s", cf.tf_prefix, e)
+        return member, None
+
+    def live_members(self) -> List[SwarmMember]:
+        """The members whose worker the server still serves (one that gave up is left out)."""
+        served = set(id(w) for w in self.server.registry.workers())
+        return [m for m in self.members if id(m.worker) in served]
+
+    # -- services ---------------------------------------------------------------------------------
+    def _advertise(self) -> None:
+        c = self.commands
+        services = [
+            ("/takeoff", Takeoff, TakeoffResponse, self._takeoff),
+            ("/land", Land, LandResponse, lambda r: c.land(r.groupMask, r.height, r.duration.to_sec())),
+            ("/go_to", GoTo, GoToResponse, lambda r: c.go_to(r.groupMask, (r.goal.x, r.goal.y, r.goal.z), r.yaw,
+                                                            r.duration.to_sec())),
+            ("/start_trajectory", StartTrajectory, StartTrajectoryResponse,
+             lambda r: c.start_trajectory(r.groupMask, r.trajectoryId, r.timescale, r.reversed)),
+            ("/stop", Stop, StopResponse, lambda r: c.stop(r.groupMask)),
+            ("/update_params", UpdateParams, UpdateParamsResponse, self._update_params),
+        ]
+        for name, kind, response, handler in services:
+            self._services.append(rospy.Service(name, kind, self._service(name, handler, response)))
+        self._services.append(rospy.Service("/emergency", Empty, self._on_emergency))
+
+    def _service(self, name: str, handler: Callable[[Any], Any], response: type) -> Callable[[Any], Any]:
+        def callback(req):
+            if self._emergency and name != "/update_params":
+                raise rospy.ServiceException("%s refused: the swarm is in emergency (restart the Crazyflies and "
+                                             "the server to fly again)" % name)
+            try:
+                handler(req)
+            except (ValueError, CrazyflieError) as e:
+                rospy.logerr("swarm: %s refused: %s", name, e)
+                raise rospy.ServiceException("%s: %s" % (name, e))
+            return response()
+        return callback
+
+    def _takeoff(self, req) -> None:
+        targets = self.commands.targets(req.groupMask)
+        self.commands.takeoff(req.groupMask, req.height, req.duration.to_sec())
+        with self._watch_lock:
+            for m in targets:
+                self.watch.rearm(m.name)
+
+    def _on_emergency(self, _req) -> EmptyResponse:
+        self._emergency = True
+        if self.stream is not None:
+            self.stream.pause()
+        failures = self.commands.emergency()
+        rospy.logwarn("swarm: EMERGENCY: e-stop broadcast on every radio and sent to each of %d Crazyflies%s",
+                      len(self.members), "; failed: " + "; ".join(failures) if failures else "")
+        return EmptyResponse()
+
+    def _update_params(self, req) -> None:
+        """Each name from /allcfs/<group>/<name> (for every Crazyflie) or else /<tf_prefix>/<group>/<name>;
+        written by unicast to every Crazyflie, in parallel, each write acknowledged."""
+        names = [p.strip("/") for p in req.params]
+        bad = [p for p in names if p.count("/") != 1]
+        if bad:
+            raise ValueError("not of the form group/name: %s" % ", ".join(bad))
+        members = self.live_members()
+
+        def write(m: SwarmMember) -> List[str]:
+            values, errors = {}, []
+            for p in names:
+                for ns in (ALL_CFS_NAMESPACE, "/" + m.name):
+                    if rospy.has_param(ns + "/" + p):
+                        values[p.replace("/", ".")] = rospy.get_param(ns + "/" + p)
+                        break
+                else:
+                    errors.append("%s: neither %s/%s nor /%s/%s is set" % (m.name, ALL_CFS_NAMESPACE, p, m.name, p))
+            _, write_errors = m.worker.update_params(values)
+            return errors + ["%s: %s" % (m.name, e) for e in write_errors]
+
+        with ThreadPoolExecutor(max_workers=max(1, min(16, len(members)))) as pool:
+            errors = [e for result in pool.map(write, members) for e in result]
+        if errors:
+            raise ValueError("%d not applied: %s" % (len(errors), "; ".join(errors[:10])))
+
+    # -- motion capture ---------------------------------------------------------------------------
+    def _start_mocap(self, uris: Dict[str, str]) -> None:
+        if self.options.mocap == "none":
+            return
+        self.stream = MocapStream(uris, self.broadcaster.send_poses, self.options.position_only,
+                                  on_first_fix=self._first_fix, on_pose=self._pose_seen).start()
+        names = {self.options.mocap_pattern.format(name=name): name for name in uris}
+        self._sources.append(swarm_mocap_sources.start(self.options, names, self.stream.pose))
+
+    def _pose_seen(self, name: str, now: float) -> None:
+        with self._watch_lock:
+            self.watch.pose_seen(name, now)
+
+    def _first_fix(self, name: str, position) -> None:
+        """The estimator starts where motion capture first saw the Crazyflie (as Crazyswarm does)."""
+        member = next((m for m in self.members if m.name == name), None)
+        if member is None:
+            return
+        values = initial_position_params(position)
+        _, errors = member.worker.update_params(values)
+        if errors:
+            rospy.logerr("swarm: %s: initial position from its first pose not written: %s", name, "; ".join(errors))
+        else:
+            rospy.loginfo("swarm: %s first seen at (%.3f, %.3f, %.3f): estimator reset there", name, *position)
+
+    # -- watching -----------------------------------------------------------------------------------
+    def _watch_loop(self) -> None:
+        while not shutting_down():
+            time.sleep(WATCH_PERIOD_S)
+            try:
+                self._check(time.monotonic())
+            except Exception as e:      # never let bookkeeping end the watch
+                rospy.logerr_throttle(5.0, "swarm: watch failed: %r" % (e,))
+
+    def _check(self, now: float) -> None:
+        members = {m.name: m for m in self.live_members()}
+        with self._watch_lock:
+            for name, m in members.items():
+                ok = m.worker.state != WorkerState.LOST
+                if self._link_ok.get(name, True) != ok:
+                    self._link_ok[name] = ok
+                    if not ok:
+                        rospy.logerr("swarm: %s: radio link lost; it lands if the link stays lost for %.1f s",
+                                     name, self.options.stale_hold)
+                    else:
+                        rospy.logwarn("swarm: %s: radio link back", name)
+                self.watch.link(name, ok, now)
+            events = self.watch.check(now)
+        for ev in events:
+            if ev.kind == "stale":
+                rospy.logwarn("swarm: %s: no pose for %.2f s (motion capture lost it); it lands in %.1f s unless "
+                              "the pose comes back", ev.name, ev.age, self.options.stale_hold)
+            elif ev.kind == "fresh":
+                rospy.loginfo("swarm: %s: pose back", ev.name)
+            elif ev.kind == "land" and ev.name in members and not self._emergency:
+                rospy.logerr("swarm: %s: landing by itself: %s", ev.name, ev.reason)
+                threading.Thread(target=self._land_one, args=(members[ev.name], ev.reason),
+                                 name="land %s" % ev.name, daemon=True).start()
+
+    def _land_one(self, member: SwarmMember, reason: str) -> None:
+        """Unicast land (retried while its link is lost, until it is taken or refused)."""
+        while not shutting_down() and not self._emergency and member.worker.state != WorkerState.STOPPED:
+            try:
+                member.onboard.land(0, 0.0, self.options.stale_land_duration)
+                return
+            except CrazyflieError as e:
+                if "refused" in str(e):         # e.g. on the ground already: nothing to land
+                    rospy.loginfo("swarm: %s: land not needed: %s", member.name, e)
+                    return
+                rospy.logwarn_throttle(2.0, "swarm: %s: land (%s) not delivered yet: %s" % (member.name, reason, e))
+            time.sleep(0.1)
+
+    # -- diagnostics --------------------------------------------------------------------------------
+    def diagnostics(self, now: float) -> DiagnosticArray:
+        arr = DiagnosticArray()
+        arr.header.stamp = rospy.Time.now()
+        mocap = self.options.mocap != "none"
+        with self._watch_lock:
+            for m in self.members:
+                status = DiagnosticStatus(name="crazyflie_server swarm: %s" % m.name, hardware_id=m.uri)
+                state = self.watch.state(m.name, now) if mocap else "no motion capture"
+                age = self.watch.age(m.name, now)
+                landed = self.watch.landed_for(m.name)
+                status.level = {"ok": DiagnosticStatus.OK, "no motion capture": DiagnosticStatus.OK,
+                                "no pose yet": DiagnosticStatus.WARN}.get(state, DiagnosticStatus.ERROR)
+                status.message = "pose %s%s" % (state, " (landed: %s)" % landed if landed else "")
+                status.values = [KeyValue("pose age_s", "%.3f" % age if math.isfinite(age) else "never"),
+                                 KeyValue("link", "ok" if self._link_ok.get(m.name, True) else "lost")]
+                arr.status.append(status)
+            for name, error in self.failed.items():
+                arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, name="crazyflie_server swarm: %s"
+                                                   % name, message="not added: %s" % error))
+        summary = DiagnosticStatus(name="crazyflie_server swarm", hardware_id=self.config.source)
+        summary.level = DiagnosticStatus.ERROR if self._emergency or self.failed else DiagnosticStatus.OK
+        summary.message = "emergency" if self._emergency else "%d Crazyflies" % len(self.members)
+        values = [("connect_s", "%.2f" % self.connect_s)]
+        if self.stream is not None:
+            lat = list(self.stream.latencies)
+            values += [("mocap frames", str(self.stream.frames)), ("mocap transfers", str(self.stream.transfers))]
+            if lat:
+                lat.sort()
+                values += [("mocap latency median_ms", "%.2f" % (1000 * statistics.median(lat))),
+                           ("mocap latency p99_ms", "%.2f" % (1000 * lat[min(len(lat) - 1, int(0.99 * len(lat)))]))]
+        if self.broadcaster is not None:
+            for key, link in self.broadcaster.links.items():
+                values.append(("radio %d channel %d broadcasts" % (key[0], key[1]), str(link.stats.packets)))
+        summary.values = [KeyValue(k, v) for k, v in values]
+        arr.status.append(summary)
+        return arr
+
+    def _diagnostics_loop(self) -> None:
+        while not shutting_down():
+            time.sleep(DIAGNOSTICS_PERIOD_S)
+            try:
+                publish_unless_shutting_down(self._diag_pub, self.diagnostics(time.monotonic()))
+            except Exception as e:
+                rospy.logerr_throttle(10.0, "swarm: diagnostics failed: %r" % (e,))
+
+    def shutdown(self) -> None:
+        if self.stream is not None:
+            self.stream.stop()
+        for s in self._sources:
+            try:
+                s.stop()
+            except Exception:
+                pass
+        if self.broadcaster is not None:
+            self.broadcaster.close()
+
+
+def initial_position_params(position) -> Dict[str, Any]:
+    """Crazyswarm's way to start the Kalman estimator at a known place: initial x/y/z, then reset.
+    (A dict keeps this order: the reset must come after the position.)"""
+    return {"kalman.initialX": float(position[0]), "kalman.initialY": float(position[1]),
+            "kalman.initialZ": float(position[2]), "kalman.resetEstimation": 1}
+
+
+def start_swarm(server) -> Optional[RosSwarm]:
+    """Swarm mode when ``~swarm_file`` is set: checked options and file (a fault ends the node with its
+    message), then everything else in a background thread."""
+    params = {k: rospy.get_param("~" + k) for k in ("swarm_file", "swarm_types_file", "mocap", "mocap_pattern",
+                                                    "vrpn_server", "world_frame", "position_only", "stale_after",
+                                                    "stale_hold", "stale_land_duration", "broadcast_repeats",
+                                                    "broadcast_interval", "enable_logging", "pose_period_ms",
+                                                    "dongle_wait") if rospy.has_param("~" + k)}
+    if not params.get("swarm_file"):
+        return None
+    options = options_from_params(params)
+    load_swarm_file(options.swarm_file, options.swarm_types_file or None)     # file faults first, fast
+    dongles = count_dongles(options.dongle_wait)
+    config = load_swarm_file(options.swarm_file, options.swarm_types_file or None, dongles=dongles)
+    swarm = RosSwarm(server, options, config)
+    rospy.on_shutdown(swarm.shutdown)
+
+    def run() -> None:
+        try:
+            swarm.start()
+        except Exception as e:
+            rospy.logerr("swarm: start failed: %s", e)
+    threading.Thread(target=run, name="swarm start", daemon=True).start()
+    return swarm

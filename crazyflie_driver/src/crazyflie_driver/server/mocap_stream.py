@@ -1,0 +1,161 @@
+"""Motion capture to the onboard estimators of a swarm, in packed broadcasts, without ROS.
+
+Poses come in one by one from whatever source (VRPN, tf, topics), in any thread. The first pose of a
+motion-capture frame wakes the sender, which waits ``gather_s`` for the rest of that frame and then
+sends every pose that arrived since its last burst: one burst per radio, two poses per packet (or four
+positions), so the stream runs at the motion-capture rate with one radio turn per frame. A pose whose
+orientation is missing or not a unit quaternion goes out as a position only.
+
+The first pose of each Crazyflie is also reported once (``on_first_fix``), for the estimator's
+initial position (``kalman.initialX/Y/Z`` + ``kalman.resetEstimation``, as Crazyswarm does); that
+runs in its own thread so slow parameter writes never hold the stream.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+
+LOG = logging.getLogger("crazyflie_driver.server.mocap")
+
+Position = Tuple[float, float, float]
+Quaternion = Tuple[float, float, float, float]
+#: How long the sender waits for the rest of a frame after its first pose (s).
+DEFAULT_GATHER_S = 0.002
+LATENCY_SAMPLES = 2000          # kept for the median / p99 (the newest ones)
+
+
+def usable_quaternion(q: Optional[Sequence[float]]) -> Optional[Quaternion]:
+    """``q`` normalised, or None when it is missing, not finite or far from unit length."""
+    if q is None or len(q) != 4 or not all(math.isfinite(c) for c in q):
+        return None
+    n = math.sqrt(sum(c * c for c in q))
+    if not 0.5 < n < 1.5:
+        return None
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+class MocapStream:
+    """``send(poses, position_only)`` sends one frame (``poses``: by URI, (x, y, z, qx, qy, qz, qw) or
+    (x, y, z)); ``uris``: the URI of each Crazyflie name the poses come under."""
+
+    def __init__(self, uris: Mapping[str, str], send: Callable[[Dict[str, tuple], bool], int],
+                 position_only: bool = False, on_first_fix: Optional[Callable[[str, Position], None]] = None,
+                 on_pose: Optional[Callable[[str, float], None]] = None, gather_s: float = DEFAULT_GATHER_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.uris = dict(uris)
+        self._send = send
+        self.position_only = position_only
+        self._on_first_fix = on_first_fix
+        self._on_pose = on_pose
+        self.gather_s = gather_s
+        self._clock = clock
+        self._cond = threading.Condition()
+        self._pending: Dict[str, Tuple[float, Position, Optional[Quaternion]]] = {}
+        self._fixed: set = set()
+        self._fixes: "queue.Queue[Optional[Tuple[str, Position]]]" = queue.Queue()
+        self._stopping = False
+        self._paused = False
+        self._threads: List[threading.Thread] = []
+        self.frames = 0
+        self.transfers = 0
+        self.poses_sent = 0
+        self.send_errors = 0
+        self.latencies: List[float] = []        # s from a pose's arrival to its burst leaving
+
+    # -- input (any thread) ---------------------------------------------------------------------
+    def pose(self, name: str, position: Sequence[float], orientation: Optional[Sequence[float]] = None,
+             received: Optional[float] = None) -> bool:
+        """A new pose of ``name`` (m, world frame); False when the name is not in the swarm or the
+        position is not finite (dropped)."""
+        if name not in self.uris or len(position) != 3 or not all(math.isfinite(c) for c in position):
+            return False
+        now = self._clock() if received is None else received
+        p = (float(position[0]), float(position[1]), float(position[2]))
+        with self._cond:
+            self._pending[name] = (now, p, usable_quaternion(orientation))
+            self._cond.notify()
+            first = name not in self._fixed
+            self._fixed.add(name)
+        if self._on_pose is not None:
+            self._on_pose(name, now)
+        if first:
+            self._fixes.put((name, p))
+        return True
+
+    def pause(self, paused: bool = True) -> None:
+        """Stop (or resume) sending, e.g. after an emergency; poses are still taken in."""
+        self._paused = paused
+
+    # -- threads ---------------------------------------------------------------------------------
+    def start(self) -> "MocapStream":
+        for target, name in ((self._run, "mocap stream"), (self._run_fixes, "mocap first fixes")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        self._fixes.put(None)
+        for t in self._threads:
+            t.join(timeout)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._pending and not self._stopping:
+                    self._cond.wait()
+                if self._stopping:
+                    return
+            if self.gather_s > 0:
+                time.sleep(self.gather_s)
+            with self._cond:
+                frame, self._pending = self._pending, {}
+            if not self._paused:
+                self.send_frame(frame)
+
+    def send_frame(self, frame: Mapping[str, Tuple[float, Position, Optional[Quaternion]]]) -> int:
+        """Send one frame now (the sender thread calls this; tests may too). Returns USB transfers."""
+        poses: Dict[str, tuple] = {}
+        positions: Dict[str, tuple] = {}
+        for name, (_, p, q) in frame.items():
+            if self.position_only or q is None:
+                positions[self.uris[name]] = p
+            else:
+                poses[self.uris[name]] = p + q
+        taken = 0
+        try:
+            if poses:
+                taken += self._send(poses, False)
+            if positions:
+                taken += self._send(positions, True)
+        except Exception as e:      # a dongle gone: the next frame tries again
+            self.send_errors += 1
+            if self.send_errors == 1 or self.send_errors % 1000 == 0:
+                LOG.error("motion capture broadcast failed (%d times so far): %s", self.send_errors, e)
+            return 0
+        sent_at = self._clock()
+        self.frames += 1
+        self.transfers += taken
+        self.poses_sent += len(frame)
+        self.latencies.extend(sent_at - t for t, _, _ in frame.values())
+        if len(self.latencies) > LATENCY_SAMPLES:
+            del self.latencies[:-LATENCY_SAMPLES]
+        return taken
+
+    def _run_fixes(self) -> None:
+        while True:
+            item = self._fixes.get()
+            if item is None:
+                return
+            if self._on_first_fix is not None:
+                try:
+                    self._on_first_fix(*item)
+                except Exception as e:
+                    LOG.error("%s: initial position from the first pose failed: %s", item[0], e)

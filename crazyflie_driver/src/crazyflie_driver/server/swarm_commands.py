@@ -1,0 +1,145 @@
+"""Swarm-wide commands with Crazyswarm's meaning, checked before anything goes out, without ROS.
+
+Takeoff, land, go_to, start_trajectory and stop go to every Crazyflie at once by broadcast on every
+radio (``SwarmBroadcaster``), each with a group mask: 0 reaches every Crazyflie, otherwise those whose
+group mask (``set_group_mask``) shares a bit with it. go_to and start_trajectory are relative, as
+Crazyswarm's: one absolute goal for all would send them to one point. A request that fails its checks
+(group mask outside 0..255, NaN, a duration that is not > 0, a trajectory some addressed Crazyflie has
+not uploaded) raises ``CommandValueError`` naming the fault and sends nothing. Emergency goes out by
+broadcast and by unicast to every Crazyflie, and never raises.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Optional, Sequence
+
+from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
+from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive
+
+LOG = logging.getLogger("crazyflie_driver.server.swarm")
+
+
+@dataclass
+class SwarmMember:
+    """One Crazyflie as the swarm commands see it: its worker (``emergency``, ``update_params``,
+    ``cf.high_level.trajectories``) and its onboard commands (``group_mask``, ``low_level_active``,
+    ``notify_setpoints_stop``)."""
+
+    name: str
+    uri: str
+    worker: Any
+    onboard: Any
+
+
+def in_groups(member_mask: int, request_mask: int) -> bool:
+    """Whether a Crazyflie with ``member_mask`` takes a command sent to ``request_mask`` (the firmware's rule)."""
+    return request_mask == 0 or bool(member_mask & request_mask)
+
+
+def positive_duration(value: float) -> float:
+    d = finite("duration", value)
+    if d <= 0:
+        raise CommandValueError("duration must be > 0 s, got %r" % (value,))
+    return d
+
+
+class SwarmCommands:
+    """The swarm-wide services behind ``/takeoff``, ``/land``, ``/go_to``, ``/start_trajectory``,
+    ``/stop``, ``/emergency``. ``members()`` gives the Crazyflies served now; ``broadcaster`` is a
+    ``SwarmBroadcaster`` reaching all of them."""
+
+    def __init__(self, members: Callable[[], Sequence[SwarmMember]], broadcaster: Any) -> None:
+        self._members = members
+        self.broadcaster = broadcaster
+        self._lock = threading.Lock()
+
+    def targets(self, group_mask: int) -> List[SwarmMember]:
+        mask = checked_group_mask(group_mask)
+        return [m for m in self._members() if in_groups(getattr(m.onboard, "group_mask", 0), mask)]
+
+    def _hand_over(self, targets: Sequence[SwarmMember]) -> None:
+        """A Crazyflie whose low-level setpoints hold the priority ignores the high-level commander:
+        notify-setpoints-stop to each such one (unicast, acknowledged) before the broadcast."""
+        for m in targets:
+            if m.onboard.low_level_active and not m.worker.emergency_active:
+                try:
+                    m.onboard.notify_setpoints_stop(0)
+                except CrazyflieError as e:
+                    LOG.warning("%s: %s (the broadcast goes out anyway)", m.name, e)
+
+    def _send(self, targets: Sequence[SwarmMember], broadcast: Callable[[], int]) -> int:
+        with self._lock:
+            self._hand_over(targets)
+            return broadcast()
+
+    def takeoff(self, group_mask: int, height: float, duration_s: float) -> int:
+        targets = self.targets(group_mask)
+        height, duration = finite("height", height), positive_duration(duration_s)
+        return self._send(targets, lambda: self.broadcaster.takeoff(height, duration, group_mask))
+
+    def land(self, group_mask: int, height: float, duration_s: float) -> int:
+        targets = self.targets(group_mask)
+        height, duration = finite("height", height), positive_duration(duration_s)
+        return self._send(targets, lambda: self.broadcaster.land(height, duration, group_mask))
+
+    def stop(self, group_mask: int) -> int:
+        targets = self.targets(group_mask)
+        return self._send(targets, lambda: self.broadcaster.stop(group_mask))
+
+    def go_to(self, group_mask: int, offset: Sequence[float], yaw: float, duration_s: float) -> int:
+        """Every addressed Crazyflie moves by ``offset`` (m) and turns by ``yaw`` (rad)."""
+        targets = self.targets(group_mask)
+        goal = [finite("goal " + axis, v) for axis, v in zip("xyz", offset)]
+        yaw, duration = finite("yaw", yaw), positive_duration(duration_s)
+        return self._send(targets, lambda: self.broadcaster.go_to(goal, yaw, duration, group_mask))
+
+    def start_trajectory(self, group_mask: int, trajectory_id: int, timescale: float, reversed_: bool) -> int:
+        """Every addressed Crazyflie flies its own uploaded trajectory from where it is."""
+        targets = self.targets(group_mask)
+        timescale = positive("timescale", timescale)
+        if not targets:
+            raise CommandValueError("no Crazyflie is in group mask %d (set_group_mask of each Crazyflie sets its "
+                                    "groups)" % group_mask)
+        missing = [m.name for m in targets if trajectory_id not in _uploaded(m)]
+        if missing:
+            raise TrajectoryError("trajectory %r was not uploaded to %s; call their upload_trajectory first"
+                                  % (trajectory_id, ", ".join(missing)))
+        return self._send(targets, lambda: self.broadcaster.start_trajectory(trajectory_id, timescale, reversed_,
+                                                                             group_mask))
+
+    def emergency(self) -> List[str]:
+        """Motors off for every Crazyflie: broadcast e-stop on every radio and each worker's unicast
+        emergency, at once. Returns what failed (never raises)."""
+        failures: List[str] = []
+        members = list(self._members())
+
+        def broadcast() -> None:
+            try:
+                self.broadcaster.emergency()
+            except Exception as e:      # the unicast e-stops still go out
+                failures.append("broadcast e-stop: %s" % e)
+
+        thread = threading.Thread(target=broadcast, name="swarm e-stop", daemon=True)
+        thread.start()
+        if members:
+            with ThreadPoolExecutor(max_workers=min(16, len(members))) as pool:
+                for m, error in zip(members, pool.map(_emergency_of, members)):
+                    if error:
+                        failures.append("%s: %s" % (m.name, error))
+        thread.join()
+        return failures
+
+
+def _uploaded(member: SwarmMember) -> Dict[int, Any]:
+    return getattr(getattr(member.worker.cf, "high_level", None), "trajectories", {}) or {}
+
+
+def _emergency_of(member: SwarmMember) -> Optional[str]:
+    try:
+        member.worker.emergency()
+        return None
+    except Exception as e:      # the worker's own zero-thrust setpoints follow anyway
+        return str(e)

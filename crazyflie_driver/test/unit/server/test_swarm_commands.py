@@ -1,0 +1,129 @@
+"""Swarm-wide commands through SwarmBroadcaster and two fake dongles: group masks, hand-over from the
+low-level stream, bad input refused with nothing on the air, emergency by broadcast and unicast."""
+from __future__ import annotations
+
+import math
+import struct
+
+import pytest
+
+from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
+from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
+from crazyflie_driver.radio.shared_radio import RadioManager
+from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, in_groups
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+
+from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
+
+URIS = ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702", "radio://1/90/2M/E7E7E7E703"]
+
+
+class Onboard:
+    def __init__(self, mask=0):
+        self.group_mask = mask
+        self.low_level_active = True
+        self.notified = 0
+
+    def notify_setpoints_stop(self, remain_valid_ms=0):
+        self.notified += 1
+        self.low_level_active = False
+
+
+class HighLevel:
+    def __init__(self):
+        self.trajectories = {}
+
+
+class Cf:
+    def __init__(self):
+        self.high_level = HighLevel()
+
+
+class Worker:
+    def __init__(self, fail=False):
+        self.cf = Cf()
+        self.emergency_active = False
+        self.fail = fail
+
+    def emergency(self):
+        self.emergency_active = True
+        if self.fail:
+            raise CrazyflieError("dongle gone")
+
+
+def swarm(masks=(0, 1, 2)):
+    medium = ScriptedMedium(lambda tx: AirReply(False, retries=tx.arc), dongles=2)
+    backend = FakeUsbBackend(medium, dongles=2, timing=DongleTiming.instant())
+    bc = SwarmBroadcaster(URIS, 12, RadioManager(backend), repeats=2, sleep=FakeClock().sleep)
+    bc.open()
+    members = [SwarmMember("cf%d" % (i + 1), uri, Worker(), Onboard(mask)) for i, (uri, mask) in
+               enumerate(zip(URIS, masks))]
+    return SwarmCommands(lambda: members, bc), members, medium
+
+
+def broadcasts(medium):
+    return [t for t in medium.transmits if t.address == BROADCAST_ADDRESS]
+
+
+def test_group_rule_is_the_firmware_one():
+    assert in_groups(0, 0) and in_groups(3, 0) and in_groups(3, 2) and not in_groups(0, 1) and not in_groups(4, 3)
+
+
+def test_takeoff_with_a_group_mask_hands_over_only_the_addressed_then_broadcasts_on_every_radio():
+    commands, members, medium = swarm()
+    assert [m.name for m in commands.targets(1)] == ["cf2"]
+    assert commands.takeoff(1, 0.5, 2.0) == 4
+    sent = broadcasts(medium)
+    assert [(t.dongle, t.channel) for t in sent] == [(0, 80), (0, 80), (1, 90), (1, 90)]
+    assert {t.data for t in sent} == {bytes([0x8C]) + struct.pack("<BBff?f", 7, 1, 0.5, 0.0, True, 2.0)}
+    assert [m.onboard.notified for m in members] == [0, 1, 0]
+    commands.land(0, 0.0, 2.0)
+    assert [m.onboard.notified for m in members] == [1, 1, 1]
+
+
+def test_go_to_is_relative_and_start_trajectory_needs_the_trajectory_on_every_addressed_crazyflie():
+    commands, members, medium = swarm()
+    commands.go_to(2, (0.5, -0.25, 0.0), 0.0, 1.5)
+    go_to = broadcasts(medium)[-1].data
+    assert go_to[1:5] == bytes([12, 2, 1, 0]) and struct.unpack_from("<3f", go_to, 5) == (0.5, -0.25, 0.0)
+    members[2].worker.cf.high_level.trajectories[4] = object()
+    before = len(broadcasts(medium))
+    with pytest.raises(TrajectoryError, match="trajectory 4 was not uploaded to cf1, cf2"):
+        commands.start_trajectory(0, 4, 1.0, False)
+    assert len(broadcasts(medium)) == before
+    commands.start_trajectory(2, 4, 1.0, False)          # only cf3 is in group 2: it has it
+    assert broadcasts(medium)[-1].data[1:7] == bytes([13, 2, 1, 0, 0, 4])
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda c: c.takeoff(256, 0.5, 2.0), "group mask"),
+    (lambda c: c.takeoff(-1, 0.5, 2.0), "group mask"),
+    (lambda c: c.takeoff(0, 0.5, 0.0), "duration must be > 0"),
+    (lambda c: c.land(0, 0.0, -1.0), "duration must be > 0"),
+    (lambda c: c.takeoff(0, math.nan, 2.0), "height"),
+    (lambda c: c.go_to(0, (math.nan, 0.0, 0.0), 0.0, 2.0), "goal x"),
+    (lambda c: c.go_to(0, (0.0, 0.0, math.inf), 0.0, 2.0), "goal z"),
+    (lambda c: c.go_to(0, (0.0, 0.0, 0.0), math.nan, 2.0), "yaw"),
+    (lambda c: c.start_trajectory(0, 7, 1.0, False), "trajectory 7 was not uploaded"),
+    (lambda c: c.start_trajectory(0, 7, 0.0, False), "timescale"),
+    (lambda c: c.start_trajectory(128, 7, 1.0, False), "no Crazyflie is in group mask 128"),
+    (lambda c: c.stop(300), "group mask"),
+])
+def test_bad_input_is_refused_by_name_and_nothing_is_sent(call, words):
+    commands, members, medium = swarm()
+    with pytest.raises(CommandValueError, match=words):
+        call(commands)
+    assert medium.transmits == []
+    assert [m.onboard.notified for m in members] == [0, 0, 0]
+
+
+def test_emergency_broadcasts_and_stops_every_worker_even_when_one_fails():
+    commands, members, medium = swarm()
+    members[1].worker.fail = True
+    failures = commands.emergency()
+    assert failures == ["cf2: dongle gone"]
+    assert all(m.worker.emergency_active for m in members)
+    sent = broadcasts(medium)
+    assert sorted((t.dongle, t.data) for t in sent) == [(0, bytes([0x9D, 3]))] * 2 + [(1, bytes([0x9D, 3]))] * 2

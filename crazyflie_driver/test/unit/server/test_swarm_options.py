@@ -1,0 +1,32 @@
+"""crazyflie_server's swarm parameters: defaults, per-source name patterns, faults named."""
+from __future__ import annotations
+
+import pytest
+
+from crazyflie_driver.errors import SwarmConfigError
+from crazyflie_driver.server.swarm_options import options_from_params
+
+
+def test_defaults_and_patterns_by_source():
+    o = options_from_params({"swarm_file": "s.yaml"})
+    assert (o.mocap, o.stale_after, o.stale_hold, o.broadcast_repeats, o.enable_logging, o.pose_period_ms) == \
+        ("none", 0.2, 0.5, 15, False, 100)
+    assert options_from_params({"mocap": "topic"}).mocap_pattern == "/vrpn_client_node/{name}/pose"
+    assert options_from_params({"mocap": "TF", "mocap_pattern": "vicon/{name}/{name}"}).mocap_pattern == \
+        "vicon/{name}/{name}"
+
+
+@pytest.mark.parametrize("params, words", [
+    ({"mocap": "optitrack"}, "~mocap must be one of vrpn, tf, topic, none"),
+    ({"mocap": "tf", "mocap_pattern": "cf1"}, "~mocap_pattern must contain {name}"),
+    ({"stale_after": 0}, "~stale_after must be a number > 0"),
+    ({"stale_hold": "soon"}, "~stale_hold must be a number >= 0"),
+    ({"broadcast_repeats": 0}, "~broadcast_repeats must be a number >= 1"),
+    ({"broadcast_repeats": 2.5}, "whole number"),
+    ({"pose_period_ms": 5}, "~pose_period_ms must be 0"),
+    ({"position_only": "maybe"}, "~position_only must be true or false"),
+])
+def test_faults_named(params, words):
+    with pytest.raises(SwarmConfigError) as e:
+        options_from_params(params)
+    assert words in str(e.value)
