@@ -8,7 +8,7 @@ warning (topics) or a service error naming the problem, never a dead node.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, List
+from typing import Any, Callable, Dict, List
 
 import rosgraph.masterapi
 import rospy
@@ -86,8 +86,9 @@ class RosOnboardCommands:
              lambda r: c.notify_setpoints_stop(r.remainValidMillisecs)),
         ]
         self._services: List[Any] = []
+        providers = _other_providers()      # one master query for all eight (a swarm adds dozens at once)
         for s, kind, response, handler in services:
-            provider = _other_provider(name(s))
+            provider = providers.get(rospy.resolve_name(name(s)), "")
             if provider:
                 rospy.loginfo("%s: %s is already served by %s (the chapter's host-side controller has its own "
                               "takeoff and land there); the onboard high-level %s is not advertised under that "
@@ -124,23 +125,24 @@ class RosOnboardCommands:
         self._subscribers, self._services = [], []
 
 
-def _other_provider(service: str) -> str:
-    """The node that already serves ``service`` (resolved name), or "" when none does or the master can't tell.
+def _other_providers() -> Dict[str, str]:
+    """Resolved service name -> another node that already serves it ({} when the master can't tell).
 
     crazyflie_ros HEAD advertised its high-level ``takeoff``/``land`` in the namespace where the chapter's
     controller serves std_srvs/Empty ones of the same name; the master keeps the newest registration, so
     whichever started last would silently answer the other's callers with the wrong type.
     """
-    resolved = rospy.resolve_name(service)
+    me = rospy.get_name()
     try:
-        _pubs, _subs, services = rosgraph.masterapi.Master(rospy.get_name()).getSystemState()
+        _pubs, _subs, services = rosgraph.masterapi.Master(me).getSystemState()
     except (rosgraph.masterapi.Error, OSError):
-        return ""
+        return {}
+    out = {}
     for name, nodes in services:
-        if name == resolved:
-            others = [n for n in nodes if n != rospy.get_name()]
-            return others[0] if others else ""
-    return ""
+        others = [n for n in nodes if n != me]
+        if others:
+            out[name] = others[0]
+    return out
 
 
 def _xyz(v) -> tuple:

@@ -29,7 +29,7 @@ from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.server.mocap_stream import MocapStream
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember
+from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_param_values
 from crazyflie_driver.server.swarm_config import SwarmConfig, SwarmCrazyflie, load_swarm_file
 from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
 from crazyflie_driver.server.swarm_watch import SwarmWatch
@@ -39,7 +39,6 @@ from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, StartT
 
 WATCH_PERIOD_S = 0.02           # how often stale poses and lost links are checked
 DIAGNOSTICS_PERIOD_S = 1.0
-ALL_CFS_NAMESPACE = "/allcfs"   # /update_params reads /allcfs/<group>/<name> first
 
 
 def worker_config(cf: SwarmCrazyflie, options: SwarmOptions) -> WorkerConfig:
@@ -198,22 +197,14 @@ class RosSwarm:
     def _update_params(self, req) -> None:
         """Each name from /allcfs/<group>/<name> (for every Crazyflie) or else /<tf_prefix>/<group>/<name>;
         written by unicast to every Crazyflie, in parallel, each write acknowledged."""
-        names = [p.strip("/") for p in req.params]
-        bad = [p for p in names if p.count("/") != 1]
-        if bad:
-            raise ValueError("not of the form group/name: %s" % ", ".join(bad))
         members = self.live_members()
+        lookup = lambda name: rospy.get_param(name) if rospy.has_param(name) else None   # noqa: E731
 
         def write(m: SwarmMember) -> List[str]:
-            values, errors = {}, []
-            for p in names:
-                for ns in (ALL_CFS_NAMESPACE, "/" + m.name):
-                    if rospy.has_param(ns + "/" + p):
-                        values[p.replace("/", ".")] = rospy.get_param(ns + "/" + p)
-                        break
-                else:
-                    errors.append("%s: neither %s/%s nor /%s/%s is set" % (m.name, ALL_CFS_NAMESPACE, p, m.name, p))
-            _, write_errors = m.worker.update_params(values)
+            values, errors = update_param_values(req.params, m.name, lookup)
+            written, write_errors = m.worker.update_params(values)
+            for name in written:
+                rospy.loginfo("swarm: %s: parameter %s updated", m.name, name)
             return errors + ["%s: %s" % (m.name, e) for e in write_errors]
 
         with ThreadPoolExecutor(max_workers=max(1, min(16, len(members)))) as pool:

@@ -14,7 +14,7 @@ import logging
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
 from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive
@@ -131,6 +131,32 @@ class SwarmCommands:
                         failures.append("%s: %s" % (m.name, error))
         thread.join()
         return failures
+
+
+#: ``/update_params`` of the swarm reads ``<ALL_CFS_NAMESPACE>/<group>/<name>`` first (every Crazyflie).
+ALL_CFS_NAMESPACE = "/allcfs"
+
+
+def update_param_values(names: Sequence[str], cf_name: str, lookup: Callable[[str], Any]) -> Tuple[Dict[str, Any],
+                                                                                                   List[str]]:
+    """The values ``/update_params`` writes to one Crazyflie: each ``group/name`` from
+    ``/allcfs/group/name`` or else ``/<cf_name>/group/name`` (``lookup(ros_name)`` returns None when
+    unset). Returns ({"group.name": value}, errors naming what is missing or malformed)."""
+    values: Dict[str, Any] = {}
+    errors: List[str] = []
+    for raw in names:
+        p = raw.strip("/")
+        if p.count("/") != 1 or not all(p.split("/")):
+            errors.append("%s: not of the form group/name" % raw)
+            continue
+        for ns in (ALL_CFS_NAMESPACE, "/" + cf_name):
+            value = lookup(ns + "/" + p)
+            if value is not None:
+                values[p.replace("/", ".")] = value
+                break
+        else:
+            errors.append("%s: neither %s/%s nor /%s/%s is set" % (cf_name, ALL_CFS_NAMESPACE, p, cf_name, p))
+    return values, errors
 
 
 def _uploaded(member: SwarmMember) -> Dict[int, Any]:

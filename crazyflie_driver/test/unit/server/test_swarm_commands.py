@@ -11,7 +11,7 @@ from crazyflie_driver.errors import CommandValueError, CrazyflieError, Trajector
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, in_groups
+from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, in_groups, update_param_values
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
@@ -127,3 +127,11 @@ def test_emergency_broadcasts_and_stops_every_worker_even_when_one_fails():
     assert all(m.worker.emergency_active for m in members)
     sent = broadcasts(medium)
     assert sorted((t.dongle, t.data) for t in sent) == [(0, bytes([0x9D, 3]))] * 2 + [(1, bytes([0x9D, 3]))] * 2
+
+
+def test_update_params_reads_allcfs_first_then_the_crazyflies_own_and_names_what_is_missing():
+    ros = {"/allcfs/stabilizer/controller": 2, "/cf1/stabilizer/controller": 1, "/cf1/locSrv/extPosStdDev": 0.001}
+    values, errors = update_param_values(["stabilizer/controller", "/locSrv/extPosStdDev/", "ring/effect", "bad"],
+                                         "cf1", ros.get)
+    assert values == {"stabilizer.controller": 2, "locSrv.extPosStdDev": 0.001}
+    assert errors == ["cf1: neither /allcfs/ring/effect nor /cf1/ring/effect is set", "bad: not of the form group/name"]
