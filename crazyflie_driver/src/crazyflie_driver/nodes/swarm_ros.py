@@ -22,6 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver import usb_choice
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.nodes import swarm_mocap_sources
 from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
@@ -217,7 +218,8 @@ class RosSwarm:
         if self.options.mocap == "none":
             return
         self.stream = MocapStream(uris, self.broadcaster.send_poses, self.options.position_only,
-                                  on_first_fix=self._first_fix, on_pose=self._pose_seen).start()
+                                  on_first_fix=self._first_fix, on_pose=self._pose_seen,
+                                  radio_of=lambda uri: parse_uri(uri).index).start()
         names = {self.options.mocap_pattern.format(name=name): name for name in uris}
         self._sources.append(swarm_mocap_sources.start(self.options, names, self.stream.pose))
 

@@ -3,8 +3,9 @@
 Each Crazyflie listens on its own address and on the fixed broadcast address 0xFFE7E7E7E7; a
 packet to the latter is never acknowledged, so nothing comes back and nothing is retried. A
 ``BroadcastLink`` shares its dongle with the unicast links on it: a burst (all packets of one
-``send_all``) is one turn of the dongle's FIFO, the way one unicast round trip is. Where the dongle
-takes two packets per USB transfer, consecutive packets of the same length go out in pairs.
+``send_all``) is one turn of the dongle's FIFO, the way one unicast round trip is, and by default it
+goes before the polls waiting there, as setpoints do. Where the dongle takes two packets per USB
+transfer, consecutive packets of the same length go out in pairs.
 Idempotent commands are sent several times (``send_repeated``) because a broadcast can be lost.
 """
 from __future__ import annotations
@@ -118,13 +119,14 @@ class BroadcastLink:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def send(self, packet: Packet) -> int:
+    def send(self, packet: Packet, urgent: bool = True) -> int:
         """One packet to every Crazyflie on the channel; returns the USB transfers made (0 or 1)."""
-        return self.send_all([packet])
+        return self.send_all([packet], urgent)
 
-    def send_all(self, packets: Sequence[Packet]) -> int:
+    def send_all(self, packets: Sequence[Packet], urgent: bool = True) -> int:
         """All ``packets`` in one turn of the dongle, paired where it can; returns the USB transfers
-        the dongle took."""
+        the dongle took. ``urgent`` (the default: commands and motion capture steer Crazyflies in
+        flight) goes before the unicast links' waiting polls, as setpoints do."""
         raw = [_raw(p) for p in packets]
         if not raw:
             return 0
@@ -144,7 +146,7 @@ class BroadcastLink:
                     self.stats.failed_transfers += 1
             return taken
 
-        taken = shared.run(burst)
+        taken = shared.run(burst, urgent=urgent)
         self.stats.packets += len(raw)
         self.stats.transfers += taken
         return taken

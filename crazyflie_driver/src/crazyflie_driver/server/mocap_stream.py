@@ -1,9 +1,10 @@
 """Motion capture to the onboard estimators of a swarm, in packed broadcasts, without ROS.
 
-Poses come in one by one from whatever source (VRPN, tf, topics), in any thread. The first pose of a
-motion-capture frame wakes the sender, which waits ``gather_s`` for the rest of that frame and then
-sends every pose that arrived since its last burst: one burst per radio, two poses per packet (or four
-positions), so the stream runs at the motion-capture rate with one radio turn per frame. A pose whose
+Poses come in one by one from whatever source (VRPN, tf, topics), in any thread. Each radio has its
+own sender thread (the radios then work in parallel): the first pose of a motion-capture frame wakes
+it, it waits ``gather_s`` for the rest of that frame and then sends every pose of its Crazyflies that
+arrived since its last burst, two poses per packet (or four positions), in one turn of its dongle. So
+the stream runs at the motion-capture rate with one radio turn per frame and radio. A pose whose
 orientation is missing or not a unit quaternion goes out as a position only.
 
 The first pose of each Crazyflie is also reported once (``on_first_fix``), for the estimator's
@@ -17,7 +18,7 @@ import math
 import queue
 import threading
 import time
-from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Dict, Hashable, List, Mapping, Optional, Sequence, Tuple
 
 LOG = logging.getLogger("crazyflie_driver.server.mocap")
 
@@ -40,13 +41,16 @@ def usable_quaternion(q: Optional[Sequence[float]]) -> Optional[Quaternion]:
 
 class MocapStream:
     """``send(poses, position_only)`` sends one frame (``poses``: by URI, (x, y, z, qx, qy, qz, qw) or
-    (x, y, z)); ``uris``: the URI of each Crazyflie name the poses come under."""
+    (x, y, z)); ``uris``: the URI of each Crazyflie name the poses come under; ``radio_of(uri)``: the
+    key of the radio that reaches it (one sender thread each; default: one for all)."""
 
     def __init__(self, uris: Mapping[str, str], send: Callable[[Dict[str, tuple], bool], int],
                  position_only: bool = False, on_first_fix: Optional[Callable[[str, Position], None]] = None,
                  on_pose: Optional[Callable[[str, float], None]] = None, gather_s: float = DEFAULT_GATHER_S,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 radio_of: Optional[Callable[[str], Hashable]] = None) -> None:
         self.uris = dict(uris)
+        self._radio = {name: (radio_of(uri) if radio_of is not None else 0) for name, uri in self.uris.items()}
         self._send = send
         self.position_only = position_only
         self._on_first_fix = on_first_fix
@@ -54,7 +58,9 @@ class MocapStream:
         self.gather_s = gather_s
         self._clock = clock
         self._cond = threading.Condition()
-        self._pending: Dict[str, Tuple[float, Position, Optional[Quaternion]]] = {}
+        self._pending: Dict[Hashable, Dict[str, Tuple[float, Position, Optional[Quaternion]]]] = {
+            radio: {} for radio in self._radio.values()}
+        self._stats_lock = threading.Lock()
         self._fixed: set = set()
         self._fixes: "queue.Queue[Optional[Tuple[str, Position]]]" = queue.Queue()
         self._stopping = False
@@ -76,8 +82,8 @@ class MocapStream:
         now = self._clock() if received is None else received
         p = (float(position[0]), float(position[1]), float(position[2]))
         with self._cond:
-            self._pending[name] = (now, p, usable_quaternion(orientation))
-            self._cond.notify()
+            self._pending[self._radio[name]][name] = (now, p, usable_quaternion(orientation))
+            self._cond.notify_all()
             first = name not in self._fixed
             self._fixed.add(name)
         if self._on_pose is not None:
@@ -91,8 +97,14 @@ class MocapStream:
         self._paused = paused
 
     # -- threads ---------------------------------------------------------------------------------
+    def pending(self) -> Dict[str, Tuple[float, Position, Optional[Quaternion]]]:
+        """The poses not sent yet, of every radio (tests send them with ``send_frame``)."""
+        with self._cond:
+            return {name: item for frame in self._pending.values() for name, item in frame.items()}
+
     def start(self) -> "MocapStream":
-        for target, name in ((self._run, "mocap stream"), (self._run_fixes, "mocap first fixes")):
+        targets = [(lambda radio=radio: self._run(radio), "mocap stream %s" % (radio,)) for radio in self._pending]
+        for target, name in targets + [(self._run_fixes, "mocap first fixes")]:
             t = threading.Thread(target=target, name=name, daemon=True)
             t.start()
             self._threads.append(t)
@@ -106,17 +118,17 @@ class MocapStream:
         for t in self._threads:
             t.join(timeout)
 
-    def _run(self) -> None:
+    def _run(self, radio: Hashable) -> None:
         while True:
             with self._cond:
-                while not self._pending and not self._stopping:
+                while not self._pending[radio] and not self._stopping:
                     self._cond.wait()
                 if self._stopping:
                     return
             if self.gather_s > 0:
                 time.sleep(self.gather_s)
             with self._cond:
-                frame, self._pending = self._pending, {}
+                frame, self._pending[radio] = self._pending[radio], {}
             if not self._paused:
                 self.send_frame(frame)
 
@@ -141,12 +153,13 @@ class MocapStream:
                 LOG.error("motion capture broadcast failed (%d times so far): %s", self.send_errors, e)
             return 0
         sent_at = self._clock()
-        self.frames += 1
-        self.transfers += taken
-        self.poses_sent += len(frame)
-        self.latencies.extend(sent_at - t for t, _, _ in frame.values())
-        if len(self.latencies) > LATENCY_SAMPLES:
-            del self.latencies[:-LATENCY_SAMPLES]
+        with self._stats_lock:
+            self.frames += 1
+            self.transfers += taken
+            self.poses_sent += len(frame)
+            self.latencies.extend(sent_at - t for t, _, _ in frame.values())
+            if len(self.latencies) > LATENCY_SAMPLES:
+                del self.latencies[:-LATENCY_SAMPLES]
         return taken
 
     def _run_fixes(self) -> None:

@@ -139,7 +139,11 @@ def test_repeats_are_paced_and_each_is_its_own_turn():
     assert clock.time() == pytest.approx(0.014)
 
 
-def test_a_burst_is_one_turn_of_the_dongle_in_arrival_order():
+@pytest.mark.parametrize("urgent, expected", [
+    (False, "bbbubbb"),      # each burst whole, the unicast round trip in its turn between them
+    (True, "bbbbbbu"),       # commands and motion capture go before the polls waiting, as setpoints do
+])
+def test_a_burst_is_one_turn_of_the_dongle(urgent, expected):
     peer = NrfPeer()
     medium, backend, manager = setup(peer)
     link = RadioLink(URI, manager)
@@ -149,21 +153,21 @@ def test_a_burst_is_one_turn_of_the_dongle_in_arrival_order():
     burst = packed_position_packets([(i, 0.0, 0.0, 0.0) for i in range(12)])   # 3 packets
     shared = manager.acquire(0)
     before = len(medium.transmits)
-    threads = [threading.Thread(target=bc.send_all, args=(burst,)), threading.Thread(target=link.poll),
-               threading.Thread(target=bc.send_all, args=(burst,))]
+    threads = [threading.Thread(target=bc.send_all, args=(burst, urgent)), threading.Thread(target=link.poll),
+               threading.Thread(target=bc.send_all, args=(burst, urgent))]
     shared.lock.acquire()            # hold the dongle while all three queue up, in this order
     try:
         for i, t in enumerate(threads):
             t.start()
             deadline = time.monotonic() + 5.0
-            while len(shared.lock._waiters) < i + 1 and time.monotonic() < deadline:
+            while len(shared.lock._waiters) + len(shared.lock._urgent) < i + 1 and time.monotonic() < deadline:
                 time.sleep(0.001)
     finally:
         shared.lock.release()
     for t in threads:
         t.join(5.0)
     kinds = "".join("b" if t.address == BROADCAST_ADDRESS else "u" for t in medium.transmits[before:])
-    assert kinds == "bbbubbb"        # each burst whole, the unicast round trip in its turn between them
+    assert kinds == expected
     manager.release(shared)
     bc.close()
     link.close()

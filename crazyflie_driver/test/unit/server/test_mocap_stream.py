@@ -39,7 +39,7 @@ def test_one_frame_is_one_burst_per_radio_with_packed_poses():
                          clock=lambda: 10.0)
     for i, name in enumerate(URIS):
         assert stream.pose(name, (0.1 * i, 0.0, 0.0), Q)
-    frame = dict(stream._pending)
+    frame = stream.pending()
     assert stream.send_frame(frame) == 3
     out = sent(medium)
     assert [(d, len(data)) for d, data in out] == [(0, 24), (0, 13), (1, 13)]     # poses: 2 per packet
@@ -56,7 +56,7 @@ def test_positions_when_the_orientation_is_missing_or_not_a_quaternion_and_bad_p
     stream.pose("cf4", (1.0, 2.0, 0.5), (math.nan, 0.0, 0.0, 1.0))
     assert not stream.pose("cf9", (0.0, 0.0, 0.0), Q)               # not in the swarm
     assert not stream.pose("cf1", (math.nan, 0.0, 0.0), Q)         # dropped, never sent
-    stream.send_frame(dict(stream._pending))
+    stream.send_frame(stream.pending())
     assert sent(medium) == [(1, bytes([0x6E]) + struct.pack("<B3h", 4, 1000, 2000, 500))]
     assert usable_quaternion((0.0, 0.0, 0.0, 2.0)) is None and usable_quaternion((0, 0, 0, 1.1)) == (0, 0, 0, 1.0)
 
@@ -71,7 +71,8 @@ def test_the_sender_thread_streams_and_reports_each_first_fix_once():
         if len(fixed) == 2:
             done.set()
 
-    stream = MocapStream(URIS, bc.send_poses, on_first_fix=on_fix, gather_s=0.0).start()
+    stream = MocapStream(URIS, bc.send_poses, on_first_fix=on_fix, gather_s=0.0,
+                         radio_of=lambda uri: uri.split("/")[2]).start()
     try:
         for k in range(3):
             stream.pose("cf1", (0.0, 0.0, 0.01 * k), Q)
