@@ -4,7 +4,7 @@ from __future__ import annotations
 from collections import deque
 from typing import Callable, Deque, List, NamedTuple, Optional
 
-from crazyflie_driver.sim.air.medium import AirReply
+from crazyflie_driver.sim.air.medium import AirReply, DongleFaults
 
 
 class Transmit(NamedTuple):
@@ -39,6 +39,11 @@ class ScriptedMedium:
 
     def set_dongle_faults(self, dongle, packet_loss=None, ack_loss=None, latency_s=None, unplugged=None):
         self.faults.append((dongle, packet_loss, ack_loss, latency_s, unplugged))
+
+    def dongle_faults(self, dongle) -> DongleFaults:
+        """Only ``unplugged`` is followed: the latest value set for ``dongle``."""
+        out = [f[4] for f in self.faults if f[0] == dongle and f[4] is not None]
+        return DongleFaults(unplugged=bool(out and out[-1]))
 
     def dongle_count(self) -> int:
         return self.dongles

@@ -325,6 +325,23 @@ def test_unplug_reported_by_the_medium(backend, medium):
     assert backend.dongles[0].unplugged
 
 
+def test_a_dongle_the_world_unplugged_is_back_when_the_world_plugs_it_in(backend, medium):
+    dev = open_dev(backend)
+    medium.set_dongle_faults(0, unplugged=True)
+    medium.push(AirReply(False, unplugged=True))
+    with pytest.raises(usb.core.USBError):
+        dev.write(1, b"\xff")
+    assert len(find_all(backend)) == len(backend.dongles) - 1       # off the bus while the world says so
+    medium.set_dongle_faults(0, unplugged=False)
+    assert len(find_all(backend)) == len(backend.dongles)           # re-enumerated, as after a re-plug
+    with pytest.raises(usb.core.USBError):
+        dev.write(1, b"\xff")                 # the old handle stays dead
+    usb.util.dispose_resources(dev)
+    new = open_dev(backend)
+    new.write(1, b"\xff")
+    assert new.read(0x81, 64).tobytes() == b"\x03"
+
+
 def test_bootloader_after_reset(backend):
     dev = open_dev(backend)
     ctrl(dev, 0xFF)

@@ -78,6 +78,9 @@ def test_control_calls(served):
     assert medium.transmit(0, 80, 2, A2, b"\xff").acked
     medium.set_dongle_faults(1, unplugged=True)
     assert medium.transmit(1, 80, 2, A1, b"\xff").unplugged
+    assert medium.dongle_faults(1).unplugged and not medium.dongle_faults(0).unplugged
+    medium.set_dongle_faults(1, unplugged=False)
+    assert not medium.dongle_faults(1).unplugged
     medium.set_dongle_faults(0, packet_loss=100)
     assert not medium.transmit(0, 80, 2, A1, b"\xff").acked
     medium.set_dongle_faults(0, packet_loss=0)

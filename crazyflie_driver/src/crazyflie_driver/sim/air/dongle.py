@@ -52,6 +52,7 @@ class FakeDongle:
         self.serial = serial
         self.lock = threading.Lock()
         self.unplugged = False
+        self.pulled_by_medium = False    # unplugged because the world says so: back when it says so
         self.in_bootloader = False
         self.bootloader_requested = False
         self.generation = 0              # bumped on re-enumeration; older handles get ENODEV
@@ -78,6 +79,11 @@ class FakeDongle:
         self.ack_enabled = True
         self.cont_carrier = False
         self.scan_hits = b""
+
+    def pulled_out(self) -> None:
+        """The medium reported this dongle unplugged (a world fault): it leaves the bus."""
+        self.unplugged = True
+        self.pulled_by_medium = True
 
     @property
     def product_id(self) -> int:
@@ -159,7 +165,7 @@ class DongleFirmware:
             reply = self.medium.transmit(d.ident, channel, d.datarate, d.address,
                                          packet[:MAX_RADIO_PAYLOAD], True, d.arc)
             if reply.unplugged:
-                d.unplugged = True
+                d.pulled_out()
                 raise no_device()
             spent += self.air_time(d, reply)
             if reply.acked and len(hits) < MAX_SCAN_HITS:
@@ -198,7 +204,7 @@ class DongleFirmware:
             for one in packets:
                 reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, one, False, d.arc)
                 if reply.unplugged:
-                    d.unplugged = True
+                    d.pulled_out()
                     raise no_device()
                 busy += self.timing.bulk_round_trip_s + reply.latency_s
             if busy > 0:
@@ -207,7 +213,7 @@ class DongleFirmware:
         reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, packet,
                                      d.ack_enabled, d.arc)
         if reply.unplugged:
-            d.unplugged = True
+            d.pulled_out()
             raise no_device()
         if reply.acked:
             payload = reply.payload

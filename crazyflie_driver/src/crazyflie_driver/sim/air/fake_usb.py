@@ -36,6 +36,7 @@ from typing import Optional
 import usb.backend
 import usb.core
 
+from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming, RealClock
 from crazyflie_driver.sim.air.usb_descriptors import (
@@ -96,13 +97,16 @@ class FakeUsbBackend(usb.backend.IBackend):
 
     def unplug(self, ident: int) -> None:
         """Pull the dongle out: it leaves the bus and every open handle gets ENODEV."""
-        self.dongle(ident).unplugged = True
+        d = self.dongle(ident)
+        d.unplugged = True
+        d.pulled_by_medium = False
 
     def replug(self, ident: int) -> None:
         """Plug it back in: power-up radio state; handles from before stay dead."""
         d = self.dongle(ident)
         with d.lock:
             d.unplugged = False
+            d.pulled_by_medium = False
             d.in_bootloader = False
             d.bootloader_requested = False
             d.generation += 1
@@ -113,7 +117,17 @@ class FakeUsbBackend(usb.backend.IBackend):
 
     # -- enumeration and descriptors ------------------------------------------------------------
     def enumerate_devices(self):
+        for d in self.dongles:
+            if d.pulled_by_medium and self._plugged_in_again(d.ident):
+                self.replug(d.ident)     # the host sees a new device, as after a real re-plug
         return [d for d in self.dongles if not d.unplugged]
+
+    def _plugged_in_again(self, ident: int) -> bool:
+        """A dongle the world unplugged (``Medium.set_dongle_faults``) is back when the world says so."""
+        try:
+            return not self.medium.dongle_faults(ident).unplugged
+        except (ValueError, IndexError, CrazyflieError):   # no such dongle there, or no world: stays out
+            return False
 
     def get_device_descriptor(self, dev: FakeDongle):
         return device_descriptor(dev.model, dev.ident, dev.product_id)

@@ -292,6 +292,9 @@ class RemoteMedium:
     def dongle_count(self) -> int:
         return int(self.control("dongle_count"))
 
+    def dongle_faults(self, dongle: int) -> DongleFaults:
+        return DongleFaults(**self.control("dongle_faults", dongle=dongle))
+
     # convenience wrappers used by tests and tools
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position=(0.0, 0.0, 0.0),
                       firmware: str = "current") -> Dict[str, Any]:
