@@ -21,6 +21,15 @@ MAX_ANGLE_DEG = 90.0
 #: scale. A larger rate cannot even be measured onboard, let alone tracked.
 MAX_RATE_DEG_S = 2000.0
 
+# -- the commander's setpoint watchdog (ports 3 and 7) -----------------------------------------------
+
+#: Seconds after the last setpoint at which the commander levels the vehicle out (thrust kept).
+SETPOINT_WATCHDOG_LEVEL_S = 0.5
+#: Seconds after the last setpoint at which it stops the motors of a flying vehicle: current firmware's
+#: supervisor then stays locked until a reboot; firmware 2016.02 sets the thrust lock again instead
+#: (released by a setpoint with thrust 0).
+SETPOINT_WATCHDOG_CUT_S = 2.0
+
 
 # -- log blocks (port 5) ----------------------------------------------------------------------------
 

@@ -38,6 +38,7 @@ class SharedRadio:
         self._opener = opener
         self._reopen_interval = reopen_interval
         self._next_reopen = 0.0
+        self._dropped_at = 0.0
 
     def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
         """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack.
@@ -71,7 +72,8 @@ class SharedRadio:
 
     def _drop(self) -> None:
         radio, self.radio = self.radio, None
-        self._next_reopen = time.monotonic() + self._reopen_interval
+        self._dropped_at = time.monotonic()
+        self._next_reopen = self._dropped_at + self._reopen_interval
         if radio is not None:
             try:
                 radio.close()
@@ -86,7 +88,8 @@ class SharedRadio:
         except CrazyflieError as exc:
             self._next_reopen = time.monotonic() + self._reopen_interval
             raise RadioUnplugged("Crazyradio %d is unplugged (%s)" % (self.index, exc)) from exc
-        _log.info("Crazyradio %d is back", self.index)
+        _log.info("Crazyradio %d is back (opened again %.1f s after it went away)", self.index,
+                  time.monotonic() - self._dropped_at)
         return self.radio
 
     def close(self) -> None:

@@ -34,6 +34,9 @@ def worker_status(worker: Any) -> CrazyflieStatus:
         level, message = ERROR, "link lost: retrying"
     elif state in (WorkerState.CONNECTING, WorkerState.STOPPED):
         level, message = STALE, state
+    elif getattr(worker, "watchdog", None) is not None and worker.watchdog.message:
+        level = ERROR if worker.watchdog.locked_until_restart else WARN
+        message = "motors stopped: " + worker.watchdog.message
     elif worker.log_late:
         level, message = WARN, "running; log data arrives late (%d log packets seen lost so far)" % (
             worker.lost_log_packets())

@@ -36,11 +36,14 @@ from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFoun
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
                        PlannedBlock, check_log_limits, log_packet_rate, plan_log_blocks)
+from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
+from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
 from crazyflie_driver.protocol.param import param_value
 from crazyflie_driver.server.log_timing import LATE_DATA_WARNING_S, OnboardClock, TopicTiming
 from crazyflie_driver.server.poll_pacer import PollPacer
 from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
 from crazyflie_driver.protocol.toc import toc_types
+from crazyflie_driver.server import watchdog_notice
 
 LOG = logging.getLogger("crazyflie_driver.server")
 
@@ -160,6 +163,9 @@ class CrazyflieWorker:
         self._late_warned_at = -1e9
         self._lost_at_late_warning = 0
         self._errors_seen: Dict[Tuple[str, str], int] = {}   # (type, where) -> count, for "traceback once"
+        self._lost_at = 0.0
+        # what the firmware's setpoint watchdog makes of the stream sent (said once per cut)
+        self.watchdog = watchdog_notice.WatchdogNotice(self._protocol_version)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -225,6 +231,7 @@ class CrazyflieWorker:
         if packet is None:
             with self._cond:
                 self._pending = None
+            self.watchdog.handed_over()
             return True
         return self.set_setpoint(packet)
 
@@ -473,6 +480,8 @@ class CrazyflieWorker:
         """Say once when log data starts arriving late (again every 10 s while it stays late, with
         the packets lost meanwhile), and once when it is on time again."""
         now = self._clock()
+        if self.state == WorkerState.LOST:
+            return          # packets the Crazyflie queued while the link was down
         if age > LATE_DATA_WARNING_S:
             if self.log_late and now - self._late_warned_at < 10.0:
                 return
@@ -535,6 +544,8 @@ class CrazyflieWorker:
                 self._after_round_trip(acked, now)
                 if acked and self._downlink_packets == downlink_before:
                     self._onboard_clock.drained()
+            if not self._emergency and self.watchdog.due(now) is not None:
+                self._say_watchdog_cut(now)
 
     def _round_trip(self, setpoint: Optional[Setpoint]) -> Optional[bool]:
         """One packet to the Crazyflie. Returns acked, or None when the dongle failed."""
@@ -545,17 +556,19 @@ class CrazyflieWorker:
                 if isinstance(setpoint, CRTPPacket):
                     acked = bool(self.cf.link.send(setpoint))
                     self.setpoints_sent += 1
+                    self.watchdog.sent(setpoint, self._clock())     # on the air (a dead dongle raised)
                     return acked
                 if setpoint is not None:
                     acked = bool(self.cf.send_setpoint(setpoint.roll, setpoint.pitch,
                                                        setpoint.yawrate, setpoint.thrust))
                     self.setpoints_sent += 1
+                    self.watchdog.sent(setpoint, self._clock())
                     return acked
                 acked = bool(self.cf.send_keepalive())
                 self.keepalives_sent += 1
                 return acked
         except RadioUnplugged as e:
-            self._mark_lost("the Crazyradio was unplugged (%s)" % e)
+            self._mark_lost("%s: plug it back in (it is picked up again, nothing to restart)" % e)
             return None
         except CrazyflieError as e:
             self._check_lost(self._clock(), str(e))
@@ -583,14 +596,48 @@ class CrazyflieWorker:
         if self.state == WorkerState.LOST:
             return
         self.state = WorkerState.LOST
+        self._lost_at = self._clock()
         with self._cond:
             self._pending = None      # never replay an old setpoint after the link comes back
+        flying = self.watchdog.flying_for(self._lost_at)
+        if flying is not None:
+            reason += "; " + watchdog_notice.flying_when_lost_message(flying)
         LOG.error("%s: link lost: %s; retrying every %.2f s", self.uri, reason, self.lost_retry_period)
         self.listener.on_link_lost(reason)
 
+    def _protocol_version(self) -> int:
+        return getattr(self.cf, "protocol_version", -1)      # -1 until connected
+
+    def _say_watchdog_cut(self, now: float) -> None:
+        """The setpoints stopped 2 s ago while asking for thrust: the firmware has stopped the motors.
+        Where it has a supervisor (and the link is up) it is asked whether it is locked."""
+        silent = self.watchdog.due(now)
+        link_down = self.state == WorkerState.LOST
+        locked = None
+        if not link_down and self._protocol_version() >= SUPERVISOR_FROM:
+            try:
+                flags = self.cf.supervisor.state().flags
+            except CrazyflieError as e:
+                LOG.debug("%s: supervisor state unknown: %s", self.uri, e)
+            else:
+                if flags["flying"] and not flags["locked"]:
+                    if silent < SETPOINT_WATCHDOG_CUT_S + 1.0:
+                        self.watchdog.not_yet(now)     # its clock runs a little behind ours
+                    else:
+                        self.watchdog.handed_over()    # something else holds it in the air: no cut
+                    return
+                locked = flags["locked"]
+        text = watchdog_notice.cut_message(silent, locked, self._protocol_version(), link_down)
+        self.watchdog.said(text, locked)
+        LOG.warning("%s: %s", self.uri, text)
+
     def _restore(self) -> None:
-        self.state = WorkerState.RUNNING
-        LOG.warning("%s: link restored", self.uri)
+        LOG.warning("%s: link restored after %.1f s", self.uri, self._clock() - self._lost_at)
+        if self.watchdog.locked_until_restart and self._protocol_version() >= SUPERVISOR_FROM:
+            try:     # restarted meanwhile?
+                self.watchdog.restarted(self.cf.supervisor.state().flags["locked"])
+            except CrazyflieError as e:
+                LOG.debug("%s: supervisor state unknown: %s", self.uri, e)
         if self._log_plan:
             # The firmware deletes all log blocks after 1 s without radio traffic: set them up again.
             try:
@@ -598,6 +645,7 @@ class CrazyflieWorker:
                 self._start_log_blocks()
             except Exception as e:
                 LOG.error("%s: could not restart logging after the link came back: %s", self.uri, e)
+        self.state = WorkerState.RUNNING     # only now: log data queued during the outage is not "late"
         self.listener.on_link_restored()
 
     def link_quality(self) -> Tuple[float, int]:

@@ -18,7 +18,8 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from crazyflie_driver.crtp.firmware_limits import MAX_THRUST, MIN_THRUST
+from crazyflie_driver.crtp.firmware_limits import (MAX_THRUST, MIN_THRUST, SETPOINT_WATCHDOG_CUT_S,
+                                                   SETPOINT_WATCHDOG_LEVEL_S)
 from crazyflie_driver.sim.world.vehicle_rows import Rows
 from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
@@ -29,8 +30,8 @@ GENERATIONS = (GEN_CURRENT, GEN_2016)
 
 PID_DT = CONTROL_PERIOD_S        # dt both generations use inside their PIDs (1/500 s)
 RATE_OUTPUT_LIMIT = 32767.0
-WATCHDOG_LEVEL_S = 0.5
-WATCHDOG_SHUTDOWN_S = 2.0
+WATCHDOG_LEVEL_S = SETPOINT_WATCHDOG_LEVEL_S
+WATCHDOG_SHUTDOWN_S = SETPOINT_WATCHDOG_CUT_S
 WATCHDOG_MARGIN_S = 1.5 * FIRMWARE_TICK_S    # odd ticks recompute the motors this close to a watchdog cut
 TUMBLE_TILT_COS = 0.5            # 60 degrees
 TUMBLE_TILT_S = 1.0

@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Unplug the Crazyradio while a Crazyflie flies, plug it back in (through the world's dongle faults).
+
+What a reader sees: one error when the radio goes, saying to plug it back in and that the firmware's
+watchdog takes the flying Crazyflie (it does: motors off 2 s after the last setpoint, on the world's
+truth); one line when the link is back, with how long it was down; imu and battery data again within
+about a second of world time; and the Crazyflie, locked by its supervisor, does not take off again
+although the pilot's cmd_vel kept asking for thrust all along.
+"""
+from __future__ import annotations
+
+import os
+import re
+import sys
+import threading
+import unittest
+
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import Twist
+from rosgraph_msgs.msg import Log
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float32
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
+
+from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
+
+URI = "radio://0/80/2M/E7E7E7E701"
+THRUST = 42000            # counts: climbs (a hover needs about 36 300)
+BACK_WITHIN_S = 1.0       # world seconds from the re-plug to the first imu and battery message
+
+
+class RadioReplug(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("radio_replug_test")
+        cls.world = world(rospy.get_param("~sim_address"))
+        cls.clock = WorldClock(cls.world.ping)
+        wait_for_crazyflie("crazyflie1", 60.0)
+        cls.rosout = RosoutRecorder("/crazyflie_server")
+        cls.imu = TopicRecorder("/crazyflie1/imu", Imu)
+        cls.battery = TopicRecorder("/crazyflie1/battery", Float32)
+        cls.status = TopicRecorder("/crazyflie1/status", DiagnosticStatus)
+        cls.cmd_vel = rospy.Publisher("/crazyflie1/cmd_vel", Twist, queue_size=1)
+        assert wait_until(lambda: cls.imu.count() > 10 and cls.battery.count() > 0, 20.0)
+
+    def state(self):
+        return self.world.control("vehicle_state", uri=URI)
+
+    def test_unplug_while_flying_then_replug(self):
+        stop = threading.Event()
+        twist = Twist()
+        twist.linear.z = THRUST
+
+        def pilot():      # the stick held up the whole time, as a pilot who has not noticed yet
+            while not stop.is_set():
+                self.cmd_vel.publish(twist)
+                stop.wait(0.02)
+
+        flying = threading.Thread(target=pilot, daemon=True)
+        flying.start()
+        try:
+            self.assertTrue(self.clock.wait_until(lambda: self.state()["position"][2] > 0.3, 10.0)[0],
+                            "did not take off: %s" % (self.state(),))
+            unplugged_at = self.clock.now()
+            self.world.set_dongle_faults(0, unplugged=True)
+
+            lost = wait_until(lambda: self.rosout.find("link lost", Log.ERROR), 5.0)
+            self.assertEqual(len(lost), 1, lost)
+            self.assertIn("plug it back in", lost[0])
+            self.assertIn("it was flying", lost[0])
+            # the firmware's watchdog: motors off 2 s after the last setpoint, locked by its supervisor
+            cut, t_cut = self.clock.wait_until(lambda: max(self.state()["motors"]) == 0, 5.0)
+            self.assertTrue(cut, "motors still running: %s" % (self.state(),))
+            print("REPLUG motors off %.2f s (world) after the unplug" % (t_cut - unplugged_at))
+            self.assertLess(t_cut - unplugged_at, 2.2)
+            self.assertEqual(self.state()["locked"], "setpoint watchdog")
+            said = wait_until(lambda: self.rosout.find("watchdog stopped the motors", Log.WARN), 5.0)
+            self.assertEqual(len(said), 1, said)
+            self.assertIn("radio link is down", said[0])
+            self.assertIn("restart it", said[0])
+            self.assertTrue(wait_until(lambda: "link lost" in (self.status.latest() or DiagnosticStatus()).message,
+                                       3.0), self.status.latest())
+
+            self.clock.sleep(3.0 - (self.clock.now() - unplugged_at))
+            imu0, battery0 = self.imu.count(), self.battery.count()
+            replugged_at = self.clock.now()
+            self.world.set_dongle_faults(0, unplugged=False)
+            back, t_back = self.clock.wait_until(
+                lambda: self.imu.count() > imu0 and self.battery.count() > battery0, 5.0)
+            self.assertTrue(back, "no imu or battery data after the re-plug")
+            print("REPLUG imu and battery back %.2f s (world) after the re-plug" % (t_back - replugged_at))
+            self.assertLess(t_back - replugged_at, BACK_WITHIN_S)
+            restored = wait_until(lambda: self.rosout.find("link restored", Log.WARN), 5.0)
+            self.assertEqual(len(restored), 1, restored)
+            down = float(re.search(r"link restored after ([0-9.]+) s", restored[0]).group(1))
+            self.assertGreater(down, 2.5)
+            self.assertLess(down, 10.0)
+
+            # the pilot's stick still asks for thrust: the locked Crazyflie stays down, nothing more is said
+            self.clock.sleep(2.0)
+            s = self.state()
+            self.assertEqual(max(s["motors"]), 0, s)
+            self.assertEqual(s["locked"], "setpoint watchdog")
+            self.assertEqual(len(self.rosout.find("link lost")), 1)
+            self.assertEqual(len(self.rosout.find("watchdog stopped the motors")), 1)
+            self.assertIn("motors stopped", self.status.latest().message)
+        finally:
+            stop.set()
+            flying.join(1.0)
+            self.world.set_dongle_faults(0, unplugged=False)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("crazyflie_driver", "radio_replug", RadioReplug, sys.argv)
