@@ -22,8 +22,17 @@ class RadioUnplugged(CrazyflieError):
     """The dongle disappeared while in use."""
 
 
+class RadioInUse(RadioAccessDenied):
+    """Another program holds the dongle (one program at a time can use a Crazyradio)."""
+
+
 class LinkTimeout(CrazyflieError, TimeoutError):
-    """The Crazyflie did not answer in time."""
+    """The Crazyflie did not answer in time. ``acked``: packets it acknowledged meanwhile (None: not
+    counted), so a caller can tell a silent Crazyflie (0) from one whose answer went elsewhere."""
+
+    def __init__(self, message: str = "", acked=None) -> None:
+        super().__init__(message)
+        self.acked = acked
 
 
 class LinkLost(CrazyflieError):

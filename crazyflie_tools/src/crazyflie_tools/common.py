@@ -9,7 +9,7 @@ from typing import Callable, Optional
 
 from crazyflie_driver import usb_choice
 from crazyflie_driver.protocol.crazyflie import Crazyflie
-from crazyflie_driver.errors import (CrazyflieError, LinkTimeout, RadioAccessDenied,
+from crazyflie_driver.errors import (CrazyflieError, LinkTimeout, RadioAccessDenied, RadioInUse,
                                      RadioNotFound, UnknownName, UriError)
 
 from .sim_hint import sim_hint
@@ -39,6 +39,8 @@ def open_crazyflie(args: argparse.Namespace, cache_dir: Optional[str] = None) ->
 def describe_error(error: BaseException) -> str:
     """One line for the user: what went wrong and, where it helps, what to do."""
     text = str(error) or error.__class__.__name__
+    if isinstance(error, RadioInUse):
+        return text         # not a permission problem: the udev hint would mislead
     if isinstance(error, RadioAccessDenied):
         if "plugdev" not in text:
             text += " (%s)" % UDEV_HINT
@@ -49,7 +51,8 @@ def describe_error(error: BaseException) -> str:
         return "bad URI: " + text
     if isinstance(error, UnknownName):
         return text
-    if isinstance(error, LinkTimeout) and "switched on" not in text:
+    if isinstance(error, LinkTimeout) and error.acked == 0 and "switched on" not in text:
+        # only when nothing acknowledged: a Crazyflie that acks is switched on (see RadioLink's reasons)
         return text + " (is the Crazyflie switched on, and on this channel, data rate and address?)"
     return text
 

@@ -266,3 +266,67 @@ def test_permission_denied_mentions_udev_and_plugdev(monkeypatch, tmp_path, caps
                 assert "crazyflie_driver/udev" in err and err.count("\n") == 1
     finally:
         s.stop()
+
+
+class BusyBackend(FakeUsbBackend):
+    """A dongle another program holds (its interface is claimed elsewhere)."""
+
+    def claim_interface(self, dev_handle, intf):
+        raise usb.core.USBError("Resource busy", -6, errno.EBUSY)
+
+
+def test_dongle_in_use_says_so_without_udev_or_switched_on_hints(monkeypatch, tmp_path, capsys):
+    monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path))
+    s = Sim(BusyBackend)
+    try:
+        with usb_backend.use_backend(s.backend):
+            assert get_param.main(["--uri", URI1, "--name", "ring.effect"]) == 1
+            err = capsys.readouterr().err
+            assert "in use by another program" in err and "crazyflie_server" in err
+            assert "plugdev" not in err and "permission denied" not in err and "switched on" not in err
+    finally:
+        s.stop()
+
+
+class Crowded:
+    """The air with another program's Crazyradio on it: after each packet of this process's dongle,
+    the other program makes one round trip (as a server polling the same Crazyflie does)."""
+
+    def __init__(self, medium) -> None:
+        self.medium = medium
+        self.other = None
+
+    def transmit(self, dongle, *args, **kwargs):
+        reply = self.medium.transmit(dongle, *args, **kwargs)
+        if dongle == 0 and self.other is not None:
+            self.other()
+        return reply
+
+    def __getattr__(self, name):
+        return getattr(self.medium, name)
+
+
+def test_another_program_on_the_same_crazyflie_is_named_not_switched_on(monkeypatch, tmp_path, capsys):
+    """crazyflie_server talks to the Crazyflie through its own dongle: the tool's packets are all
+    acked, but the answers to its requests go to the other program."""
+    from crazyflie_driver.radio.link import open_link
+    from crazyflie_driver.radio.shared_radio import RadioManager
+
+    monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path))
+    s = Sim(dongles=2)
+    try:
+        s.add(URI1)
+        air = Crowded(s.medium)
+        tool_backend = FakeUsbBackend(air, dongles=1, timing=DongleTiming.instant())
+        server_backend = FakeUsbBackend(s.medium, dongles=1, timing=DongleTiming.instant(), first_id=1)
+        other = open_link(URI1, RadioManager(backend=server_backend))
+        air.other = other.poll
+        with usb_backend.use_backend(tool_backend):
+            assert get_param.main(["--uri", URI1, "--name", "ring.effect", "--timeout", "0.3"]) == 1
+        err = capsys.readouterr().err
+        assert "another program" in err and "crazyflie_server" in err and "acknowledged" in err
+        assert "switched on" not in err and "Traceback" not in err
+        air.other = None
+        other.close()
+    finally:
+        s.stop()

@@ -12,7 +12,7 @@ from typing import List, NamedTuple, Optional
 import usb.core
 import usb.util
 
-from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
+from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioInUse, RadioNotFound, RadioUnplugged
 
 VENDOR_ID = 0x1915
 PRODUCT_ID = 0x7777
@@ -42,6 +42,9 @@ _EP_OUT = 0x01
 _EP_IN = 0x81
 _NOT_FOUND = ("no Crazyradio found (is it plugged in, and are the udev rules for group plugdev "
               "installed? see crazyflie_driver/udev/README.md)")
+_IN_USE = ("Crazyradio %d is in use by another program (%s): one program at a time can use a Crazyradio. Stop the "
+           "other one (crazyflie_server, a tool, a client), use another Crazyradio (radio://1/...), or go through "
+           "the running crazyflie_server (its parameters are on the ROS parameter server, update_params writes them)")
 _GONE_ERRNOS = (errno.ENODEV, errno.EIO, errno.ENOENT, errno.ESHUTDOWN)
 
 
@@ -144,7 +147,7 @@ class Crazyradio:
             if _is_access_error(exc):
                 raise _access_denied(index, exc) from exc
             if exc.errno == errno.EBUSY:
-                raise RadioAccessDenied("Crazyradio %d is in use by another program (%s)" % (index, exc)) from exc
+                raise RadioInUse(_IN_USE % (index, exc.strerror or exc)) from exc
             raise self._usb_error(exc, "opening") from exc
         # Known state whatever the last user left behind (the order cflib uses, ``cflib/drivers/crazyradio.py``).
         self.set_data_rate(DR_2MPS)

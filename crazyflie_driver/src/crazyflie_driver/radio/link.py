@@ -120,7 +120,7 @@ class RadioLink:
         if not any_ack:
             raise LinkTimeout("%s: no answer from the Crazyflie (%d packets unacknowledged); is it "
                               "switched on, and on this channel, data rate and address?"
-                              % (self.uri, attempts))
+                              % (self.uri, attempts), acked=0)
         self.safelink = False
 
     def close(self) -> None:
@@ -269,6 +269,7 @@ class RadioLink:
             self._waiter = waiter
             try:
                 start = time.monotonic()
+                sent0, acked0 = self.stats.sent, self.stats.acked
                 first_packet = self.downlink_packets
                 seen, last_data = first_packet, start
                 acked = self.send(packet)
@@ -281,7 +282,9 @@ class RadioLink:
                         seen, last_data = self.downlink_packets, now
                     drained = seen - first_packet
                     if now - last_data >= timeout or (now - start >= timeout and drained > 2 * TX_QUEUE_PACKETS):
-                        raise LinkTimeout(self._no_answer(what or repr(packet), now - start, drained))
+                        acked = self.stats.acked - acked0
+                        raise LinkTimeout(self._no_answer(what or repr(packet), now - start, drained, acked,
+                                                          self.stats.sent - sent0), acked=acked)
                     if self.safelink:
                         resend = not acked
                     else:
@@ -297,15 +300,20 @@ class RadioLink:
             finally:
                 self._waiter = None
 
-    def _no_answer(self, what: str, waited: float, drained: int) -> str:
-        ratio = self.stats.ack_ratio
-        text = "%s: no answer to %s within %.2f s (ack ratio %.0f %%, %d other packets received meanwhile)" % (
-            self.uri, what, waited, 100.0 * ratio, drained)
-        if ratio >= 0.9:
-            text += ("; the Crazyflie acknowledges every packet but does not answer this request: is another "
-                     "program (crazyflie_server, a tool) talking to it at the same time, through this or another "
-                     "Crazyradio?")
-        return text
+    def _no_answer(self, what: str, waited: float, drained: int, acked: int, sent: int) -> str:
+        """Why a request went unanswered, as far as the round trips meanwhile tell."""
+        text = "%s: no answer to %s within %.2f s (%d of %d packets acknowledged, %d other packets received)" % (
+            self.uri, what, waited, acked, sent, drained)
+        if acked == 0:
+            return text + "; is the Crazyflie switched on, in range, and on this channel, data rate and address?"
+        if acked < 0.9 * sent:
+            return text + ("; the link is poor: move the Crazyradio closer, or choose a channel with less "
+                           "interference")
+        return text + ("; the Crazyflie acknowledges but its answer never came: most likely another program "
+                       "(crazyflie_server, a tool) is talking to it at the same time, through this or another "
+                       "Crazyradio, and takes its answers. Stop that program, or go through it (with "
+                       "crazyflie_server running: its parameters are on the ROS parameter server, update_params "
+                       "writes them). Otherwise its firmware does not answer this request")
 
     def __repr__(self) -> str:
         return "<RadioLink %s %s>" % (self.uri, "safelink" if self.safelink else
