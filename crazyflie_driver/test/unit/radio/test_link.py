@@ -501,3 +501,29 @@ def test_a_packet_that_cannot_exist_is_refused_by_name_and_not_sent(raw):
         link.send_bytes(raw)
     assert len(medium.transmits) == before
     assert link.send_bytes(b"\xff")         # the link still works
+
+
+def test_a_request_timeout_counts_what_was_acknowledged_and_names_the_likely_cause():
+    # acked, never answered: another program takes the answers; "switched on?" would mislead
+    peer = NrfPeer(safelink_capable=False)
+    medium, backend, manager = setup(peer)
+    link = open_link(URI, manager)
+    with pytest.raises(LinkTimeout) as info:
+        link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.05, resend_interval=0.01,
+                     what="param TOC info")
+    assert info.value.acked > 0 and "switched on" not in str(info.value)
+    assert "another program" in str(info.value) and "packets acknowledged" in str(info.value)
+    # the Crazyflie went silent after the greeting: nothing acknowledged, the only case for "switched on?"
+    peer.lose_uplink = set(range(peer.count, peer.count + 100000))
+    with pytest.raises(LinkTimeout) as info:
+        link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.05, resend_interval=0.01,
+                     what="param TOC info")
+    assert info.value.acked == 0 and "0 of " in str(info.value) and "switched on" in str(info.value)
+    link.close()
+
+
+def test_a_greeting_nobody_acks_is_a_timeout_with_nothing_acknowledged():
+    medium, backend, manager = setup(NrfPeer(address=b"\xe7\xe7\xe7\xe7\x09"))
+    with pytest.raises(LinkTimeout) as info:
+        open_link(URI, manager, safelink_attempts=3)
+    assert info.value.acked == 0 and "switched on" in str(info.value)

@@ -293,7 +293,8 @@ class RemoteMedium:
         return int(self.control("dongle_count"))
 
     def dongle_faults(self, dongle: int) -> DongleFaults:
-        return DongleFaults(**self.control("dongle_faults", dongle=dongle))
+        row = self.control("dongle_faults", dongle=dongle)[0]
+        return DongleFaults(row["packet_loss"], row["ack_loss"], row["latency_s"], row["unplugged"])
 
     # convenience wrappers used by tests and tools
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position=(0.0, 0.0, 0.0),
