@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Unplug the Crazyradio while a Crazyflie flies, plug it back in (through the world's dongle faults).
+"""Unplug the Crazyradio while a Crazyflie flies, plug it back in, with the reader's command
+(``rosrun crazyflie_tools fault unplug 0`` / ``replug 0``).
 
 What a reader sees: one error when the radio goes, saying to plug it back in and that the firmware's
 watchdog takes the flying Crazyflie (it does: motors off 2 s after the last setpoint, on the world's
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
 import sys
 import threading
 import unittest
@@ -50,6 +52,13 @@ class RadioReplug(unittest.TestCase):
     def state(self):
         return self.world.control("vehicle_state", uri=URI)
 
+    def fault(self, *words: str) -> str:
+        """The reader's command against this test's world; its one line of output."""
+        out = subprocess.run(["rosrun", "crazyflie_tools", "fault", "--address", rospy.get_param("~sim_address")]
+                             + list(words), capture_output=True, text=True, timeout=30.0)
+        self.assertEqual(out.returncode, 0, out.stderr)
+        return out.stdout.strip()
+
     def test_unplug_while_flying_then_replug(self):
         stop = threading.Event()
         twist = Twist()
@@ -66,7 +75,7 @@ class RadioReplug(unittest.TestCase):
             self.assertTrue(self.clock.wait_until(lambda: self.state()["position"][2] > 0.3, 10.0)[0],
                             "did not take off: %s" % (self.state(),))
             unplugged_at = self.clock.now()
-            self.world.set_dongle_faults(0, unplugged=True)
+            self.assertIn("dongle 0: unplugged", self.fault("unplug", "0"))
 
             lost = wait_until(lambda: self.rosout.find("link lost", Log.ERROR), 5.0)
             self.assertEqual(len(lost), 1, lost)
@@ -88,7 +97,7 @@ class RadioReplug(unittest.TestCase):
             self.clock.sleep(3.0 - (self.clock.now() - unplugged_at))
             imu0, battery0 = self.imu.count(), self.battery.count()
             replugged_at = self.clock.now()
-            self.world.set_dongle_faults(0, unplugged=False)
+            self.assertIn("dongle 0: plugged in", self.fault("replug", "0"))
             back, t_back = self.clock.wait_until(
                 lambda: self.imu.count() > imu0 and self.battery.count() > battery0, 5.0)
             self.assertTrue(back, "no imu or battery data after the re-plug")
