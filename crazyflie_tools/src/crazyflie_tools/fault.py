@@ -8,7 +8,7 @@ Bad input or a world that refuses gets one line on stderr and exit code 1.
 from __future__ import annotations
 
 import sys
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 PROG = "fault"
 
@@ -25,29 +25,9 @@ def split_address(argv: Sequence[str]) -> Tuple[Optional[str], List[str]]:
     return None, words
 
 
-def describe(op: str, args: Dict[str, Any], result: Any) -> str:
-    """What the world answered, in one line (several for ``list``)."""
-    from crazyflie_driver.sim.air.faults import format_faults
-
-    if op in ("faults", "clear_faults"):
-        return format_faults(result)
-    if op == "set_dongle_faults":
-        r = result
-        state = "unplugged" if r["unplugged"] else "plugged in"
-        return "dongle %d: %s, packet loss %.0f %%, ack loss %.0f %%, latency %.0f ms" % (
-            r["dongle"], state, r["packet_loss"], r["ack_loss"], r["latency_s"] * 1000.0)
-    if op == "power":
-        return "%s: switched %s" % (args["uri"], "on" if result["powered"] else "off")
-    if op == "set_battery":
-        return args["uri"] + ": battery %.2f V, %.0f %% charge" % (result["vbat"], result["charge"] * 100.0)
-    if op == "set_mocap_faults":
-        return "%s: motion capture %s" % (result["name"], result["faults"])
-    return str(result)
-
-
 def main(argv: Optional[Sequence[str]] = None) -> int:
     from crazyflie_driver.errors import CrazyflieError
-    from crazyflie_driver.sim.air.faults import USAGE, FaultError, parse_command
+    from crazyflie_driver.sim.air.faults import USAGE, FaultError, describe_result, parse_command
     from crazyflie_driver.sim.air.medium import RemoteMedium
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -68,5 +48,5 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             text = text[len("simulated world: "):]
         print("%s: error: %s" % (PROG, text.replace("\n", " ")), file=sys.stderr)
         return 1
-    print(describe(op, args, result))
+    print(describe_result(op, args, result))
     return 0

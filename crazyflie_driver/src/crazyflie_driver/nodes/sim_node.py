@@ -31,6 +31,13 @@ motion-capture PC would) and ``vrpn_port`` (default 3883 when free, else one the
 The frames come from the world's own motion-capture model (``sim.mocap.MocapModel``), sampled on
 world time; a vehicle added to the world at run time is reported too.
 
+Faults (docs/simulation.md, "Fault injection"): ``packet_loss`` and ``ack_loss`` (fraction 0..1 of
+round trips, every dongle), ``latency_ms`` (every dongle) and ``faults`` (fault commands separated by
+';', e.g. ``"unplug 1; battery crazyflie1 3.4"``) are applied at start; the service ``~fault``
+(crazyflie_driver/InjectFault) takes one command at run time, in the words of
+``rosrun crazyflie_tools fault``, and calls the same world-server operation the tool does. The faults
+in force are listed on /diagnostics.
+
 Service ``~<name>/set_mocap`` (std_srvs/SetBool) per vehicle: ``data: false`` makes the
 motion-capture system stop reporting that vehicle (an occluded or lost body), ``true`` brings it
 back. Tests use it to check what the controller does without a pose.
@@ -271,6 +278,39 @@ def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behi
     return WorldStatus(level, message, values)
 
 
+def start_faults_from_params(params: Mapping[str, Any], dongles: int) -> List[Tuple[str, Dict[str, Any]]]:
+    """The control operations that ``~packet_loss``, ``~ack_loss``, ``~latency_ms`` and ``~faults`` ask for
+    at start (in that order); SimConfigError naming the parameter when one is wrong."""
+    from crazyflie_driver.sim.air import faults
+
+    ops: List[Tuple[str, Dict[str, Any]]] = []
+    radio: Dict[str, Any] = {}
+    try:
+        for key, arg in (("packet_loss", "packet_loss"), ("ack_loss", "ack_loss")):
+            if params.get(key) not in (None, "", 0, 0.0):
+                radio[arg] = faults.fraction("~" + key, params[key]) * 100.0
+        if params.get("latency_ms") not in (None, "", 0, 0.0):
+            radio["latency_s"] = faults.duration("~latency_ms", "%sms" % (params["latency_ms"],))
+    except faults.FaultError as e:
+        raise SimConfigError(str(e)) from None
+    if radio:
+        ops += [("set_dongle_faults", dict(radio, dongle=d)) for d in range(dongles)]
+    for command in faults.split_commands(params.get("faults") or ""):
+        try:
+            ops.append(faults.parse_command(command))
+        except faults.FaultError as e:
+            raise SimConfigError("~faults: %r: %s" % (command, e)) from None
+    return ops
+
+
+def faults_status(faults: Sequence[Sequence[str]]) -> WorldStatus:
+    """The injected faults for /diagnostics: OK with none, WARN listing them otherwise."""
+    if not faults:
+        return WorldStatus(0, "no faults injected", ())
+    return WorldStatus(1, "%d injected: %s" % (len(faults), "; ".join("%s %s" % (t, d) for t, d in faults)),
+                       tuple((str(t), str(d)) for t, d in faults))
+
+
 # ------------------------------------------------------------------------------------------------
 # ROS side
 
@@ -381,7 +421,28 @@ def _advertise_mocap_switches(source: Any, names: Sequence[str]) -> list:
     return [rospy.Service("~%s/set_mocap" % n, SetBool, handler(n)) for n in names]
 
 
-def _start_diagnostics(world: Any, address: str):
+def _advertise_fault_service(control: Any) -> Any:
+    """``~fault`` (crazyflie_driver/InjectFault): one fault command, applied by ``control(op, args)``."""
+    import rospy
+
+    from crazyflie_driver.sim.air import faults
+    from crazyflie_driver.srv import InjectFault, InjectFaultResponse
+
+    def on_call(req) -> InjectFaultResponse:
+        try:
+            op, args = faults.parse_command(req.command)
+            answer = faults.describe_result(op, args, control(op, args))
+        except (ValueError, KeyError) as e:       # bad words or a refused value: nothing changed
+            text = str(e.args[0]) if isinstance(e, KeyError) and e.args else str(e)
+            rospy.logwarn("crazyflie_sim: fault %r refused: %s", req.command, text)
+            return InjectFaultResponse(success=False, message=text)
+        if op not in ("faults",):
+            rospy.loginfo("crazyflie_sim: fault %r: %s", req.command, answer.replace("\n", "; "))
+        return InjectFaultResponse(success=True, message=answer)
+    return rospy.Service("~fault", InjectFault, on_call)
+
+
+def _start_diagnostics(world: Any, address: str, active_faults: Any = None):
     """Publishes the world's real-time status on /diagnostics every second; warns (throttled) when behind."""
     import rospy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -401,6 +462,11 @@ def _start_diagnostics(world: Any, address: str):
         msg.header.stamp = rospy.Time.now()
         msg.status = [DiagnosticStatus(level=st.level, name=name, message=st.message, hardware_id="crazyflie_sim",
                                        values=[KeyValue(k, v) for k, v in st.values])]
+        if active_faults is not None:
+            ft = faults_status(active_faults())
+            msg.status.append(DiagnosticStatus(level=ft.level, name="%s: injected faults" % rospy.get_name(),
+                                               message=ft.message, hardware_id="crazyflie_sim",
+                                               values=[KeyValue(k, v) for k, v in ft.values]))
         try:
             pub.publish(msg)
         except Exception as e:
@@ -420,6 +486,7 @@ def main() -> None:
     from rosgraph_msgs.msg import Clock
 
     from crazyflie_driver.errors import CrazyflieError
+    from crazyflie_driver.sim.air.faults import describe_result as faults_text
     from crazyflie_driver.sim.air.medium import parse_address
     from crazyflie_driver.sim.air.server import WorldServer
     from crazyflie_driver.sim.world.world import World
@@ -436,6 +503,7 @@ def main() -> None:
             dongles = dongles_needed(vehicles, params.get("dongles"))
         mocap = mocap_from_params(params)
         vrpn_on, vrpn_port = vrpn_port_from_params(params)
+        start_faults = start_faults_from_params(params, dongles)
         host, port = parse_address(str(params.get("address", "127.0.0.1:19840")))
         speed = _number("~speed", params.get("speed", 1.0))
         seed = params.get("seed")
@@ -456,6 +524,16 @@ def main() -> None:
     model = mocap_model(world, mocap, None if seed is None else int(seed))
     publisher = MocapPublisher(mocap, names, {v.name: v.frame for v in vehicles if v.frame})
     _advertise_mocap_switches(model, names)
+    server.mocap = model
+    try:
+        for op, args in start_faults:
+            rospy.loginfo("crazyflie_sim: injected at start: %s", faults_text(op, args, server.control(op, args)))
+    except (ValueError, KeyError) as e:      # e.g. a vehicle name in ~faults that the world has not
+        rospy.logfatal("crazyflie_sim: ~faults: %s", e)
+        server.stop()
+        world.stop()
+        raise SystemExit(1)
+    _advertise_fault_service(server.control)
     clock_pub = rospy.Publisher("/clock", Clock, queue_size=10) if params.get("publish_clock", False) else None
     stop = threading.Event()
     delivered: List[Any] = []
@@ -504,7 +582,7 @@ def main() -> None:
 
     thread = threading.Thread(target=mocap_loop, name="mocap", daemon=True)
     thread.start()
-    diagnostics = _start_diagnostics(world, server.address)
+    diagnostics = _start_diagnostics(world, server.address, server.active_faults)
 
     def shutdown() -> None:
         stop.set()

@@ -304,3 +304,21 @@ def format_faults(faults: Sequence[Sequence[str]]) -> str:
         return "no faults injected"
     width = max(len(t) for t, _ in faults)
     return "\n".join("%-*s  %s" % (width, t, d) for t, d in faults)
+
+
+def describe_result(op: str, args: Dict[str, Any], result: Any) -> str:
+    """What the world answered, in one line (several for ``list``)."""
+    if op in ("faults", "clear_faults"):
+        return format_faults(result)
+    if op == "set_dongle_faults":
+        r = result
+        state = "unplugged" if r["unplugged"] else "plugged in"
+        return "dongle %d: %s, packet loss %.0f %%, ack loss %.0f %%, latency %.0f ms" % (
+            r["dongle"], state, r["packet_loss"], r["ack_loss"], r["latency_s"] * 1000.0)
+    if op == "power":
+        return "%s: switched %s" % (args["uri"], "on" if result["powered"] else "off")
+    if op == "set_battery":
+        return args["uri"] + ": battery %.2f V, %.0f %% charge" % (result["vbat"], result["charge"] * 100.0)
+    if op == "set_mocap_faults":
+        return "%s: motion capture %s" % (result["name"], result["faults"])
+    return str(result)
