@@ -266,7 +266,7 @@ class WorldServer:
     def _need_mocap(self, a: ControlArgs):
         if self.mocap is None:
             raise FaultError("%s: this world has no motion-capture system (crazyflie_sim_node, started by "
-                             "sim.launch, has one; crazyflie_world_server does not)" % a.op)
+                             "sim.launch, has one; crazyflie_world_server only with --vrpn)" % a.op)
         return self.mocap
 
     def _op_faults(self, a: ControlArgs) -> List[List[str]]:
@@ -525,6 +525,8 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         server.start()
         try:
             vrpn = start_vrpn(world, args, args.seed) if args.vrpn is not None else None
+            if vrpn is not None:
+                server.mocap = vrpn.mocap       # its motion capture takes faults too
         except ValueError:
             server.stop()
             raise
