@@ -24,7 +24,7 @@ hovering; a row that leaves the vehicle down (or a node dead) makes the next one
 
 Usage (takes the ROS lock on a shared machine; about 5 minutes):
     source tools/env.sh
-    flock /tmp/ros.lock bench/bench_faults.py                 # every row -> bench/results/faults.txt
+    flock /tmp/ros.lock bench/bench_faults.py --readme        # every row -> bench/results/faults.txt + README
     flock /tmp/ros.lock bench/bench_faults.py --rows loss30,emergency --out -
 """
 from __future__ import annotations
@@ -612,10 +612,29 @@ def markdown(results: List[Tuple[Row, Dict[str, Any]]]) -> List[str]:
     return out
 
 
+README_MARKERS = ("<!-- fault table: bench/bench_faults.py --readme writes below -->", "<!-- fault table end -->")
+
+
+def update_readme(lines: List[str]) -> None:
+    path = os.path.join(REPO, "README.md")
+    with open(path) as f:
+        text = f.read()
+    start, end = text.find(README_MARKERS[0]), text.find(README_MARKERS[1])
+    if start < 0 or end < start:
+        print("bench_faults: README.md has no fault-table markers; table not copied", file=sys.stderr)
+        return
+    text = text[:start + len(README_MARKERS[0])] + "\n" + "\n".join(lines) + "\n" + text[end:]
+    with open(path, "w") as f:
+        f.write(text)
+    print("README.md fault table updated")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rows", help="comma-separated row keys (default: all): " + ",".join(r.key for r in rows()))
     ap.add_argument("--out", default=os.path.join(HERE, "results", "faults.txt"), help="'-' for stdout only")
+    ap.add_argument("--readme", action="store_true",
+                    help="also put the short table into README.md (between its fault-table markers)")
     args = ap.parse_args()
     chosen = rows()
     if args.rows:
@@ -681,6 +700,8 @@ def main() -> int:
         with open(args.out, "w") as f:
             f.write(text)
         print("written to %s (%.0f s)" % (args.out, took))
+        if args.readme:
+            update_readme(markdown(results))
     else:
         print("\n".join(markdown(results)))
     return 0 if all("error" not in r for _, r in results) else 1
