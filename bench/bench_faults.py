@@ -589,6 +589,8 @@ def table(results: List[Tuple[Row, Dict[str, Any]]]) -> List[str]:
         for i, where in enumerate(r["reported"] or ["nowhere"]):
             lines.append("  %s %s" % ("reported:" if i == 0 else "         ", where))
         lines.append("  lost:     %s" % ("; ".join(r["lost"]) or "nothing counted"))
+        lines.append("  (bench: %.1f s to a hover before the fault%s)" % (
+            r["setup_s"], "" if r["setup_s"] else ": the graph of the row before"))
         lines.append("")
     return lines
 
