@@ -1,0 +1,230 @@
+"""The safety policy (server.safety) from figures and time alone."""
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from crazyflie_driver.server.safety import (ERROR, WARN, Action, BatteryWatch, DescentPlan, Reaction,
+                                            SafetyConfig, SafetyMonitor, thrust_change_for)
+
+HOVER = 36344
+CURRENT_FW = 12
+
+
+def monitor(config=SafetyConfig(), protocol=2, params=None):
+    return SafetyMonitor(config, "cf", lambda: protocol, lambda: params or {})
+
+
+def hover_for(m, t0, seconds, thrust=HOVER, period=0.02):
+    t = t0
+    while t < t0 + seconds:
+        assert m.note_setpoint(t, thrust)
+        t += period
+    return t - period
+
+
+def run(m, t0, t1, step=0.01):
+    """Poll from t0 to t1; the actions with their times."""
+    out, t = [], t0
+    while t <= t1:
+        a = m.poll(t)
+        if a is not None:
+            out.append((round(t, 3), a))
+        t += step
+    return out
+
+
+# ---------------------------------------------------------------- config
+
+def test_defaults_are_valid_and_watchdog_off():
+    c = SafetyConfig()
+    assert c.setpoint_silence and c.battery and c.land_on_shutdown and not c.emergency_watchdog
+    assert c.setpoint_silence_s < 0.5        # before the firmware's level-out
+    assert c.battery_critical_v < c.battery_warning_v
+
+
+def test_config_from_params_checks_every_value():
+    got = SafetyConfig.from_params(lambda name, default: {"safety/descent_rate": 1, "safety/emergency_watchdog":
+                                                         True}.get(name, default))
+    assert got.descent_rate == 1.0 and got.emergency_watchdog
+    with pytest.raises(ValueError, match="safety/setpoint_silence_s"):
+        SafetyConfig(setpoint_silence_s=-1.0)
+    with pytest.raises(ValueError, match="true or false"):
+        SafetyConfig(battery="yes")
+    with pytest.raises(ValueError, match="battery_critical_v"):
+        SafetyConfig(battery_warning_v=3.3, battery_critical_v=3.4)
+    with pytest.raises(ValueError, match="positive"):
+        SafetyConfig(descent_max_height=float("nan"))
+
+
+# ---------------------------------------------------------------- descent plan
+
+def test_descent_plan_phases_and_bounded_speed():
+    p = DescentPlan(HOVER, rate=0.3, max_height=2.0, hold_s=0.3)
+    assert p.thrust_at(0.1) == HOVER
+    assert p.thrust_at(0.4) < HOVER - 2000                     # accelerating down at ~1 m/s²
+    coast = p.thrust_at(1.0)
+    assert HOVER - 200 < coast < HOVER                         # sinking, barely accelerating
+    assert p.thrust_at(p.duration + 0.01) is None
+    # integrate the modelled acceleration: the floor from 2 m is reached, at most ~2x the rate
+    v = z = 0.0
+    t, dt = 0.0, 0.001
+    while t < p.duration:
+        a = -(HOVER - p.thrust_at(t)) / thrust_change_for(1.0, HOVER)
+        v += a * dt
+        z += v * dt
+        t += dt
+    assert z < -2.0
+    assert -0.65 < v < -0.3
+
+
+# ---------------------------------------------------------------- battery
+
+def test_battery_levels_need_persistence_and_only_go_down():
+    b = BatteryWatch(3.45, 3.3, 2.0)
+    assert b.update(0.0, 3.40) is None
+    assert b.update(1.0, 3.40) is None
+    assert b.update(1.5, 3.50) is None                          # a short sag is not a level
+    assert all(b.update(t, 3.40) is None for t in (2.0, 3.0))
+    assert b.update(3.6, 3.40) is None                          # 3.50 V held until 2.0 s: not 2 s below yet
+    assert b.update(4.1, 3.40) == WARN
+    assert b.update(4.2, 3.40) is None                          # said once
+    for t in (4.6, 5.5, 6.5):
+        assert b.update(t, 3.2) is None
+    assert b.update(6.7, 3.2) == ERROR
+    assert b.update(9.0, 4.0) is None and b.level == ERROR
+    assert b.update(8.0, float("nan")) is None
+
+
+def test_battery_warning_then_critical_descends_once_flying(caplog):
+    m = monitor()
+    t = hover_for(m, 0.0, 2.0)
+    with caplog.at_level(logging.WARNING, logger="crazyflie_driver.server.safety"):
+        for i in range(30):
+            m.note_battery(t + i * 0.1, 3.40)
+            m.note_setpoint(t + i * 0.1, HOVER)
+        assert m.poll(t + 3.0) is None
+        assert m.battery.level == WARN and m.report()[0] == WARN
+        t2 = t + 3.0
+        for i in range(25):
+            m.note_battery(t2 + i * 0.1, 3.25)
+            m.note_setpoint(t2 + i * 0.1, HOVER)
+        a = m.poll(t2 + 2.5)
+    assert a == Action("thrust", thrust=DescentPlan(HOVER, 0.3, 2.0, 0).thrust_at(0))
+    assert m.reaction == Reaction.DESCENT and "battery critical" in m.reason
+    texts = [r.getMessage() for r in caplog.records]
+    assert sum("warning level" in x for x in texts) == 1 and sum("critical level" in x for x in texts) == 1
+    # no new take-off on a critical battery once down
+    end = run(m, t2 + 2.6, t2 + 20.0)
+    assert end[-1][1] == Action("off") and m.reaction == Reaction.DOWN
+    assert not m.note_setpoint(t2 + 21.0, HOVER)
+    assert m.note_setpoint(t2 + 21.0, 0)
+
+
+# ---------------------------------------------------------------- setpoint silence
+
+def test_silence_on_the_chapter_path_holds_then_descends_then_stops(caplog):
+    m = monitor()
+    t = hover_for(m, 0.0, 2.0, thrust=HOVER)
+    assert run(m, t, t + 0.3) == []                             # within the silence limit
+    with caplog.at_level(logging.INFO, logger="crazyflie_driver.server.safety"):
+        acts = run(m, t + 0.31, t + 12.0)
+    kinds = [a.kind for _, a in acts]
+    assert kinds[-3:] == ["off"] * 3 and kinds.count("off") == 3     # zero thrust, said thrice: one may be lost
+    thrusts = [(at, a.thrust) for at, a in acts if a.kind == "thrust"]
+    assert thrusts[0][1] == HOVER                               # level hold at the hover thrust
+    assert min(x for _, x in thrusts) < HOVER - 2000
+    plan = DescentPlan(HOVER, 0.3, 2.0, 0.3)
+    first_off = next(at for at, a in acts if a.kind == "off")
+    assert first_off - thrusts[0][0] == pytest.approx(plan.duration, abs=0.02)
+    said = [r.getMessage() for r in caplog.records]
+    assert len([x for x in said if "no setpoint for" in x and "holding level" in x]) == 1
+    assert len([x for x in said if "descent over" in x]) == 1
+    assert m.report()[0] == WARN and "motors off" in m.report()[1]
+
+
+def test_setpoints_back_during_the_hold_resume_but_not_during_the_descent():
+    m = monitor()
+    t = hover_for(m, 0.0, 2.0)
+    run(m, t, t + 0.35)
+    assert m.reaction == Reaction.HOLD and m.report()[0] == ERROR
+    assert m.note_setpoint(t + 0.4, HOVER + 100)
+    assert m.reaction == Reaction.NONE and m.poll(t + 0.41) is None
+    t = hover_for(m, t + 0.42, 1.0)
+    run(m, t, t + 1.0)
+    assert m.reaction == Reaction.DESCENT
+    assert not m.note_setpoint(t + 1.01, HOVER) and m.ignored_setpoints == 1
+
+
+def test_a_motors_off_setpoint_ends_a_reaction_and_goes_out():
+    m = monitor()
+    t = hover_for(m, 0.0, 1.0)
+    run(m, t, t + 1.0)
+    assert m.reaction == Reaction.DESCENT
+    assert not m.note_setpoint(t + 1.0, HOVER)
+    assert m.note_setpoint(t + 1.01, 0)
+    assert m.reaction == Reaction.NONE and m.poll(t + 1.02) is None and m.finished(t + 1.02)
+    assert "motors off by the user" in m.events[-1]
+
+
+def test_no_reaction_on_the_ground_or_when_switched_off():
+    m = monitor()
+    hover_for(m, 0.0, 1.0, thrust=0)
+    assert run(m, 1.0, 3.0) == []
+    m = monitor(SafetyConfig(setpoint_silence=False))
+    t = hover_for(m, 0.0, 1.0)
+    assert run(m, t, t + 3.0) == []
+
+
+def test_silence_with_onboard_control_lands_by_the_high_level_commander():
+    m = monitor(protocol=CURRENT_FW, params={"stabilizer.estimator": 2})
+    t = 0.0
+    while t < 2.0:
+        m.note_pose(t, 0.8)
+        m.note_setpoint(t, HOVER)
+        t += 0.02
+    m.note_pose(t + 0.3, 0.8)
+    acts = run(m, t, t + 5.0)
+    assert acts[0][1] == Action("land", duration=pytest.approx(0.8 / 0.3))
+    stop_at = next(at for at, a in acts if a.kind == "hl_stop")
+    assert [a.kind for _, a in acts][1:] == ["hl_stop", "off", "off", "off"]
+    assert stop_at - acts[0][0] == pytest.approx(0.8 / 0.3 + 0.5, abs=0.02)
+    assert m.reaction == Reaction.DOWN
+
+
+def test_streamed_port7_setpoints_land_onboard_and_a_released_stream_is_not_silence():
+    m = monitor(protocol=CURRENT_FW)
+    m.note_setpoint(0.0, None)
+    assert run(m, 0.0, 1.0)[0][1].kind == "land"
+    m = monitor(protocol=CURRENT_FW)
+    m.note_setpoint(0.0, None)
+    m.note_stream_released(0.1)
+    m.note_high_level(0.2, "takeoff")
+    assert run(m, 0.2, 3.0) == []
+    assert m.flying
+
+
+def test_finished_only_once_the_last_zero_thrust_went_out():
+    m = monitor()
+    t = hover_for(m, 0.0, 1.0)
+    m.begin_shutdown(t, 1.0)
+    acts = run(m, t, t + 0.5 - 0.015)
+    assert acts[-1][1].kind == "thrust" and not m.finished(t + 0.5)
+    offs = [m.poll(t + 0.5 + k * 0.01) for k in range(3)]
+    assert offs == [Action("off")] * 3 and not m.finished(t + 0.53)
+    assert m.poll(t + 0.54) is None and m.finished(t + 0.54)
+
+
+def test_shutdown_lands_or_descends_only_what_flies_within_the_budget():
+    m = monitor()
+    assert not m.begin_shutdown(0.0) and m.finished(0.0)
+    t = hover_for(m, 0.0, 1.0)
+    assert m.begin_shutdown(t, 3.0)
+    acts = run(m, t, t + 5.0)
+    assert acts[0][1].kind == "thrust" and acts[0][1].thrust < HOVER - 2000    # no hold: descend at once
+    assert acts[-1][1] == Action("off") and acts[-3][0] <= t + 2.5 + 0.02       # cut at the budget
+    assert m.finished(t + 5.0)
+    m = monitor(SafetyConfig(land_on_shutdown=False))
+    hover_for(m, 0.0, 1.0)
+    assert not m.begin_shutdown(1.0)
