@@ -1,13 +1,14 @@
 """The swarm demo's flight: its phases, each Crazyflie's planned path, and the tracking error against it.
 
 ROS-free. The demo node announces each phase (``Phase``) just before it sends the command; the
-monitor anchors the phase at the world time it hears of it and rebuilds every Crazyflie's plan as
-the firmware's high-level commander flies it: takeoff, go_to and land are the planner's degree-7
-rest-to-rest polynomials (zero velocity, acceleration and jerk at both ends) from where the
-previous phase ended, and the figure-8 is the uploaded trajectory relative to its start. The error
-is the distance from the world's true position to that plan. A plan anchored when the command is
-sent, not when the radio delivers it, makes the error an upper bound by the delivery delay (a few
-milliseconds: under 1 cm at the figure-8's top speed).
+monitor anchors the phase at the world time it hears of it, then, once the command had time to
+arrive, at the world time each Crazyflie's high-level commander began it (``set_start``: the
+moment the broadcast or unicast reached that Crazyflie; the delivery itself is not tracking
+error). It rebuilds every Crazyflie's plan as the firmware's high-level commander flies it:
+takeoff, go_to and land are the planner's degree-7 rest-to-rest polynomials (zero velocity,
+acceleration and jerk at both ends) from where the previous phase ended, and the figure-8 is the
+uploaded trajectory relative to its start. The error is the distance from the world's true
+position to that plan.
 """
 from __future__ import annotations
 
@@ -101,6 +102,11 @@ class Plan:
     def end(self) -> Vec3:
         return self.segments[-1].end if self.segments else self.initial
 
+    def set_start(self, phase_index: int, start_time: float) -> None:
+        """When the Crazyflie's commander began the ``phase_index``-th segment (world time)."""
+        if 0 <= phase_index < len(self.segments):
+            self.segments[phase_index].start_time = float(start_time)
+
     def add(self, phase: Phase, anchor: float, name: str) -> None:
         start = self.end
         if phase.name == "takeoff":
@@ -132,19 +138,21 @@ class Plan:
 
 @dataclass
 class Track:
-    """The world's truth for one Crazyflie and its plan."""
+    """The world's truth for one Crazyflie and its plan; errors against the plan as it stands."""
 
     name: str
     plan: Plan
     times: List[float] = field(default_factory=list)
     positions: List[Vec3] = field(default_factory=list)
-    errors: List[float] = field(default_factory=list)
 
     def add(self, t: float, p: Sequence[float]) -> None:
-        p = tuple(float(v) for v in p)
         self.times.append(t)
-        self.positions.append(p)
-        self.errors.append(math.dist(p, self.plan.at(t)))
+        self.positions.append(tuple(float(v) for v in p))
+
+    @property
+    def errors(self) -> List[float]:
+        at = self.plan.at
+        return [math.dist(p, at(t)) for t, p in zip(self.times, self.positions)]
 
 
 class Flight:
@@ -155,7 +163,9 @@ class Flight:
         self.tracks = {n: Track(n, Plan(p, fig)) for n, p in initial.items()}
         self.windows: List[Tuple[str, float, float]] = []      # (phase, start, end incl. settle)
 
-    def phase(self, phase: Phase, anchor: float) -> None:
+    def phase(self, phase: Phase, anchor: float) -> int:
+        """Adds the phase to every plan, anchored at ``anchor``; returns its index (for ``set_start``)."""
+        index = len(self.windows)
         for name, track in self.tracks.items():
             track.plan.add(phase, anchor, name)
         if self.windows:
@@ -163,6 +173,12 @@ class Flight:
             self.windows[-1] = (name, start, anchor)
         if phase.name in PHASES:
             self.windows.append((phase.name, anchor, anchor + phase.duration + SETTLE_S))
+        return index
+
+    def set_start(self, index: int, name: str, start_time: float) -> None:
+        track = self.tracks.get(name)
+        if track is not None:
+            track.plan.set_start(index, start_time)
 
     def sample(self, t: float, positions: Dict[str, Sequence[float]]) -> None:
         for name, p in positions.items():
@@ -176,7 +192,11 @@ class Flight:
         if window is None:
             return {}
         _, a, b = window
-        return {n: [e for t, e in zip(tr.times, tr.errors) if a <= t <= b] for n, tr in self.tracks.items()}
+        out = {}
+        for n, tr in self.tracks.items():
+            at = tr.plan.at
+            out[n] = [math.dist(p, at(t)) for t, p in zip(tr.times, tr.positions) if a <= t <= b]
+        return out
 
     def means(self, phase: str) -> Dict[str, float]:
         """Each Crazyflie's mean error over the phase (m)."""

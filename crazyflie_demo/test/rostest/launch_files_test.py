@@ -63,6 +63,7 @@ EXPECTED: Dict[str, Tuple[List[str], List[str], List[str]]] = {
     "ps3.launch": (["/" + n for n in PAD], [], []),
     "sim_mission.launch": (SIM + _ns("crazyflie1", WAYPOINT + BASELINK) + _ns("crazyflie2", WAYPOINT + BASELINK)
                            + ["/mission_monitor"], ["crazyflie1", "crazyflie2"], ["plot:={tmp}/mission.png"]),
+    "swarm.launch": (SIM + ["/swarm_demo"], ["cf1", "cf2", "cf3", "cf4"], ["n:=4", "vrpn_port:=19936"]),
 }
 # nodes that finish by design once their work is done
 EXITS = {"crazyflie_add"}

@@ -130,3 +130,15 @@ def test_pyramid_of_an_even_grid():
     goals = pyramid_goals(start, 1.0, 0.15)
     assert sorted({round(g[2], 3) for g in goals.values()}) == [1.0, 1.15]      # inner 2 x 2 one step up
     assert goals["cf6"][2] == pytest.approx(1.15) and goals["cf1"][2] == pytest.approx(1.0)
+
+
+def test_each_crazyflie_is_judged_from_when_its_commander_began_the_phase():
+    flight = Flight({"cf1": (0.0, 0.0, 1.0)})
+    index = flight.phase(Phase("figure8", 8.0), 10.0)          # announced at 10.0
+    flight.set_start(index, "cf1", 10.3)                          # the broadcast reached it at 10.3
+    plan = flight.tracks["cf1"].plan
+    for t in (10.5, 12.0, 15.0):
+        flight.sample(t, {"cf1": plan.at(t)})
+    assert plan.at(12.0) == pytest.approx(tuple(a + b for a, b in zip((0.0, 0.0, 1.0), position_at(
+        figure8_pieces(), 1.7))))
+    assert max(flight.tracks["cf1"].errors) == pytest.approx(0.0)

@@ -196,7 +196,9 @@ class Vehicle:
                     "on_ground": bool(b.on_ground[i]), "motors": o.motors[i].tolist(),
                     "thrust": float(o.thrust[i]), "thrust_locked": bool(o.thrust_locked[i]),
                     "locked": LOCK_NAMES[int(o.lock[i])], "vbat": float(w.battery.vbat[i]),
-                    "mass": self.params.mass}
+                    "mass": self.params.mass,
+                    # world time the high-level commander's current plan began (takeoff, go_to, trajectory...)
+                    "plan_begin": float(w.flight.hl.plans[i].t_begin)}
 
     def velocity(self) -> np.ndarray:
         with self._world._lock:
