@@ -1,0 +1,124 @@
+#!/usr/bin/env python3
+"""The swarm demo's flight for 1, 9 and 49 simulated Crazyflies: figure-8 tracking error per Crazyflie, CPU.
+
+Each case runs ``roslaunch crazyflie_demo swarm.launch sim:=true monitor:=true n:=N`` (the demo:
+takeoff by broadcast, the computed figure-8 at 0.76 m/s mean / 1.48 m/s top started by one
+broadcast, a formation change by go_to, land) and reads the monitor's figures: the distance of
+each Crazyflie's true position (the world's) to its plan over the figure-8 and its settling second,
+its mean per Crazyflie; the swarm's mean of those, the worst Crazyflie's, and the largest single
+error. CPU: the server's and the world's processes (/proc, user + system) from every Crazyflie
+connected to the end of the flight, as a share of one core.
+
+Usage (takes the ROS lock on a shared machine; about a minute per case):
+    source tools/env.sh
+    flock /tmp/ros.lock bench/bench_swarm_flight.py [--counts 1,9,49]
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Dict, Optional
+
+import bench_support as bs
+
+
+def node_pids(master, names) -> Dict[str, int]:
+    import xmlrpc.client
+    out = {}
+    for n in names:
+        try:
+            out[n] = int(xmlrpc.client.ServerProxy(master.lookupNode(n)).getPid("/bench")[2])
+        except Exception:
+            pass
+    return out
+
+
+def run_case(n: int, timeout: float) -> dict:
+    import rosgraph
+    work = tempfile.mkdtemp(prefix="cf_swarm_flight_")
+    stats = os.path.join(work, "stats.json")
+    port = bs.free_port()
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_LOG_DIR=os.path.join(work, "log"),
+               CRAZYFLIE_TOC_CACHE=os.path.join(work, "toc"))
+    log = open(os.path.join(work, "launch.log"), "w")
+    proc = subprocess.Popen(["roslaunch", "-p", str(port), "crazyflie_demo", "swarm.launch", "sim:=true",
+                             "monitor:=true", "n:=%d" % n, "stats_file:=" + stats,
+                             "plot:=" + os.path.join(work, "swarm.png"),
+                             "sim_address:=127.0.0.1:%d" % bs.free_port(), "vrpn_port:=%d" % bs.free_port()],
+                            stdout=log, stderr=subprocess.STDOUT, env=env)
+    result: dict = {"work": work}
+    start: Optional[Dict[str, float]] = None
+    last: Dict[str, float] = {}
+    t_start = t_last = 0.0
+    t0 = time.monotonic()
+    try:
+        os.environ["ROS_MASTER_URI"] = env["ROS_MASTER_URI"]
+        master = rosgraph.Master("/bench")
+        want = {"/cf%d/emergency" % (i + 1) for i in range(n)} | {"/takeoff"}
+        pids: Dict[str, int] = {}
+        while proc.poll() is None and time.monotonic() - t0 < timeout:
+            try:
+                if start is None:
+                    _, _, srvs = master.getSystemState()
+                    if want <= {s for s, _ in srvs}:
+                        pids = node_pids(master, ("/crazyflie_server", "/crazyflie_sim"))
+                        start = {k: bs.process_cpu_seconds(p) for k, p in pids.items()}
+                        t_start = time.monotonic()
+                        result["connect_s"] = t_start - t0
+                else:
+                    last = {k: bs.process_cpu_seconds(p) for k, p in pids.items()}
+                    t_last = time.monotonic()
+            except Exception:
+                pass                      # master not up yet, or a process just ended
+            time.sleep(0.25)
+        if proc.poll() is None:
+            result["error"] = "no end within %.0f s" % timeout
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait(30)
+        log.close()
+    if os.path.exists(stats):
+        with open(stats) as f:
+            result.update(json.load(f))
+    if start and last and t_last > t_start:
+        result["cpu"] = {k: (last[k] - start[k]) / (t_last - t_start) for k in start if k in last}
+    return result
+
+
+def main() -> int:
+    ap = bs.parser(__doc__, "swarm_flight.txt", 0.0, counts="1,9,49")
+    args = ap.parse_args()
+    lines = ["swarm demo flight (swarm.launch sim:=true): figure-8 2 x 1 m, 8 s, 0.76 m/s mean, 1.48 m/s top,",
+             "started by one broadcast relative to each start; Mellinger controller, Kalman estimator fed by the",
+             "server's packed broadcasts of the world's VRPN motion capture (100 Hz, 0.5 mm noise, 5 ms latency)",
+             bs.machine_line(), "",
+             "%4s %14s %14s %12s %10s %11s %10s %8s" % ("CFs", "fig-8 mean cm", "worst CF cm", "max cm",
+                                                       "server CPU", "world CPU", "connect s", "result")]
+    print("\n".join(lines), flush=True)
+    for n in bs.counts_of(args.counts):
+        r = run_case(n, timeout=300.0)
+        fig = (r.get("phases") or {}).get("figure8")
+        cpu = r.get("cpu", {})
+        if fig is None:
+            line = "%4d   failed: %s (logs in %s)" % (n, r.get("error") or r.get("result"), r["work"])
+        else:
+            line = "%4d %14.2f %14.2f %12.2f %9.0f%% %10.0f%% %10.1f %8s" % (
+                n, 100 * fig["mean"], 100 * fig["worst_mean"], 100 * fig["max"],
+                100 * cpu.get("/crazyflie_server", float("nan")), 100 * cpu.get("/crazyflie_sim", float("nan")),
+                r.get("connect_s", float("nan")), r.get("result"))
+        print(line, flush=True)
+        lines.append(line)
+    lines += ["", "fig-8 mean: the swarm's mean of each Crazyflie's mean error (true position - plan) over the",
+              "figure-8 and its settling second; worst CF: the largest of those means; max: the largest single error.",
+              "CPU: share of one core from every Crazyflie connected to the end of the flight (user + system)."]
+    bs.write_lines(args.out, lines)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
