@@ -4,14 +4,18 @@ Every packet gets a reply on its own header, ``[command, request byte 1, request
 The planning itself happens in the world (``call(command, **args) -> result``); trajectory
 definitions and their data live in the ``TrajectoryMemory``. A packet shorter than its command's
 layout is read as if zero-padded (the firmware reads whatever the buffer holds). Facts in
-docs/protocol.md ("High-level commander").
+docs/protocol.md ("High-level commander"); compressed trajectories and the spiral in
+docs/simulation.md.
 """
 from __future__ import annotations
 
+import logging
 import struct
 from typing import Callable, Dict, Tuple
 
 from crazyflie_driver.sim.firmware.trajectory_memory import MAX_TRAJECTORIES, Descriptor, TrajectoryMemory
+
+_log = logging.getLogger(__name__)
 
 ENOEXEC = 8
 Handler = Callable[[int, int, bytes], None]
@@ -28,6 +32,7 @@ LAYOUTS: Dict[int, struct.Struct] = {
     DEFINE_TRAJECTORY: struct.Struct("<BBBIB"), TAKEOFF_2: struct.Struct("<Bff?f"), LAND_2: struct.Struct("<Bff?f"),
     TAKEOFF_WITH_VELOCITY: struct.Struct("<Bf?f?f"), LAND_WITH_VELOCITY: struct.Struct("<Bf?f?f"),
     GO_TO_2: struct.Struct("<BBBfffff"), START_TRAJECTORY_2: struct.Struct("<BBBBBf"),
+    SPIRAL: struct.Struct("<BBBfffff"),
 }
 
 
@@ -40,7 +45,18 @@ def high_level_port(send: Send, call: Call, memory: TrajectoryMemory) -> Handler
     def start(mask: int, traj_id: int, timescale: float, reversed_: bool, relative: bool, relative_yaw: bool) -> int:
         pieces = memory.pieces(traj_id)
         if pieces is None:
-            return ENOEXEC
+            compressed = memory.compressed(traj_id)
+            if compressed is None:
+                return ENOEXEC
+            # the firmware plays a compressed trajectory only forwards at its own speed, shifted in
+            # position only (no relative yaw)
+            if timescale != 1.0 or reversed_:
+                return call("start_trajectory", mask=mask, pieces=[])
+            pieces, past_end = compressed
+            if past_end:
+                _log.warning("compressed trajectory %d runs past the end of the trajectory memory: the simulated "
+                             "Crazyflie reads zeros there (the real one reads whatever RAM follows)", traj_id)
+            relative_yaw = False
         return call("start_trajectory", mask=mask, pieces=pieces, timescale=timescale, reversed=reversed_,
                     relative=relative, relative_yaw=relative_yaw)
 
@@ -64,6 +80,9 @@ def high_level_port(send: Send, call: Call, memory: TrajectoryMemory) -> Handler
             return call("go_to", mask=f[0], relative=f[1], linear=False, goal=f[2:5], yaw=f[5], duration=f[6])
         if cmd == GO_TO_2:
             return call("go_to", mask=f[0], relative=f[1], linear=f[2], goal=f[3:6], yaw=f[6], duration=f[7])
+        if cmd == SPIRAL:
+            return call("spiral", mask=f[0], sideways=bool(f[1]), clockwise=bool(f[2]), angle=f[3], r0=f[4],
+                        rf=f[5], ascent=f[6], duration=f[7])
         if cmd == START_TRAJECTORY:
             return start(f[0], f[3], f[4], bool(f[2]), bool(f[1]), False)
         if cmd == START_TRAJECTORY_2:

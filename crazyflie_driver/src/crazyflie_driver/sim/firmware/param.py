@@ -139,12 +139,17 @@ class ParamService:
         else:
             self._send(header, bytes([0xFF, ident, ENOENT]))
 
-    def _read(self, header: int, data: bytes) -> None:
+    def _known_id(self, header: int, data: bytes) -> Optional[int]:
+        """The id a read or write names; None (after answering ENOENT for an unknown id) when there is none."""
         ident = self._parse_id(data)
-        if ident is None:
-            return
-        if ident >= len(self.entries):
+        if ident is not None and ident >= len(self.entries):
             self._unknown(header, ident)
+            return None
+        return ident
+
+    def _read(self, header: int, data: bytes) -> None:
+        ident = self._known_id(header, data)
+        if ident is None:
             return
         e = self.entries[ident]
         value = T.pack(self.values[ident], T.CTYPES[e.ctype])
@@ -154,11 +159,8 @@ class ParamService:
             self._send(header, bytes([ident]) + value)
 
     def _write(self, header: int, data: bytes) -> None:
-        ident = self._parse_id(data)
+        ident = self._known_id(header, data)
         if ident is None:
-            return
-        if ident >= len(self.entries):
-            self._unknown(header, ident)
             return
         e = self.entries[ident]
         if e.readonly:

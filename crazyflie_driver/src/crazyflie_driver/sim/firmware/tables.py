@@ -196,7 +196,9 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
        for n in ("initialX", "initialY", "initialZ", "initialYaw")]
     + [ParamVar("kalman", "maxPos", "float", 100.0, generations=_CUR),
        ParamVar("kalman", "maxVel", "float", 10.0, generations=_CUR)]
-    + [ParamVar("hlCommander", "groupmask", "uint8_t", 0, generations=_CUR)]
+    + [ParamVar("hlCommander", "groupmask", "uint8_t", 0, generations=_CUR),
+       ParamVar("hlCommander", "vtoff", "float", 0.5, generations=_CUR),
+       ParamVar("hlCommander", "vland", "float", 0.5, generations=_CUR)]
     + [ParamVar("ctrlMel", n, "float", 0.0, generations=_CUR)
        for n in ("kp_xy", "kd_xy", "ki_xy", "i_range_xy", "kp_z", "kd_z", "ki_z", "i_range_z", "mass", "massThrust")]
     + [ParamVar("locSrv", "extPosStdDev", "float", 0.01, generations=_CUR),

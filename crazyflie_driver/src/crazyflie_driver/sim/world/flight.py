@@ -30,6 +30,8 @@ def default_params() -> Dict[str, float]:
     out = dict(ESTIMATOR_DEFAULTS)
     out.update(control_defaults())
     out["hlCommander.groupmask"] = 0.0
+    out["hlCommander.vtoff"] = DEFAULT_VELOCITY
+    out["hlCommander.vland"] = DEFAULT_VELOCITY
     return out
 
 
@@ -59,6 +61,10 @@ class OnboardFlight:
     def set_param(self, i: int, name: str, value: float, truth: Sequence[float], now: float) -> bool:
         if name == "hlCommander.groupmask":
             self.hl.group_mask[i] = int(value) & 0xFF
+            return True
+        if name in ("hlCommander.vtoff", "hlCommander.vland"):
+            velocities = self.hl.takeoff_velocity if name.endswith("vtoff") else self.hl.landing_velocity
+            velocities[i] = float(value)
             return True
         return self.estimator.set_param(i, name, value, truth, now) or self.control.set_param(i, name, value)
 
@@ -121,13 +127,18 @@ class OnboardFlight:
             if args.get("relative"):
                 height = start.pos[2] + height if command == "takeoff" else start.pos[2] - height
             if velocity is not None:
-                v = float(velocity) if float(velocity) > 0 else DEFAULT_VELOCITY
-                duration = abs(height - start.pos[2]) / v
+                default = hl.takeoff_velocity[i] if command == "takeoff" else hl.landing_velocity[i]
+                v = float(velocity) if float(velocity) > 0 else default
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    duration = float(np.float64(abs(height - start.pos[2])) / v)
             fn = hl.takeoff if command == "takeoff" else hl.land
             return fn(i, start, height, yaw, duration, now)
         if command == "go_to":
             return hl.go_to(i, start, args["goal"], float(args["yaw"]), duration, bool(args.get("relative")),
                             bool(args.get("linear")), now)
+        if command == "spiral":
+            return hl.spiral(i, start, bool(args["sideways"]), bool(args["clockwise"]), float(args["angle"]),
+                             float(args["r0"]), float(args["rf"]), float(args["ascent"]), duration, now)
         if command == "start_trajectory":
             pieces = [Piece(float(d), np.asarray(c, dtype=float)) for d, c in args["pieces"]]
             return hl.start_trajectory(i, start, pieces, float(args.get("timescale", 1.0)),

@@ -8,18 +8,20 @@ notify-setpoints-stop hands control back. While idle with the control, it stops 
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, Setpoint
-from crazyflie_driver.sim.world.planner import FLYING, IDLE, LANDING, Evaluation, Piece, Plan, online_piece
+from crazyflie_driver.sim.world.planner import (AXES, FLYING, IDLE, LANDING, N_COEFFS, Evaluation, Piece, Plan,
+                                                online_piece, poly7_nojerk, shortest_angle, wrap_angle)
 
 HL_RATE_EVERY = 10                 # ticks: the high-level commander runs at 100 Hz
 HL_SETPOINT_KIND = 100             # not a port-7 type: marks setpoints of the high-level commander
 ENOEXEC, EBUSY = 8, 16
 REFUSED = 1                        # what the planner returns for a command it does not take now
-DEFAULT_VELOCITY = 0.5             # m/s, hlCommander.vtoff / vland
+DEFAULT_VELOCITY = 0.5             # m/s, the defaults of hlCommander.vtoff and hlCommander.vland
+MAX_SPIRAL_ANGLE = 2.0 * math.pi   # rad: the planner saturates a spiral's angle here
 
 
 class HighLevelPlans:
@@ -28,6 +30,8 @@ class HighLevelPlans:
     def __init__(self) -> None:
         self.plans: List[Plan] = []
         self.group_mask: List[int] = []
+        self.takeoff_velocity: List[float] = []       # hlCommander.vtoff, m/s
+        self.landing_velocity: List[float] = []       # hlCommander.vland, m/s
 
     def __len__(self) -> int:
         return len(self.plans)
@@ -35,15 +39,21 @@ class HighLevelPlans:
     def append_row(self) -> int:
         self.plans.append(Plan())
         self.group_mask.append(0)
+        self.takeoff_velocity.append(DEFAULT_VELOCITY)
+        self.landing_velocity.append(DEFAULT_VELOCITY)
         return len(self.plans) - 1
 
     def delete_row(self, index: int) -> None:
         del self.plans[index]
         del self.group_mask[index]
+        del self.takeoff_velocity[index]
+        del self.landing_velocity[index]
 
     def boot(self, i: int) -> None:
         self.plans[i] = Plan()
         self.group_mask[i] = 0
+        self.takeoff_velocity[i] = DEFAULT_VELOCITY
+        self.landing_velocity[i] = DEFAULT_VELOCITY
 
     def in_group(self, i: int, mask: int) -> bool:
         return mask == 0 or bool(mask & self.group_mask[i])
@@ -94,8 +104,53 @@ class HighLevelPlans:
             first = plan.evaluate(now)
             plan.shift[:3] = start.pos - first.pos
             if relative_yaw:
-                plan.shift[3] = start.yaw - first.yaw
+                plan.shift[3] = shortest_angle(wrap_angle(first.yaw), wrap_angle(start.yaw))
         self.plans[i] = plan
+        return 0
+
+    def spiral(self, i: int, start: Evaluation, sideways: bool, clockwise: bool, angle: float, r0: float, rf: float,
+               ascent: float, duration: float, now: float) -> int:
+        """A spiral segment from ``start`` as the firmware plans it: one degree-7 piece per axis whose ends
+        lie on the spiral (position, velocity and acceleration); the yaw turns by the angle. The angle is
+        saturated at +-2 pi and negative radii count as 0. Around a centre to the left (counter-clockwise)
+        or right (clockwise) of the heading, or ahead of/behind it when ``sideways``."""
+        angle = min(max(angle, -MAX_SPIRAL_ANGLE), MAX_SPIRAL_ANGLE) if not math.isnan(angle) else angle
+        r0 = 0.0 if r0 < 0 else r0
+        rf = 0.0 if rf < 0 else rf
+        sense = 1.0 if clockwise else -1.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            omega = np.float64(-sense * angle) / duration
+            climb = np.float64(ascent) / duration
+            dr = np.float64(rf - r0) / duration
+        phi0 = wrap_angle(start.yaw)
+        phi_f = phi0 - sense * angle
+
+        def point(phi: float, r: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """Offset from the centre, velocity and acceleration at heading ``phi`` and radius ``r``."""
+            c, s_ = math.cos(phi), math.sin(phi)
+            if sideways:
+                offset = np.array([-c, -s_]) * sense * r
+                vel = sense * np.array([r * s_ * omega - dr * c, -r * c * omega - dr * s_])
+                acc = sense * np.array([r * c * omega ** 2 + 2 * dr * s_ * omega,
+                                        r * s_ * omega ** 2 - 2 * dr * c * omega])
+            else:
+                offset = np.array([-s_, c]) * sense * r
+                vel = np.array([-sense * (r * c * omega + dr * s_), sense * (-r * s_ * omega + dr * c)])
+                acc = sense * np.array([r * s_ * omega ** 2 - 2 * dr * c * omega,
+                                        -r * c * omega ** 2 - 2 * dr * s_ * omega])
+            return offset, vel, acc
+
+        with np.errstate(invalid="ignore", over="ignore"):
+            off0, vel0, acc0 = point(phi0, r0)
+            off_f, vel_f, acc_f = point(phi_f, rf)
+            centre = start.pos[:2] - off0
+            end = centre + off_f
+            coeffs = np.zeros((AXES, N_COEFFS))
+            for k in range(2):
+                coeffs[k] = poly7_nojerk(duration, (start.pos[k], vel0[k], acc0[k]), (end[k], vel_f[k], acc_f[k]))
+            coeffs[2] = poly7_nojerk(duration, (start.pos[2], climb, 0.0), (start.pos[2] + ascent, climb, 0.0))
+            coeffs[3] = poly7_nojerk(duration, (phi0, omega, 0.0), (phi_f, omega, 0.0))
+        self.plans[i] = Plan(FLYING, [Piece(max(duration, 0.0), coeffs)], now)
         return 0
 
     def stop(self, i: int) -> None:

@@ -53,6 +53,8 @@ def poly7_nojerk(duration: float, start: Sequence[float], end: Sequence[float]) 
         c = np.zeros(N_COEFFS)
         c[0] = end[0]
         return c
+    if not math.isfinite(duration):
+        return np.full(N_COEFFS, np.nan)          # what the firmware's float arithmetic gives
     a = np.array([_basis(0.0, k) for k in range(4)] + [_basis(duration, k) for k in range(4)])
     b = np.array([start[0], start[1], start[2], 0.0, end[0], end[1], end[2], 0.0])
     return np.linalg.solve(a, b)
@@ -68,6 +70,11 @@ def evaluate(piece: Piece, t: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray
     v = c[:, 1:] @ (n[1:] * powers[:-1])
     a = c[:, 2:] @ (n[2:] * (n[2:] - 1) * powers[:-2])
     return p, v, a
+
+
+def wrap_angle(rad: float) -> float:
+    """The angle in [-pi, pi)."""
+    return (rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def shortest_angle(from_rad: float, to_rad: float) -> float:

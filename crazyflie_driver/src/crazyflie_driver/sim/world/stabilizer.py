@@ -252,7 +252,7 @@ class OnboardController:
         if m.max() > 65535.0:
             excess = np.maximum(m.max(axis=1) - 65535.0, 0.0) * ~s.gen2016      # current: keep the torques
             m -= excess[:, None]
-        np.maximum(m, 0.0, out=m)
+        np.fmax(m, 0.0, out=m)                 # NaN (a NaN setpoint) -> 0, as the MCU converts it
         np.minimum(m, 65535.0, out=m)
         m *= (thrust > 0.0)[:, None]
         if s.motor_power_enable.any():
