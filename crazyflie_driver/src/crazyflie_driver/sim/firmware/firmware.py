@@ -15,7 +15,7 @@ import logging
 import threading
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable, Deque, Dict, Optional, Sequence, Union
+from typing import Any, Callable, Deque, Dict, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
 from crazyflie_driver.sim.firmware import ports
@@ -115,9 +115,10 @@ class SimulatedCrazyflie:
             6: ports.localization_port(state, hook, self.emergency_stop, self.now, self.address[-1]),
             7: ports.generic_setpoint_port(state, hook, self.halt),
             8: high_level_port(self.send, self._high_level, self.trajectory_memory),
-            9: ports.supervisor_port(state, self.send, self.supervisor_bits, self.emergency_stop, self.now),
-            13: ports.platform_port(state, self.send, profile.protocol_version, profile.firmware_version,
-                                    profile.device_type, profile.device_type_query),
+            9: ports.supervisor_port(state, self.send, self.supervisor_bits, self.arm, self.recover,
+                                     self.emergency_stop, self.now),
+            13: ports.platform_port(self.send, profile.protocol_version, profile.firmware_version,
+                                    profile.device_type, profile.device_type_query, self.arm, self.recover),
             15: ports.link_port(self.send),
         }
         self._ports = {p: h for p, h in handlers.items() if p in self.profile.ports}
@@ -213,25 +214,65 @@ class SimulatedCrazyflie:
         if fn is not None:
             fn(name, value)
 
-    def supervisor_bits(self) -> int:
-        def flag(name: str, default: float) -> int:
+    def _supervisor_flags(self) -> Dict[str, bool]:
+        """The vehicle's supervisor flags (``Vehicle.supervisor_flags``), or what its log variables say."""
+        fn = getattr(self.vehicle, "supervisor_flags", None)
+        if fn is not None:
             try:
-                return 1 if self.vehicle.read(name) else 0
+                return dict(fn())
             except Exception:
-                return 1 if default else 0
+                _log.exception("vehicle.supervisor_flags failed")
+
+        def flag(name: str, default: float) -> bool:
+            try:
+                return bool(self.vehicle.read(name))
+            except Exception:
+                return bool(default)
         try:   # the vehicle's own locks (setpoint watchdog, tumble, battery) lock the supervisor too
             vehicle_locked = bool(getattr(self.vehicle, "lock_reason", ""))
         except Exception:
             vehicle_locked = False
-        locked = self.state.emergency or vehicle_locked
-        bits = 1 << 0                                   # can arm
-        bits |= int(self.state.armed) << 1
-        bits |= 1 << 2                                  # auto arm
-        bits |= (0 if locked else flag("sys.canfly", 1)) << 3
-        bits |= flag("sys.isFlying", 0) << 4
-        bits |= flag("sys.isTumbled", 0) << 5
+        return {"locked": vehicle_locked, "crashed": False, "tumbled": flag("sys.isTumbled", 0),
+                "flying": flag("sys.isFlying", 0), "hl_active": False, "hl_finished": True, "hl_disabled": False}
+
+    def supervisor_bits(self) -> int:
+        """``supervisor.info``: the bits of the firmware's supervisor (docs/protocol.md, port 9)."""
+        f = self._supervisor_flags()
+        locked = self.state.emergency or bool(f.get("locked"))
+        crashed = bool(f.get("crashed")) and not locked
+        blocked = locked or crashed
+        armed = self.state.armed and not blocked
+        bits = int(not self.state.armed and not blocked)        # 0: can arm
+        bits |= int(armed) << 1
+        bits |= 1 << 2                                          # auto arm
+        bits |= int(armed) << 3                                 # can fly: motors allowed
+        bits |= int(bool(f.get("flying"))) << 4
+        bits |= int(bool(f.get("tumbled"))) << 5
         bits |= int(locked) << 6
+        bits |= int(crashed) << 7
+        bits |= int(bool(f.get("hl_active"))) << 8
+        bits |= int(bool(f.get("hl_finished"))) << 9
+        bits |= int(bool(f.get("hl_disabled"))) << 10
         return bits
+
+    def arm(self, do_arm: bool) -> Tuple[bool, bool]:
+        """An arming request: (success, armed). Arming needs a supervisor that is neither locked nor
+        crashed; disarming always succeeds."""
+        bits = self.supervisor_bits()
+        if do_arm and not bits & 0x03:              # neither armed nor able to arm (a locked supervisor disarms)
+            return False, False
+        self.state.armed = bool(do_arm)
+        return True, bool(self.supervisor_bits() & 0x02)
+
+    def recover(self) -> Tuple[bool, bool]:
+        """A crash-recovery request: (success, not crashed); refused while the Crazyflie is tumbled."""
+        fn = getattr(self.vehicle, "recover_crash", None)
+        try:
+            ok = bool(fn()) if fn is not None else True
+        except Exception:
+            _log.exception("vehicle.recover_crash failed")
+            ok = False
+        return ok, not self.supervisor_bits() & 0x80
 
     # --- packets in --------------------------------------------------------------------------
     def handle_radio_packet(self, data: bytes, ack_requested: bool = True) -> bytes:

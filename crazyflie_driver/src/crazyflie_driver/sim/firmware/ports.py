@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import struct
-from typing import Any, Callable, List
+from typing import Any, Callable, List, Tuple
 
 from crazyflie_driver.sim.firmware import localization_decode as loc
 from crazyflie_driver.sim.firmware.setpoint_decode import FirmwareAssert, decode_meta, decode_setpoint
@@ -26,6 +26,7 @@ EIO = 5
 Handler = Callable[[int, int, bytes], None]
 Send = Callable[[int, bytes], bool]
 VehicleHook = Callable[..., bool]       # (hook name, *args) -> whether the vehicle has that hook
+Request = Callable[[bool], Tuple[bool, bool]]   # a supervisor request -> (success, resulting state)
 
 
 class Console:
@@ -160,9 +161,12 @@ def localization_port(state: SimState, hook: VehicleHook, emergency_stop: Callab
     return handle
 
 
-def supervisor_port(state: SimState, send: Send, supervisor_bits: Callable[[], int],
-                    emergency_stop: Callable[[str], None], now: Callable[[], float]) -> Handler:
-    """Port 9 (protocol 12): state queries on ch 0, arm / recover / e-stop on ch 1."""
+def supervisor_port(state: SimState, send: Send, supervisor_bits: Callable[[], int], arm: Request,
+                    recover: Callable[[], Tuple[bool, bool]], emergency_stop: Callable[[str], None],
+                    now: Callable[[], float]) -> Handler:
+    """Port 9 (protocol 12): state queries on ch 0, arm / recover / e-stop on ch 1.
+
+    ``arm(do_arm)`` and ``recover()`` return (success, armed) and (success, not crashed)."""
     def handle(header: int, channel: int, data: bytes) -> None:
         if not data:
             return
@@ -175,10 +179,9 @@ def supervisor_port(state: SimState, send: Send, supervisor_bits: Callable[[], i
                 send(header, struct.pack("<BH", 0x8C, bits))
         elif channel == 1:
             if cmd == 1 and len(data) >= 2:
-                state.armed = bool(data[1])
-                send(header, bytes([0x81, 1, int(state.armed)]))
+                send(header, bytes([0x81]) + bytes(int(v) for v in arm(bool(data[1]))))
             elif cmd == 2:
-                send(header, bytes([0x82, 1, 1]))
+                send(header, bytes([0x82]) + bytes(int(v) for v in recover()))
             elif cmd == 3:
                 emergency_stop("supervisor emergency stop")
             elif cmd == 4:
@@ -186,9 +189,10 @@ def supervisor_port(state: SimState, send: Send, supervisor_bits: Callable[[], i
     return handle
 
 
-def platform_port(state: SimState, send: Send, protocol_version: int, firmware_version: str,
-                  device_type: str, device_type_query: bool) -> Handler:
-    """Port 13: protocol version, firmware version, device type; ch 0 platform commands.
+def platform_port(send: Send, protocol_version: int, firmware_version: str, device_type: str,
+                  device_type_query: bool, arm: Request, recover: Callable[[], Tuple[bool, bool]]) -> Handler:
+    """Port 13: protocol version, firmware version, device type; ch 0 platform commands (arming and
+    crash recovery answer as on port 9).
 
     ``device_type_query`` false plays the 2016 firmware: no device type, and on ch 0 only the
     continuous-wave command, echoed."""
@@ -209,10 +213,9 @@ def platform_port(state: SimState, send: Send, protocol_version: int, firmware_v
                     send(header, bytes(data))
                 return
             if cmd == 1 and len(data) >= 2:
-                state.armed = bool(data[1])
-                send(header, bytes([1, 1, int(state.armed)]))
+                send(header, bytes([1]) + bytes(int(v) for v in arm(bool(data[1]))))
             elif cmd == 2:
-                send(header, bytes([2, 1, 1]))
+                send(header, bytes([2]) + bytes(int(v) for v in recover()))
             elif cmd == 3:
                 send(header, b"")
             else:

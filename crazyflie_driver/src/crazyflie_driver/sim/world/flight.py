@@ -73,13 +73,13 @@ class OnboardFlight:
         """A low-level (CRTP) setpoint: it takes the priority and stops the high-level planner."""
         self.control.set_setpoint(i, sp)
         self.control.s.priority[i] = PRIORITY_CRTP
-        self.hl.stop(i)
+        self.hl.disable(i)
 
     def release(self, i: int) -> None:
         """The legacy RPYT path drives this vehicle (also a low-level setpoint)."""
         self.control.release(i)
         self.control.s.priority[i] = PRIORITY_CRTP
-        self.hl.stop(i)
+        self.hl.disable(i)
 
     def notify_stop(self, i: int, stab, now: float) -> None:
         """Notify-setpoints-stop: the high-level commander gets the control back; idle, it stops the motors."""

@@ -32,6 +32,8 @@ class HighLevelPlans:
         self.group_mask: List[int] = []
         self.takeoff_velocity: List[float] = []       # hlCommander.vtoff, m/s
         self.landing_velocity: List[float] = []       # hlCommander.vland, m/s
+        self.disabled: List[bool] = []                # a low-level setpoint disabled the planner
+        self.finish_time: List[float] = []            # world time at which the last plan ends
 
     def __len__(self) -> int:
         return len(self.plans)
@@ -41,6 +43,8 @@ class HighLevelPlans:
         self.group_mask.append(0)
         self.takeoff_velocity.append(DEFAULT_VELOCITY)
         self.landing_velocity.append(DEFAULT_VELOCITY)
+        self.disabled.append(False)
+        self.finish_time.append(-math.inf)
         return len(self.plans) - 1
 
     def delete_row(self, index: int) -> None:
@@ -48,12 +52,31 @@ class HighLevelPlans:
         del self.group_mask[index]
         del self.takeoff_velocity[index]
         del self.landing_velocity[index]
+        del self.disabled[index]
+        del self.finish_time[index]
 
     def boot(self, i: int) -> None:
         self.plans[i] = Plan()
         self.group_mask[i] = 0
         self.takeoff_velocity[i] = DEFAULT_VELOCITY
         self.landing_velocity[i] = DEFAULT_VELOCITY
+        self.disabled[i] = False
+        self.finish_time[i] = -math.inf
+
+    def _begin(self, i: int, plan: Plan) -> int:
+        self.plans[i] = plan
+        self.disabled[i] = False
+        self.finish_time[i] = plan.t_begin + plan.duration
+        return 0
+
+    def disable(self, i: int) -> None:
+        """A low-level setpoint took over: the plan is forgotten."""
+        self.plans[i] = Plan()
+        self.disabled[i] = True
+
+    def status(self, i: int, now: float) -> Tuple[bool, bool, bool]:
+        """(flying a plan, the last plan has ended, disabled): supervisor.info bits 8, 9 and 10."""
+        return (self.plans[i].state in (FLYING, LANDING), now >= self.finish_time[i], self.disabled[i])
 
     def in_group(self, i: int, mask: int) -> bool:
         return mask == 0 or bool(mask & self.group_mask[i])
@@ -68,16 +91,14 @@ class HighLevelPlans:
             return REFUSED
         goal = np.array([start.pos[0], start.pos[1], height])
         rest = Evaluation(start.pos, np.zeros(3), np.zeros(3), start.yaw, 0.0)
-        self.plans[i] = Plan(FLYING, [online_piece(duration, rest, goal, yaw)], now)
-        return 0
+        return self._begin(i, Plan(FLYING, [online_piece(duration, rest, goal, yaw)], now))
 
     def land(self, i: int, start: Evaluation, height: float, yaw: float, duration: float, now: float) -> int:
         if self.plans[i].state == LANDING:
             return REFUSED
         goal = np.array([start.pos[0], start.pos[1], height])
         rest = Evaluation(start.pos, np.zeros(3), np.zeros(3), start.yaw, 0.0)
-        self.plans[i] = Plan(LANDING, [online_piece(duration, rest, goal, yaw)], now)
-        return 0
+        return self._begin(i, Plan(LANDING, [online_piece(duration, rest, goal, yaw)], now))
 
     def go_to(self, i: int, start: Evaluation, goal: Sequence[float], yaw: float, duration: float, relative: bool,
               linear: bool, now: float) -> int:
@@ -92,8 +113,7 @@ class HighLevelPlans:
             piece = online_piece(duration, begin, goal, yaw, v, yaw_rate)
         else:
             piece = online_piece(duration, start, goal, yaw)
-        self.plans[i] = Plan(FLYING, [piece], now)
-        return 0
+        return self._begin(i, Plan(FLYING, [piece], now))
 
     def start_trajectory(self, i: int, start: Evaluation, pieces: List[Piece], timescale: float, reversed_: bool,
                          relative_position: bool, relative_yaw: bool, now: float) -> int:
@@ -105,8 +125,7 @@ class HighLevelPlans:
             plan.shift[:3] = start.pos - first.pos
             if relative_yaw:
                 plan.shift[3] = shortest_angle(wrap_angle(first.yaw), wrap_angle(start.yaw))
-        self.plans[i] = plan
-        return 0
+        return self._begin(i, plan)
 
     def spiral(self, i: int, start: Evaluation, sideways: bool, clockwise: bool, angle: float, r0: float, rf: float,
                ascent: float, duration: float, now: float) -> int:
@@ -150,8 +169,7 @@ class HighLevelPlans:
                 coeffs[k] = poly7_nojerk(duration, (start.pos[k], vel0[k], acc0[k]), (end[k], vel_f[k], acc_f[k]))
             coeffs[2] = poly7_nojerk(duration, (start.pos[2], climb, 0.0), (start.pos[2] + ascent, climb, 0.0))
             coeffs[3] = poly7_nojerk(duration, (phi0, omega, 0.0), (phi_f, omega, 0.0))
-        self.plans[i] = Plan(FLYING, [Piece(max(duration, 0.0), coeffs)], now)
-        return 0
+        return self._begin(i, Plan(FLYING, [Piece(duration if duration > 0 else 0.0, coeffs)], now))
 
     def stop(self, i: int) -> None:
         self.plans[i] = Plan()

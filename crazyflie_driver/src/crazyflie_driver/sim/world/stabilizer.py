@@ -98,8 +98,7 @@ class OnboardStates(Rows):
         "sp": ((4,), float),                # roll, pitch, yaw rate, thrust
         "sp_time": ((), float),
         "thrust_locked": ((), bool),        # waits for a zero-thrust setpoint
-        "lock": ((), np.int8),              # LOCK_*: motors off until reboot
-        "stopped": ((), bool),              # param stabilizer.stop
+        "lock": ((), np.int8),              # LOCK_*: motors off until reboot (LOCK_TUMBLE: until crash recovery)
         # controller state
         "yaw_sp": ((), float),
         "att_integ": ((3,), float),
@@ -159,7 +158,8 @@ class OnboardController:
         self.dirty = True
 
     def lock(self, i: int, reason: int) -> None:
-        if self.s.lock[i] == LOCK_NONE:
+        """Motors off until reboot; a lock replaces a crash (the firmware's Crashed state can still lock)."""
+        if self.s.lock[i] == LOCK_NONE or (self.s.lock[i] == LOCK_TUMBLE and reason != LOCK_TUMBLE):
             self.s.lock[i] = reason
         self.dirty = True
 
@@ -182,7 +182,8 @@ class OnboardController:
                 s.motor_power[i, int(field[1]) - 1] = min(max(float(value), 0.0), 65535.0)
                 return True
         elif name == "stabilizer.stop":
-            s.stopped[i] = bool(value)
+            if value:                       # an emergency stop: the supervisor locks until reboot
+                self.lock(i, LOCK_EMERGENCY)
             return True
         return False
 
@@ -231,7 +232,7 @@ class OnboardController:
 
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
-        off = s.thrust_locked | (s.lock != LOCK_NONE) | s.stopped
+        off = s.thrust_locked | (s.lock != LOCK_NONE)
         thrust[off] = 0.0
 
         if tick % CONTROL_TICKS == 0:
@@ -261,6 +262,19 @@ class OnboardController:
         s.motors = m
         return m
 
+    def recover(self, i: int, tilt_cos: float) -> bool:
+        """Crash recovery: a crash (tumble) lock is cleared unless the body is still tilted over 60°.
+        True when row ``i`` is not crashed afterwards."""
+        s = self.s
+        if s.lock[i] != LOCK_TUMBLE:
+            return True
+        if tilt_cos < TUMBLE_TILT_COS:
+            return False
+        s.lock[i] = LOCK_NONE
+        s.tilt_time[i] = s.upside_time[i] = 0.0
+        self.dirty = True
+        return True
+
     @property
     def motors_may_change(self) -> bool:
         """Whether a tick without the PIDs could give other motor commands than the last call returned."""
@@ -268,10 +282,12 @@ class OnboardController:
 
     def _lock_rows(self, rows: np.ndarray, reason: int) -> None:
         s = self.s
-        s.lock = np.where(rows & (s.lock == LOCK_NONE), reason, s.lock).astype(np.int8)
+        free = (s.lock == LOCK_NONE) | ((s.lock == LOCK_TUMBLE) & (reason != LOCK_TUMBLE))
+        s.lock = np.where(rows & free, reason, s.lock).astype(np.int8)
 
     def _tumble(self, tilt_cos: np.ndarray, thrust: np.ndarray) -> bool:
-        """Current firmware: tilted over 60° for 1 s or upside down for 0.1 s while flying -> locked.
+        """Current firmware: tilted over 60° for 1 s or upside down for 0.1 s while flying -> crashed
+        (motors off until a crash recovery or a reboot).
 
         ``tilt_cos``: cosine of each body's tilt (its z axis against the world's). True when a vehicle
         was locked by this call.

@@ -20,7 +20,8 @@ from crazyflie_driver.sim.world import battery as _battery
 from crazyflie_driver.sim.world import sensors as _sensors
 from crazyflie_driver.sim.world import flight as _flight
 from crazyflie_driver.sim.world.stabilizer import (GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE,
-                                                   LOCK_TUMBLE, OnboardController, check_generation, default_params)
+                                                   LOCK_TUMBLE, TUMBLE_TILT_COS, OnboardController, check_generation,
+                                                   default_params)
 from crazyflie_driver.sim.world.physics import BodyStates, RigidBodyBackend, VehicleParams, quat_to_matrix
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
@@ -181,6 +182,30 @@ class Vehicle:
                 w.flight.release(self._row)
                 w.onboard.lock(self._row, LOCK_ASSERT)
 
+    def supervisor_flags(self) -> Dict[str, bool]:
+        """What the supervisor reports beyond the firmware's own records: locked (until reboot),
+        crashed (a tumble while flying, until crash recovery), tumbled now, flying, and the
+        high-level commander's flying / finished / disabled states."""
+        w = self._world
+        with w._lock:
+            i = self._row
+            if i < 0:
+                return {}
+            o = w.onboard.s
+            lock = int(o.lock[i])
+            q = w.bodies.quaternion[i]
+            active, finished, disabled = w.flight.hl.status(i, w.time)
+            return {"locked": lock not in (LOCK_NONE, LOCK_TUMBLE), "crashed": lock == LOCK_TUMBLE,
+                    "tumbled": _tilt_cos(q) < TUMBLE_TILT_COS, "flying": bool(o.thrust[i] > 0.0),
+                    "hl_active": active, "hl_finished": finished, "hl_disabled": disabled}
+
+    def recover_crash(self) -> bool:
+        """Crash recovery; True when the vehicle is not crashed afterwards (refused while tumbled)."""
+        w = self._world
+        with w._lock:
+            i = self._row
+            return i >= 0 and w.onboard.recover(i, _tilt_cos(w.bodies.quaternion[i]))
+
     # --- inspection and test helpers ---------------------------------------------------------
     def state(self) -> Dict[str, object]:
         """True state and controller status (JSON-friendly)."""
@@ -229,6 +254,11 @@ class Vehicle:
 
     def __repr__(self) -> str:
         return "Vehicle(%r, firmware=%r)" % (self.name, self.firmware)
+
+
+def _tilt_cos(q: np.ndarray) -> float:
+    """Cosine of the angle between the body's z axis and the world's (quaternion x, y, z, w)."""
+    return float(1.0 - 2.0 * (q[0] * q[0] + q[1] * q[1]))
 
 
 class World:
@@ -407,7 +437,7 @@ class World:
         if group == "sys":
             locked = int(o.lock[i])
             return {"sys.canfly": float(locked == LOCK_NONE), "sys.isFlying": float(o.thrust[i] > 0.0),
-                    "sys.isTumbled": float(locked == LOCK_TUMBLE)}
+                    "sys.isTumbled": float(_tilt_cos(b.quaternion[i]) < TUMBLE_TILT_COS)}
         if group == "controller":
             d, r = o.attitude_desired[i], o.rate_desired[i]
             return {"controller.roll": float(d[0]), "controller.pitch": float(d[1]), "controller.yaw": float(d[2]),
