@@ -28,13 +28,14 @@ from crazyflie_driver.sim.air.faults import MAX_RADIO_LATENCY_S, ControlArgs, Fa
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
 from crazyflie_driver.sim.world import battery as battery_model
+from crazyflie_driver.sim.world.mocap_feed import MocapEstimatorFeed
 from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
 UDP_BASE_PORT = 19850
 CONTROL_OPS = ("time", "dongle_count", "list", "add_crazyflie", "remove_crazyflie", "state", "vehicle_state", "poses",
                "reboot", "set_rssi", "power", "set_dongle_faults", "dongle_faults", "set_battery",
-               "set_mocap_faults", "faults", "clear_faults")
+               "set_mocap_faults", "faults", "clear_faults", "set_mocap_to_estimator")
 
 
 @dataclass
@@ -71,11 +72,16 @@ class WorldServer:
         self._udp_next = 0
         self.mocap = None        # the world's MocapModel where the process runs one (the sim node); faults reach it
         self._battery_set: Dict[str, float] = {}      # vehicle -> charge a fault set it to
+        self._mocap_seed = seed
+        self.mocap_feed = MocapEstimatorFeed(self._feed_estimator)
         world.add_tick_listener(self._tick, FIRMWARE_TICK_S)
 
     # --- Crazyflies --------------------------------------------------------------------------
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position: Sequence[float] = (0.0, 0.0, 0.0),
-                      firmware: str = "current", yaw: float = 0.0) -> SimulatedCrazyflie:
+                      firmware: str = "current", yaw: float = 0.0, mocap_to_estimator: bool = False
+                      ) -> SimulatedCrazyflie:
+        """A simulated Crazyflie on ``uri``; ``mocap_to_estimator`` switches on the simulator extension
+        that feeds the world's motion capture straight into its estimator (``set_mocap_to_estimator``)."""
         if firmware not in PROFILES:
             raise ValueError("unknown firmware %r for %s (choose one of: %s)" % (firmware, uri, ", ".join(PROFILES)))
         key = key_of(uri)
@@ -100,6 +106,8 @@ class WorldServer:
                 entry.udp.start()
             self._entries[name] = entry
             self._crazyflies = tuple(e.crazyflie for e in self._entries.values())
+            if mocap_to_estimator:
+                self.set_mocap_to_estimator(name, True)
             return cf
 
     def remove_crazyflie(self, uri_or_name: str) -> None:
@@ -110,6 +118,7 @@ class WorldServer:
                 entry.udp.stop()
             del self._entries[entry.name]
             self._crazyflies = tuple(e.crazyflie for e in self._entries.values())
+            self.mocap_feed.set(entry.name, False)
             try:
                 self.world.remove_vehicle(entry.name)
             except Exception:
@@ -135,6 +144,33 @@ class WorldServer:
     def entries(self) -> List[SimEntry]:
         with self._lock:
             return list(self._entries.values())
+
+    # --- the mocap-into-estimator extension ----------------------------------------------------
+    def use_mocap(self, model) -> None:
+        """Feed switched-on estimators from ``model`` (a ``MocapModel``, e.g. the one served over VRPN);
+        it becomes the world's motion capture (``mocap``) when there was none."""
+        self.mocap_feed.attach(model)
+        if self.mocap is None:
+            self.mocap = model
+
+    def set_mocap_to_estimator(self, uri_or_name: str, on: bool) -> bool:
+        """Switch the feed of the world's mocap into one Crazyflie's estimator; the first switch-on
+        without ``use_mocap`` attaches a motion-capture model with the default rate, noise and latency."""
+        with self._lock:
+            name = self._find(uri_or_name).name
+            if on and self.mocap_feed.model is None:
+                if self.mocap is None:
+                    from crazyflie_driver.sim.world.mocap import MocapModel
+                    self.use_mocap(MocapModel(self.world, seed=self._mocap_seed).attach())
+                else:
+                    self.use_mocap(self.mocap)
+            self.mocap_feed.set(name, bool(on))
+            return self.mocap_feed.enabled(name)
+
+    def _feed_estimator(self, name: str, position, quaternion) -> None:
+        entry = self._entries.get(name)
+        if entry is not None:
+            entry.crazyflie.external_pose_from_world(position, quaternion)
 
     def _tick(self, now: float) -> None:
         """The firmware timers of every Crazyflie that has one due (most ticks: none)."""
@@ -186,7 +222,7 @@ class WorldServer:
     def _op_add_crazyflie(self, a: ControlArgs) -> Dict[str, Any]:
         uri = a.text("uri")
         self.add_crazyflie(uri, a.text("name", None), a.args.get("position") or (0.0, 0.0, 0.0),
-                           a.text("firmware", "current"))
+                           a.text("firmware", "current"), mocap_to_estimator=a.flag("mocap_to_estimator", False))
         return self._find(uri).describe()
 
     def _op_remove_crazyflie(self, a: ControlArgs) -> None:
@@ -268,6 +304,11 @@ class WorldServer:
             raise FaultError("%s: this world has no motion-capture system (crazyflie_sim_node, started by "
                              "sim.launch, has one; crazyflie_world_server only with --vrpn)" % a.op)
         return self.mocap
+
+    def _op_set_mocap_to_estimator(self, a: ControlArgs) -> Dict[str, Any]:
+        """Simulator extension: the world's motion capture straight into one estimator (``on``, default true)."""
+        return {"uri": a.text("uri"), "mocap_to_estimator": self.set_mocap_to_estimator(a.text("uri"),
+                                                                                        a.flag("on", True))}
 
     def _op_faults(self, a: ControlArgs) -> List[List[str]]:
         """The faults in force, as [target, description] pairs."""
@@ -418,7 +459,8 @@ class WorldServer:
 
 # --- command line --------------------------------------------------------------------------------
 def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
-    """Vehicles from YAML: a list (or ``vehicles:`` list) of {uri, name, position, firmware, yaw}."""
+    """Vehicles from YAML: a list (or ``vehicles:`` list) of {uri, name, position, firmware, yaw,
+    mocap_to_estimator}."""
     import yaml
     try:
         with open(path) as f:
@@ -434,9 +476,13 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
     for i, item in enumerate(items):
         if not isinstance(item, dict) or "uri" not in item:
             raise ValueError("vehicle config %s: entry %d needs at least a 'uri'" % (path, i + 1))
-        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw"}
+        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator"}
         if unknown:
             raise ValueError("vehicle config %s: entry %d has unknown keys %s" % (path, i + 1, sorted(unknown)))
+        if not isinstance(item.get("mocap_to_estimator", False), bool):
+            raise ValueError("vehicle config %s: entry %d: mocap_to_estimator must be true or false (a simulator "
+                             "extension feeding the world's motion capture into the estimator), got %r"
+                             % (path, i + 1, item["mocap_to_estimator"]))
         out.append(dict(item))
     return out
 
@@ -444,7 +490,8 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="crazyflie_world_server", description="Run the simulated Crazyflie world.")
     p.add_argument("--uri", action="append", default=[], help="radio URI of a simulated Crazyflie (repeatable)")
-    p.add_argument("--config", help="YAML file listing vehicles (uri, name, position, firmware, yaw)")
+    p.add_argument("--config", help="YAML file listing vehicles (uri, name, position, firmware, yaw, "
+                   "mocap_to_estimator)")
     p.add_argument("--swarm", metavar="FILE", help="crazyflie_server's swarm file: every Crazyflie at its "
                    "initialPosition on its id's address and channel, one dongle per channel")
     p.add_argument("--address", default=None,
@@ -530,6 +577,11 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         except ValueError:
             server.stop()
             raise
+        if vrpn is not None:
+            server.use_mocap(vrpn.mocap)      # estimators fed by the switch see what VRPN clients see
+        for v in vehicles:
+            if v.get("mocap_to_estimator"):
+                server.set_mocap_to_estimator(str(v["uri"]), True)
     except (ValueError, KeyError, CrazyflieError, ImportError) as e:
         print("crazyflie_world_server: error: %s" % (e,), file=sys.stderr)
         return 2

@@ -314,6 +314,20 @@ class SimulatedCrazyflie:
                 self.packet_link_active = True
                 self._dispatch(raw)
 
+    def external_pose_from_world(self, position, quaternion) -> None:
+        """A pose for the onboard estimator that did not come over a link (the world's mocap feed, a
+        simulator extension): taken like an external pose while the STM runs."""
+        with self.lock:
+            if not self.state.powered or self.state.halted:
+                return
+            fn = getattr(self.vehicle, "external_measurement", None)
+            if fn is None:
+                return
+            try:
+                fn(tuple(float(v) for v in position), tuple(float(v) for v in quaternion))
+            except Exception:
+                _log.exception("vehicle.external_measurement failed")
+
     def _deliver_from_radio(self, raw: bytes) -> None:
         self._dispatch(raw)
 
