@@ -8,7 +8,11 @@ PYTHONPATH, CRAZYFLIE_SIM_ADDRESS naming the world server). cflib's public API o
   ``extpos.send_extpos`` (or ``send_extpose``) at 100 Hz, positions taken from the world's true state
   as a motion-capture system would measure them -> position setpoints -> hover setpoints ->
   velocity-world setpoints -> notify-setpoint-stop -> disconnect; or, with --high-level, trajectory
-  upload (Poly4D, write_data_sync) -> define -> takeoff -> go_to -> trajectory -> land.
+  upload (Poly4D, write_data_sync) -> define -> takeoff -> go_to -> trajectory -> land; or, with
+  --compressed, a compressed trajectory uploaded with cflib's CompressedStart / CompressedSegment,
+  defined, takeoff, the trajectory started and the landing sent to the broadcast address by our own
+  ``BroadcastLink`` on a second fake Crazyradio (cflib 0.1.34 has no broadcasts), with group mask 1
+  (set through cflib as ``hlCommander.groupmask``) so that other Crazyflies on the channel stay down.
 
 The world's true position is sampled through the world server's control API during every phase and
 reported per phase, so the test judges the flight on the truth.
@@ -24,6 +28,7 @@ import time
 from support.cflib_session import RESULT, Step, emit, install_fake_dongle, start_watchdog  # noqa: E402
 
 MOCAP_PERIOD_S = 0.01
+GROUP = 1                  # the group mask of the Crazyflie flown by broadcasts
 SETPOINT_PERIOD_S = 0.02
 
 
@@ -67,8 +72,7 @@ def run(args: argparse.Namespace) -> None:
     from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
     from crazyflie_driver.sim.air.medium import RemoteMedium
 
-    if args.uri.startswith("radio://"):
-        install_fake_dongle(1)
+    backend = install_fake_dongle(2 if args.compressed else 1) if args.uri.startswith("radio://") else None
     cflib.crtp.init_drivers()
     control = RemoteMedium()
     cf = Crazyflie(rw_cache=None)
@@ -76,7 +80,10 @@ def run(args: argparse.Namespace) -> None:
     with Step("connect"):
         scf.open_link()
         scf.wait_for_params()
-    for name, value in (("stabilizer.estimator", args.estimator), ("stabilizer.controller", args.controller)):
+    settings = [("stabilizer.estimator", args.estimator), ("stabilizer.controller", args.controller)]
+    if args.compressed:
+        settings.append(("hlCommander.groupmask", GROUP))
+    for name, value in settings:
         cf.param.set_value(name, str(value))
     mocap = Mocap(cf, control, args.sim_uri, args.pose)
     mocap.start()
@@ -85,13 +92,15 @@ def run(args: argparse.Namespace) -> None:
     phases: dict = {}
     if args.high_level:
         fly_high_level(cf, control, mocap, args, phases)
+    elif args.compressed:
+        fly_compressed_broadcast(cf, control, mocap, args, phases, backend)
     else:
         fly_setpoints(cf, mocap, args, phases, x, y, z)
     mocap.stop.set()
     mocap.join(1.0)
     RESULT["phases"] = phases
     RESULT["extpos_sent"] = mocap.sent
-    RESULT["params"] = {n: cf.param.get_value(n) for n in ("stabilizer.estimator", "stabilizer.controller")}
+    RESULT["params"] = {n: cf.param.get_value(n) for n, _ in settings}
     with Step("disconnect"):
         scf.close_link()
     control.close()
@@ -126,6 +135,35 @@ def fly_high_level(cf, control, mocap: Mocap, args: argparse.Namespace, phases: 
     phase("land", 3.0, idle, mocap, phases)
 
 
+def fly_compressed_broadcast(cf, control, mocap: Mocap, args: argparse.Namespace, phases: dict, backend) -> None:
+    """Compressed upload through cflib, cflib's takeoff, then start and land as broadcasts to group 1."""
+    import json
+    from cflib.crazyflie.mem import CompressedSegment, CompressedStart, MemoryElement
+    from crazyflie_driver.protocol import high_level as hl
+    from crazyflie_driver.radio.broadcast import BroadcastLink
+    from crazyflie_driver.radio.shared_radio import RadioManager
+
+    with open(args.compressed) as f:
+        spec = json.load(f)
+    memory = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)[0]
+    memory.trajectory = [CompressedStart(*spec["start"])] + [CompressedSegment(*segment) for segment in spec["segments"]]
+    with Step("upload"):
+        RESULT["upload_ok"] = bool(memory.write_data_sync())
+    hlc = cf.high_level_commander
+    hlc.define_trajectory(2, 0, len(spec["segments"]), type=hlc.TRAJECTORY_TYPE_POLY4D_COMPRESSED)
+    total = sum(segment[0] for segment in spec["segments"])
+    idle = lambda: None    # noqa: E731
+    hlc.takeoff(0.5, 2.0)
+    phase("takeoff", 2.5, idle, mocap, phases)
+    version = cf.platform.get_protocol_version()
+    with BroadcastLink(1, args.channel, manager=RadioManager(backend)) as broadcast:
+        RESULT["trajectory_start"] = control.ping()
+        broadcast.send_repeated(hl.start_trajectory_packet(2, version, group_mask_=GROUP))
+        phase("trajectory", total + 1.0, idle, mocap, phases)
+        broadcast.send_repeated(hl.land_packet(0.0, 2.0, version, group_mask=GROUP))
+        phase("land", 2.5, idle, mocap, phases)
+
+
 def fly_setpoints(cf, mocap: Mocap, args: argparse.Namespace, phases: dict, x: float, y: float, z: float) -> None:
     phase("position", args.seconds, lambda: cf.commander.send_position_setpoint(x, y, z, 0.0), mocap, phases)
     if not args.trap:
@@ -147,6 +185,9 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=6.0, help="duration of the position phase")
     p.add_argument("--trap", action="store_true", help="position phase only (estimator-1 trap)")
     p.add_argument("--high-level", default="", help="JSON file of poly4d pieces: fly with the high-level commander")
+    p.add_argument("--compressed", default="", help="JSON file {start, segments} of a compressed trajectory: fly "
+                   "it with broadcasts (radio:// only)")
+    p.add_argument("--channel", type=int, default=80, help="radio channel of the broadcasts")
     p.add_argument("--timeout", type=float, default=40.0)
     args = p.parse_args()
     logging_level = os.environ.get("CFLIB_PEER_LOG")

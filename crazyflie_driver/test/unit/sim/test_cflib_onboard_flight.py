@@ -37,7 +37,7 @@ def python():
 def served():
     from crazyflie_driver.sim.world.world import World
     world = World(speed=1.0, seed=5)
-    server = WorldServer(world, dongles=1, port=0, seed=5, udp_base_port=0)
+    server = WorldServer(world, dongles=2, port=0, seed=5, udp_base_port=0)   # cflib's and a broadcaster
     server.add_crazyflie(URI_HOLD, "cf3", (0.0, 0.0, 0.0), "current")
     server.add_crazyflie(URI_TRAP, "cf4", (TRAP_START[0], TRAP_START[1], 0.0), "current")
     server.start()
@@ -143,3 +143,34 @@ def test_cflib_high_level_takeoff_go_to_figure_eight_and_land(python, served, tm
     assert sum(errors) / len(errors) < 0.3
     assert distance(ph["trajectory"][-1], (0.0, 0.0, 0.5)) < 0.08          # the end point is held
     assert ph["land"][-1][3] < 0.03 and ph["land"][-1][4] == 0.0            # landed, motors off
+
+
+def test_cflib_mellinger_compressed_trajectory_driven_by_broadcasts(python, served, tmp_path):
+    """Controller 2 (Mellinger) with extpos from cflib; a figure-8 uploaded with cflib's compressed
+    classes and defined as compressed; cflib's takeoff; the trajectory's start and the landing sent
+    to the broadcast address (group 1) by our BroadcastLink. The other Crazyflie on the channel (group
+    0) stays on the floor; the path is checked on the world's true state against the curve."""
+    from crazyflie_driver.protocol.trajectory import bezier_points
+    from crazyflie_driver.sim.world.planner import Plan, figure_eight
+    pieces = figure_eight(0.5, 0.25, 6.0, 6, 0.5)
+    segments = [[p.duration] + [bezier_points(p.coeffs[axis], p.duration)[1:] for axis in range(4)] for p in pieces]
+    spec = tmp_path / "compressed.json"
+    spec.write_text(json.dumps({"start": [0.0, 0.0, 0.5, 0.0], "segments": segments}))
+    other = served.world.vehicle([e for e in served.entries() if e.uri == URI_TRAP][0].name)
+    r = fly(python, served, URI_HOLD, URI_HOLD, "--controller", "2", "--compressed", str(spec))
+    other_state = other.state()
+    settle(served, URI_HOLD)
+    assert r["upload_ok"] is True
+    assert r["params"] == {"stabilizer.estimator": "2", "stabilizer.controller": "2", "hlCommander.groupmask": "1"}
+    ph = r["phases"]
+    assert abs(ph["takeoff"][-1][3] - 0.5) < 0.05
+    plan = Plan(1, pieces, r["trajectory_start"])
+    flown = [s for s in ph["trajectory"] if r["trajectory_start"] + 1.0 <= s[0] <= r["trajectory_start"] + 6.0]
+    errors = [distance(s, plan.evaluate(s[0]).pos) for s in flown]
+    xs, ys = [s[1] for s in flown], [s[2] for s in flown]
+    # Mellinger with the plan's feed-forward: close tracking (the PID flight above lags by ~0.2 m)
+    assert max(xs) > 0.4 and min(xs) < -0.4 and max(ys) > 0.2 and min(ys) < -0.2
+    assert sum(errors) / len(errors) < 0.06
+    assert ph["land"][-1][3] < 0.03 and ph["land"][-1][4] == 0.0            # the broadcast landing
+    assert other_state["position"][2] < 0.02 and max(other_state["motors"]) == 0   # not in group 1
+    assert served.crazyflie(URI_TRAP).snapshot()["rx_broadcast"] > 0              # ... though it heard them
