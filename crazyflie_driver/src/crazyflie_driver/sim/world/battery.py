@@ -67,7 +67,12 @@ def update(b: BatteryStates, dt: float, motor_thrust: np.ndarray) -> None:
     b.charge = np.maximum(b.charge - current * dt / (b.capacity_mah * 3.6), 0.0)
     b.current = current
     b.vbat = np.maximum(open_circuit_voltage(b.charge) - current * INTERNAL_RESISTANCE, 0.0)
-    b.low_time = np.where(b.vbat < LOW_VOLTAGE, b.low_time + dt, 0.0)
+    low = b.vbat < LOW_VOLTAGE
+    if not low.any() and not b.state.any():     # every battery fine (and none shut down): the same result
+        b.low_time.fill(0.0)
+        b.critical_time.fill(0.0)
+        return
+    b.low_time = np.where(low, b.low_time + dt, 0.0)
     b.critical_time = np.where(b.vbat < CRITICAL_VOLTAGE, b.critical_time + dt, 0.0)
     state = np.where(b.low_time >= PERSIST_S, PM_LOW_POWER, PM_BATTERY)
     state = np.where((b.critical_time >= PERSIST_S) | (b.state == PM_SHUTDOWN), PM_SHUTDOWN, state)

@@ -40,8 +40,8 @@ def force_and_attitude(gains: np.ndarray, integ: np.ndarray, pos: np.ndarray, ve
     e_p = sp_pos - pos
     e_v = sp_vel - vel
     integ = integ + e_p * DT
-    integ[:, :2] = np.clip(integ[:, :2], -ir_xy[:, None], ir_xy[:, None])
-    integ[:, 2] = np.clip(integ[:, 2], -ir_z, ir_z)
+    integ[:, :2] = np.minimum(np.maximum(integ[:, :2], -ir_xy[:, None]), ir_xy[:, None])
+    integ[:, 2] = np.minimum(np.maximum(integ[:, 2], -ir_z), ir_z)
     full = np.empty_like(e_p)
     full[:, 0] = mass * sp_acc[:, 0] + kp_xy * e_p[:, 0] + kd_xy * e_v[:, 0] + ki_xy * integ[:, 0]
     full[:, 1] = mass * sp_acc[:, 1] + kp_xy * e_p[:, 1] + kd_xy * e_v[:, 1] + ki_xy * integ[:, 1]
@@ -51,12 +51,12 @@ def force_and_attitude(gains: np.ndarray, integ: np.ndarray, pos: np.ndarray, ve
     quirk[:, 1] = -np.sin(np.radians(sp_att_deg[:, 0]))
     quirk[:, 2] = np.where(z_abs, mass * GRAVITY + kp_z * e_p[:, 2] + kd_z * e_v[:, 2] + ki_z * integ[:, 2], 1.0)
     force = np.where(x_abs[:, None], full, quirk)
-    thrust = np.clip(mass_thrust * np.einsum("ij,ij->i", force, body_z), 0.0, 65535.0)
+    thrust = np.minimum(np.maximum(mass_thrust * np.einsum("ij,ij->i", force, body_z), 0.0), 65535.0)
     norm = np.linalg.norm(force, axis=1)
     z_des = force / np.where(norm > 0, norm, 1.0)[:, None]
     c, s = np.cos(yaw_des_rad), np.sin(yaw_des_rad)
     bx = c * z_des[:, 0] + s * z_des[:, 1]          # desired body z in the yaw-aligned frame
     by = -s * z_des[:, 0] + c * z_des[:, 1]
-    roll = -np.degrees(np.arcsin(np.clip(by, -1.0, 1.0)))
+    roll = -np.degrees(np.arcsin(np.minimum(np.maximum(by, -1.0), 1.0)))
     pitch_legacy = -np.degrees(np.arctan2(bx, z_des[:, 2]))
     return roll, pitch_legacy, thrust, integ

@@ -238,10 +238,10 @@ class PositionControl:
         vel_out = self._pid(rows, vel_sp, body_v, s.vel_gains[rows], "vel", limits, np.ones_like(absolute))
         s.vel_target[rows] = vel_sp
 
-        pitch = np.clip(-vel_out[:, 0], -s.rp_limit[rows, 1], s.rp_limit[rows, 1])
-        roll = np.clip(-vel_out[:, 1], -s.rp_limit[rows, 0], s.rp_limit[rows, 0])
-        thrust = np.clip(np.maximum(vel_out[:, 2] * THRUST_SCALE + s.thrust_base[rows], s.thrust_min[rows]),
-                         0.0, UINT16_MAX)
+        pitch = np.minimum(np.maximum(-vel_out[:, 0], -s.rp_limit[rows, 1]), s.rp_limit[rows, 1])
+        roll = np.minimum(np.maximum(-vel_out[:, 1], -s.rp_limit[rows, 0]), s.rp_limit[rows, 0])
+        thrust = np.minimum(np.maximum(np.maximum(vel_out[:, 2] * THRUST_SCALE + s.thrust_base[rows],
+                                                s.thrust_min[rows]), 0.0), UINT16_MAX)
         # disabled axes: attitude and thrust straight from the setpoint
         xy_off = (modes[:, M_X] == MODE_DISABLE) | (modes[:, M_Y] == MODE_DISABLE)
         roll = np.where(xy_off, s.att[rows, 0], roll)
@@ -277,10 +277,10 @@ class PositionControl:
         integ_name, prev_name = which + "_integ", which + "_prev"
         integ_all, prev_all = getattr(s, integ_name), getattr(s, prev_name)
         err = desired - measured
-        integ = np.clip(integ_all[rows] + err * DT, -INTEGRATION_LIMIT, INTEGRATION_LIMIT)
+        integ = np.minimum(np.maximum(integ_all[rows] + err * DT, -INTEGRATION_LIMIT), INTEGRATION_LIMIT)
         deriv = (err - prev_all[rows]) / DT
         out = gains[:, :, 0] * err + gains[:, :, 1] * integ + gains[:, :, 2] * deriv + gains[:, :, 3] * desired
-        out = np.clip(out, -limit, limit)
+        out = np.minimum(np.maximum(out, -limit), limit)
         integ_all[rows] = np.where(run, integ, integ_all[rows])
         prev_all[rows] = np.where(run, err, prev_all[rows])
         return out

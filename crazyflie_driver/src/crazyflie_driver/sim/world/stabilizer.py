@@ -233,7 +233,8 @@ class OnboardController:
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
         off = s.thrust_locked | (s.lock != LOCK_NONE)
-        thrust[off] = 0.0
+        if off.any():
+            thrust[off] = 0.0
 
         if tick % CONTROL_TICKS == 0:
             terms = _attitude_terms(body.quaternion)
