@@ -146,7 +146,7 @@ def fly_compressed_broadcast(cf, control, mocap: Mocap, args: argparse.Namespace
     with open(args.compressed) as f:
         spec = json.load(f)
     memory = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)[0]
-    memory.trajectory = [CompressedStart(*spec["start"])] + [CompressedSegment(*segment) for segment in spec["segments"]]
+    memory.trajectory = [CompressedStart(*spec["start"])] + [CompressedSegment(*seg) for seg in spec["segments"]]
     with Step("upload"):
         RESULT["upload_ok"] = bool(memory.write_data_sync())
     hlc = cf.high_level_commander
