@@ -164,21 +164,31 @@ def test_takeoff_and_landing_velocity_parameters():
     assert rig.world.flight.hl.takeoff_velocity[0] == pytest.approx(0.5)
 
 
-def test_fuzz_port_8_never_breaks_the_world():
+def test_fuzz_ports_8_and_9_never_break_the_world():
     rig = Rig()
     rnd = random.Random(8)
     upload(rig, pack_compressed(host_pieces(figure_eight(0.6, 0.3, 6.0, 3, 0.5))))
     for k in range(1500):
-        cmd = rnd.choice((5, 6, 11, 13, rnd.randrange(256)))
-        body = bytes(rnd.randrange(256) for _ in range(rnd.randrange(28)))
-        if cmd == 6:
-            body = struct.pack("<BBBI", rnd.randrange(34), 1, rnd.randrange(3), rnd.randrange(5000)) + body[:1]
-        elif cmd in (5, 13) and body:
-            body = body[:3] + bytes([rnd.randrange(32)]) + body[4:]
-        reply = hl(rig, bytes([cmd]) + body)
-        assert reply is not None and len(reply) == 5
+        if k % 3 == 0:                      # the supervisor port: queries, arming, recovery (no e-stop or its watchdog)
+            channel = rnd.randrange(2)
+            cmd = rnd.choice((1, 2, rnd.randrange(5, 256))) if channel else rnd.randrange(16)
+            rig.send(9, channel, bytes([cmd]) + bytes(rnd.randrange(256) for _ in range(rnd.randrange(4))))
+        else:
+            fuzz_high_level(rig, rnd)
         if k % 10 == 0:
             rig.fly(0.005)
-    assert not rig.cf.state.halted
+    assert not rig.cf.state.halted and not rig.cf.state.emergency
     state = rig.vehicle.state()
     assert np.all(np.isfinite(state["position"])) and np.all(np.isfinite(state["velocity"]))
+
+
+def fuzz_high_level(rig, rnd):
+    """One random port-8 packet, biased to the trajectory and spiral commands; it always gets its reply."""
+    cmd = rnd.choice((5, 6, 11, 13, rnd.randrange(256)))
+    body = bytes(rnd.randrange(256) for _ in range(rnd.randrange(28)))
+    if cmd == 6:
+        body = struct.pack("<BBBI", rnd.randrange(34), 1, rnd.randrange(3), rnd.randrange(5000)) + body[:1]
+    elif cmd in (5, 13) and body:
+        body = body[:3] + bytes([rnd.randrange(32)]) + body[4:]
+    reply = hl(rig, bytes([cmd]) + body)
+    assert reply is not None and len(reply) == 5
