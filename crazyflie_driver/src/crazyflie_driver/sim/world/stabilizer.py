@@ -294,6 +294,8 @@ class OnboardController:
         was locked by this call.
         """
         s = self.s
+        if tilt_cos.min() >= TUMBLE_TILT_COS and not s.tilt_time.any():
+            return False                    # nobody tilted, no tilt being timed
         flying = thrust > 0.0
         tilted = flying & (tilt_cos < TUMBLE_TILT_COS)
         if not (tilted.any() or s.tilt_time.any()):
