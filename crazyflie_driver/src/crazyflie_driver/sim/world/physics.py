@@ -280,7 +280,7 @@ class RigidBodyBackend:
         p_new *= 0.5 * h
         p_new += s.position
         q_new = _quat_multiply_flat(s.quaternion, _small_rotation(w_new * h))
-        q_new /= np.sqrt(_sum_rows(q_new * q_new))
+        q_new /= np.sqrt((q_new * q_new) @ _ONES41)
 
         # floor contact
         resting = np.zeros(len(p_new), dtype=bool)
@@ -327,11 +327,6 @@ def bilinear_form(fn, size_a: int, size_b: int) -> np.ndarray:
     return np.array([fn(ea[i], eb[j]) for i in range(size_a) for j in range(size_b)])
 
 
-def _sum_rows(x: np.ndarray) -> np.ndarray:
-    """(N,k) -> (N,1) row sums."""
-    return x @ np.ones((x.shape[1], 1))
-
-
 def _small_rotation(v: np.ndarray) -> np.ndarray:
     """quat_from_rotvec for the rotation of one substep, without branches.
 
@@ -367,6 +362,7 @@ _QUAT_PRODUCT = bilinear_form(lambda a, b: quat_multiply(a[None], b[None])[0], 4
 _CROSS = bilinear_form(np.cross, 3, 3)
 _MINUS_ONES4 = -np.ones((4, 1))
 _ONES31 = np.ones((3, 1))
+_ONES41 = np.ones((4, 1))
 # Horner coefficients (highest power first) of sin(a/2)/a and cos(a/2) in a²
 _ROTATION_SERIES = np.array([[-1.0 / 645120.0, -1.0 / 46080.0], [1.0 / 3840.0, 1.0 / 384.0],
                              [-1.0 / 48.0, -1.0 / 8.0], [0.5, 1.0]])
