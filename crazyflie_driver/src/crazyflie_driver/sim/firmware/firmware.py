@@ -499,5 +499,5 @@ class SimulatedCrazyflie:
                                for b in self.logs.blocks.values()},
                 "params": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)},
                 "decoded": self.decoded.summary(),
-                "trajectories": trajectory_values(self.trajectory_memory.pieces, self.trajectory_memory.descriptors),
+                "trajectories": trajectory_values(self.trajectory_memory.decoded, self.trajectory_memory.descriptors),
             }

@@ -142,6 +142,15 @@ class TrajectoryMemory:
         return decode_compressed(self.data, d.offset)
 
 
+    def decoded(self, trajectory_id: int) -> Optional[Pieces]:
+        """The pieces of a defined trajectory in memory, poly4d or compressed; None when there are none."""
+        pieces = self.pieces(trajectory_id)
+        if pieces is None:
+            compressed = self.compressed(trajectory_id)
+            pieces = compressed[0] if compressed is not None else None
+        return pieces
+
+
 def trajectory_memory_port(send: Send, memory: TrajectoryMemory) -> Handler:
     """Port 4 with one memory: enumeration (ch 0), reads (ch 1) and writes (ch 2)."""
     def handle(header: int, channel: int, data: bytes) -> None:
