@@ -5,10 +5,13 @@ Global services ``/add_crazyflie`` and ``/remove_crazyflie``; per Crazyflie, und
 ``magnetic_field``, ``pressure``, ``battery``, ``rssi`` and one GenericLogData topic per custom
 log block (pubs); its parameters mirrored to ``/<tf_prefix>/<group>/<name>``; ``status``
 (``diagnostic_msgs/DiagnosticStatus``, latched, on every change) and one entry per Crazyflie on
-``/diagnostics`` every second. A Crazyflie whose worker gave up is removed (its topics and
-services go) and stays on ``/diagnostics`` as an error until it is added again. Also per Crazyflie:
-crazyflie_ros HEAD's setpoint topics and high-level services (``nodes/onboard_ros.py``). With
-``~swarm_file``, swarm mode: every Crazyflie of the file and the swarm-wide services (``nodes/swarm_ros.py``).
+``/diagnostics`` every second, with its link, battery, supervisor, commands and reports entries and one
+entry per dongle (``server.diagnostics``, docs/diagnostics.md); the radio budget is checked on every
+add and logged when a dongle will be short (``server.radio_budget``). A Crazyflie whose worker gave
+up is removed (its topics and services go) and stays on ``/diagnostics`` as an error until it is
+added again. Also per Crazyflie: crazyflie_ros HEAD's setpoint topics and high-level services
+(``nodes/onboard_ros.py``). With ``~swarm_file``, swarm mode: every Crazyflie of the file and the
+swarm-wide services (``nodes/swarm_ros.py``).
 ``magnetic_field`` carries the firmware's ``mag.x/y/z`` values unscaled, as the original did.
 """
 from __future__ import annotations
@@ -37,6 +40,10 @@ from crazyflie_driver.errors import UnknownName
 from crazyflie_driver.protocol.toc import check_toc_name
 from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.refusals import RefusalThrottle
+from crazyflie_driver.server.diagnostics import (CounterWindow, CrazyflieDiagnostics, Entry, RadioFigures,
+                                                 radio_entry)
+from crazyflie_driver.server import radio_budget
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
@@ -72,6 +79,15 @@ def diagnostic_status(status: CrazyflieStatus, tf_prefix: str, uri: str) -> Diag
     return msg
 
 
+def entry_status(entry: Entry, label: str, hardware_id: str) -> DiagnosticStatus:
+    """``crazyflie_server: <label> <part>``, e.g. ``crazyflie_server: crazyflie1 link``."""
+    msg = DiagnosticStatus(name="crazyflie_server: %s" % " ".join(p for p in (label, entry.part) if p),
+                           hardware_id=hardware_id)
+    msg.level, msg.message = entry.level, entry.message
+    msg.values = [KeyValue(k, v) for k, v in entry.values]
+    return msg
+
+
 class RosCrazyflie(WorkerListener):
     """The ROS face of one Crazyflie: publishers, the cmd_vel subscriber, its services."""
 
@@ -96,6 +112,7 @@ class RosCrazyflie(WorkerListener):
         self._onboard: Optional[RosOnboardCommands] = None
         self._pose: Optional[PosePublisher] = None        # HEAD's onboard pose topic, when asked for
         self.frame_id_world = "world"
+        self.figures = CrazyflieDiagnostics()
 
     # -- after the Crazyflie answered --------------------------------------------------------------
     def attach(self, worker: CrazyflieWorker) -> None:
@@ -121,7 +138,8 @@ class RosCrazyflie(WorkerListener):
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
         self._onboard = RosOnboardCommands(self.ns, config.uri, OnboardCommands(
-            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri))
+            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri,
+            on_pose=worker.health.pose_sent))
         self.publish_status()
 
     @property
@@ -134,6 +152,12 @@ class RosCrazyflie(WorkerListener):
 
     def diagnostic(self) -> DiagnosticStatus:
         return diagnostic_status(self.status(), self.config.tf_prefix, self.config.uri)
+
+    def diagnostics(self) -> List[DiagnosticStatus]:
+        """Its status, then one entry per part (link, battery, supervisor, commands, reports)."""
+        label = self.config.tf_prefix or self.config.uri
+        return [self.diagnostic()] + [entry_status(e, label, self.config.uri)
+                                      for e in self.figures.entries(self.worker)]
 
     def publish_status(self, force: bool = False) -> None:
         """On the latched ``status`` topic when level or message changed (or ``force``)."""
@@ -327,19 +351,66 @@ class CrazyflieServer:
         self._ros: Dict[str, RosCrazyflie] = {}
         self._gone: Dict[str, DiagnosticStatus] = {}    # removed after their worker gave up, until added again
         self._lock = threading.Lock()
+        self._broadcasts: Dict[int, List[Any]] = {}     # dongle -> BroadcastStatistics of its broadcast links
+        self._broadcast_plan: List[radio_budget.BroadcastDemand] = []
+        self._budget: List[radio_budget.DongleBudget] = []
+        self._radio_windows: Dict[int, CounterWindow] = {}
+        self.budget_setpoint_rate = float(rospy.get_param("~budget_setpoint_rate", radio_budget.DEFAULT_SETPOINT_HZ))
+        self.budget_pose_rate = float(rospy.get_param("~budget_pose_rate", 0.0))
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         rospy.Service("/add_crazyflie", AddCrazyflie, self._on_add)
         rospy.Service("/remove_crazyflie", RemoveCrazyflie, self._on_remove)
         threading.Thread(target=self._diagnostics_loop, name="diagnostics", daemon=True).start()
 
+    def add_broadcasts(self, index: int, stats: Any, plan: Optional[radio_budget.BroadcastDemand] = None) -> None:
+        """Count a broadcast link's packets (its ``BroadcastStatistics``) on dongle ``index``'s entry, and
+        add its planned bursts to the radio budget (swarm mode calls this for each of its links)."""
+        with self._lock:
+            self._broadcasts.setdefault(index, []).append(stats)
+            if plan is not None:
+                self._broadcast_plan.append(plan)
+        self.check_radio_budget()
+
+    def check_radio_budget(self) -> List[radio_budget.DongleBudget]:
+        """The radio budget of the Crazyflies served now (their log blocks, ``~budget_setpoint_rate`` and
+        ``~budget_pose_rate``) and the broadcasts added; a dongle that will be short is logged as a warning."""
+        with self._lock:
+            served = [(key, ros) for key, ros in self._ros.items() if ros.worker is not None]
+            plan = list(self._broadcast_plan)
+        demands = [radio_budget.CrazyflieDemand(ros.config.tf_prefix or key, parse_uri(key), self.budget_setpoint_rate,
+                                                self.budget_pose_rate, ros.worker.log_packet_rate)
+                   for key, ros in served]
+        budget = radio_budget.check_budget(demands, plan)
+        self._budget = budget
+        for b in budget:
+            if b.level:
+                rospy.logwarn("radio budget: %s", b.message())
+        return budget
+
     def diagnostics(self) -> DiagnosticArray:
         arr = DiagnosticArray()
         arr.header.stamp = rospy.Time.now()
         with self._lock:
-            served = list(self._ros.values())
+            served = list(self._ros.items())
             arr.status.extend(self._gone.values())
-        for ros in served:
-            arr.status.append(ros.diagnostic())
+            broadcasts = {i: sum(s.packets for s in stats) for i, stats in self._broadcasts.items()}
+        by_dongle: Dict[int, List[Any]] = {}
+        for key, ros in served:
+            arr.status.extend(ros.diagnostics())
+            by_dongle.setdefault(parse_uri(key).index, []).append((key, ros))
+        now = time.monotonic()
+        for index in sorted(set(by_dongle) | set(broadcasts)):
+            members = by_dongle.get(index, [])
+            window = self._radio_windows.setdefault(index, CounterWindow())
+            span, grown = window.update(now, {"broadcasts": broadcasts.get(index, 0)})
+            links = [ros.figures.link for _, ros in members if ros.figures.link is not None]
+            planned = radio_budget.find(self._budget, index)
+            names = tuple(ros.config.tf_prefix or key for key, ros in members)
+            figures = RadioFigures(
+                index, span, sum(f.per_s(f.round_trips) for f in links), int(grown["broadcasts"]), names,
+                radio_budget.capacity_per_s([parse_uri(key) for key, _ in members]),
+                planned.load if planned else None, "; ".join(planned.advice) if planned else "")
+            arr.status.append(entry_status(radio_entry(figures), "", "radio://%d" % index))
         return arr
 
     def _diagnostics_loop(self) -> None:
@@ -415,6 +486,10 @@ class CrazyflieServer:
         with self._lock:
             self._ros[key] = ros
             self._gone.pop(key, None)
+        try:
+            self.check_radio_budget()
+        except Exception as e:      # bookkeeping must never fail an add
+            rospy.logerr("radio budget check failed: %r", e)
         rospy.loginfo("%s ready (%s%s)", key, "logging: %s" % ", ".join(worker.log_topics)
                       if worker.log_topics else "no logging",
                       "; no %s on this Crazyflie" % ", ".join(worker.missing_fixed_topics)

@@ -20,6 +20,7 @@ from crazyflie_driver.radio.shared_radio import RadioManager, SharedRadio, defau
 from crazyflie_driver.radio.statistics import DEFAULT_LOST_THRESHOLD, LinkStatistics
 
 _log = logging.getLogger(__name__)
+_now = time.perf_counter      # times each round trip for the link statistics
 
 SAFELINK_ON = b"\xff\x05\x01"
 NULL_PACKET = b"\xff"
@@ -144,8 +145,9 @@ class RadioLink:
         if shared is None:
             raise CrazyflieError("%s: link is not open" % (self.uri,))
         uri = self.uri
+        started = _now()
         ack = shared.round_trip(uri.channel, uri.datarate, uri.address, data)
-        self.stats.record(ack.ack, ack.retries)
+        self.stats.record(ack.ack, ack.retries, _now() - started)
         return ack
 
     def send(self, packet: CRTPPacket) -> bool:

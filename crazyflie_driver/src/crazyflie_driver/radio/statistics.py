@@ -21,7 +21,9 @@ class LinkStatistics:
     ``ack_ratio`` and ``retries`` (mean retransmissions of acked packets) cover the last ``window``
     round trips (``samples`` of them so far); ``rssi`` is the latest value carried by an empty ack
     (raw, i.e. -dBm), None until one arrives; ``link_lost`` is true after ``lost_threshold`` unacked
-    round trips in a row.
+    round trips in a row. ``sent``, ``acked``, ``retries_total`` and ``busy_s`` (seconds spent in
+    round trips, waiting for the shared dongle included) only grow: ``/diagnostics`` turns their
+    differences over a time window into rates, ratios and the mean round-trip time.
     """
 
     def __init__(self, lost_threshold: int = DEFAULT_LOST_THRESHOLD, window: int = STATS_WINDOW):
@@ -31,6 +33,8 @@ class LinkStatistics:
         self.window = window
         self.sent = 0
         self.acked = 0
+        self.retries_total = 0
+        self.busy_s = 0.0
         self.consecutive_failures = 0
         self.rssi: Optional[int] = None
         self._acks = [0] * window
@@ -40,8 +44,8 @@ class LinkStatistics:
         self._ack_sum = 0
         self._retry_sum = 0
 
-    def record(self, acked: bool, retries: int = 0) -> None:
-        """One round trip: acked or not, after ``retries`` retransmissions by the dongle."""
+    def record(self, acked: bool, retries: int = 0, seconds: float = 0.0) -> None:
+        """One round trip: acked or not, after ``retries`` retransmissions by the dongle, ``seconds`` long."""
         pos = self._pos
         a = 1 if acked else 0
         r = retries if acked else 0
@@ -54,8 +58,10 @@ class LinkStatistics:
         if self._filled < self.window:
             self._filled += 1
         self.sent += 1
+        self.busy_s += seconds
         if acked:
             self.acked += 1
+            self.retries_total += r
             self.consecutive_failures = 0
         else:
             self.consecutive_failures += 1
@@ -80,7 +86,8 @@ class LinkStatistics:
         return self.consecutive_failures >= self.lost_threshold
 
     def as_dict(self) -> dict:
-        return {"sent": self.sent, "acked": self.acked, "ack_ratio": self.ack_ratio,
+        return {"sent": self.sent, "acked": self.acked, "retries_total": self.retries_total,
+                "busy_s": self.busy_s, "ack_ratio": self.ack_ratio,
                 "retries": self.retries, "rssi": self.rssi,
                 "consecutive_failures": self.consecutive_failures, "link_lost": self.link_lost}
 

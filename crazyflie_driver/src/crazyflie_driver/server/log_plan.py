@@ -37,8 +37,17 @@ FIXED_LOG_TOPICS: Tuple[Tuple[str, int, Tuple[str, ...]], ...] = (
     (BATTERY_TOPIC, 100, ("pm.vbat",)),
 )
 RSSI_LOG_VARIABLE = "radio.rssi"    # current firmware: RSSI is a log variable, not in the acks
+# Topics only /diagnostics reads (no ROS topic): (topic, the fixed topic whose period it takes, variables).
+# Each fits in that topic's block (IMU 24 + 2 bytes; the 100 ms topics 24 + 1, + 1 for radio.rssi), so
+# it costs no packet of its own; left out, silently, where the firmware lacks the variable.
+POWER_STATE_TOPIC = "power_state"
+SUPERVISOR_TOPIC = "supervisor"
+DIAGNOSTIC_LOG_TOPICS: Tuple[Tuple[str, str, Tuple[str, ...]], ...] = (
+    (POWER_STATE_TOPIC, BATTERY_TOPIC, ("pm.state",)),
+    (SUPERVISOR_TOPIC, IMU_TOPIC, ("supervisor.info",)),    # current firmware only
+)
 RESERVED_TOPIC_NAMES = frozenset(t for t, _, _ in FIXED_LOG_TOPICS) | {
-    RADIO_RSSI_TOPIC, "cmd_vel", "emergency", "update_params"}
+    RADIO_RSSI_TOPIC, POWER_STATE_TOPIC, SUPERVISOR_TOPIC, "cmd_vel", "emergency", "update_params"}
 
 
 @dataclass(frozen=True)

@@ -31,11 +31,13 @@ Quaternion = Sequence[float]
 class OnboardCommands:
     """The HEAD API for one Crazyflie. ``cf`` is a connected ``Crazyflie`` (its ``high_level``,
     ``link``, ``protocol_version``); ``stream(packet) -> bool`` hands a setpoint to the worker
-    (False after emergency); ``emergency_active()`` tells whether the worker is in emergency."""
+    (False after emergency); ``emergency_active()`` tells whether the worker is in emergency;
+    ``on_pose()``, if given, is called for each external position/pose sent (for ``/diagnostics``)."""
 
     def __init__(self, cf, stream: Callable[[CRTPPacket], bool], emergency_active: Callable[[], bool],
-                 label: str = "") -> None:
+                 label: str = "", on_pose: Optional[Callable[[], None]] = None) -> None:
         self.cf = cf
+        self._on_pose = on_pose
         self._stream = stream
         self._emergency_active = emergency_active
         self.label = label or str(getattr(cf, "uri", ""))
@@ -74,11 +76,15 @@ class OnboardCommands:
     def external_position(self, x: float, y: float, z: float) -> bool:
         if self._emergency_active():
             return False
+        if self._on_pose is not None:
+            self._on_pose()
         return self.cf.link.send(external_position_packet(x, y, z))
 
     def external_pose(self, x: float, y: float, z: float, quaternion: Quaternion) -> bool:
         if self._emergency_active():
             return False
+        if self._on_pose is not None:
+            self._on_pose()
         return self.cf.link.send(external_pose_packet(x, y, z, quaternion))
 
     # -- high-level services --------------------------------------------------------------------

@@ -8,9 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Tuple
 
+from crazyflie_driver.server.diagnostics import ERROR, OK, STALE, WARN, worst
 from crazyflie_driver.server.worker import WorkerState
 
-OK, WARN, ERROR, STALE = 0, 1, 2, 3
+__all__ = ["OK", "WARN", "ERROR", "STALE", "CrazyflieStatus", "worker_status"]
 
 
 @dataclass(frozen=True)
@@ -21,7 +22,8 @@ class CrazyflieStatus:
 
 
 def worker_status(worker: Any) -> CrazyflieStatus:
-    """The status of a :class:`~crazyflie_driver.server.worker.CrazyflieWorker` right now."""
+    """The status of a :class:`~crazyflie_driver.server.worker.CrazyflieWorker` right now; the worst of
+    its ``reports`` (e.g. a safety reaction) raises the level, and their messages are added."""
     state = worker.state
     quality, samples = worker.link_quality()
     if state == WorkerState.FAILED:
@@ -60,4 +62,9 @@ def worker_status(worker: Any) -> CrazyflieStatus:
     for topic, t in sorted(worker.topic_timing.items()):
         values += (("%s age_s" % topic, "%.3f" % t.age), ("%s rate_hz" % topic, "%.1f" % t.rate),
                    ("%s lost" % topic, str(t.lost)))
+    reports = [r for r in worker.reports.entries() if r.level != OK]
+    if reports:
+        level = worst([level] + [r.level for r in reports])
+        message = "; ".join([message] + ["%s: %s" % (r.part, r.message) for r in reports])
+        values += tuple(("%s: %s" % (r.part, k), v) for r in reports for k, v in r.values)
     return CrazyflieStatus(level, message, values)

@@ -34,8 +34,10 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
-from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec,
-                       PlannedBlock, check_log_limits, log_packet_rate, plan_log_blocks)
+from crazyflie_driver.server.diagnostics import CrazyflieHealth, Reports
+from crazyflie_driver.server.log_plan import (DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC,
+                                              RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock, check_log_limits,
+                                              log_packet_rate, plan_log_blocks)
 from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
 from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
 from crazyflie_driver.protocol.param import param_value
@@ -141,6 +143,8 @@ class CrazyflieWorker:
         self.param_values: Dict[str, Any] = {}   # as read after connecting and written since
         self.topic_timing: Dict[str, TopicTiming] = {}   # per log topic: age, rate, lost packets
         self.log_late = False                    # log data currently arrives late
+        self.health = CrazyflieHealth(clock)     # latest battery/supervisor samples, last setpoint and pose
+        self.reports = Reports()                 # entries other parts add to /diagnostics and the status
 
         self._cond = threading.Condition()
         self._pending: Optional[Setpoint] = None
@@ -221,6 +225,7 @@ class CrazyflieWorker:
         """Latest setpoint wins; wakes the worker at once. False (ignored) after emergency."""
         if self._emergency:
             return False
+        self.health.setpoint_given()
         with self._cond:
             self._pending = setpoint
             self._cond.notify_all()
@@ -414,6 +419,10 @@ class CrazyflieWorker:
                                 self.uri, name, ", ".join(missing))
                     continue
                 topics.append((name, period, variables))
+            for name, host, variables in DIAGNOSTIC_LOG_TOPICS:     # for /diagnostics, in the hosts' blocks
+                period = [p for t, p, _ in topics if t == host]
+                if period and all(v in types for v in variables):
+                    topics.append((name, period[0], variables))
             plan.extend(plan_log_blocks(topics, types, share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
         plan.extend(plan_log_blocks(custom, types, share=False))
@@ -453,6 +462,7 @@ class CrazyflieWorker:
                 timing = self.topic_timing.get(topic)
                 if timing is not None:
                     timing.record(onboard_s, age, arrived)
+                self.health.on_log(topic, part, arrived)
                 try:
                     if topic == RADIO_RSSI_TOPIC:
                         listener.on_rssi(float(part[0]))
@@ -465,6 +475,16 @@ class CrazyflieWorker:
                                       self.uri, topic)
             self._check_late(age)
         return on_packet
+
+    @property
+    def log_packet_rate(self) -> float:
+        """Log packets per second the started blocks produce."""
+        return log_packet_rate(self._log_plan)
+
+    @property
+    def log_packets_received(self) -> int:
+        """Log packets received since the worker started (all blocks)."""
+        return self._downlink_packets
 
     def lost_log_packets(self) -> int:
         """Log packets the onboard timestamps say never arrived (one count per block)."""

@@ -1,0 +1,174 @@
+"""What each Crazyradio will carry, against what it can carry: the radio budget, checked before take-off.
+
+Pure. A dongle answers strictly one packet at a time, so its capacity is one over the time a round
+trip costs it: a bulk OUT + IN (``BULK_ROUND_TRIP_S``), plus a control transfer
+(``CONTROL_TRANSFER_S``) for each radio setting (address, channel, data rate) that changes between
+consecutive packets. The server's round trips of several Crazyflies interleave (the dongle's FIFO),
+so with two or more addresses on one dongle every round trip pays the address switch: ~1250 round
+trips/s for one Crazyflie, ~435/s shared. A broadcast burst switches to the broadcast address with
+acks off and back (four control transfers when unicast links share the dongle) and costs a bulk OUT
+per packet. Figures and sources: docs/diagnostics.md, "Radio budget".
+
+What a Crazyflie needs: a round trip per setpoint and per unicast pose, and one per log packet its
+blocks produce (each ack carries at most one); the larger of the two, since a setpoint's ack also
+fetches a log packet; at least ``KEEPALIVE_FLOOR_HZ``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+
+from crazyflie_driver.crtp.uri import RadioUri, parse_uri
+from crazyflie_driver.protocol.localization import POSES_PER_PACKET, POSITIONS_PER_PACKET
+from crazyflie_driver.server import diagnostic_thresholds as T
+
+#: A Crazyradio PA over USB (the fake dongle's DongleTiming defaults are the same figures; a test holds them equal).
+BULK_ROUND_TRIP_S = 0.0008          # s, bulk OUT + IN of an acked packet
+CONTROL_TRANSFER_S = 0.0015         # s, one vendor request (set address, channel, data rate, ack enable)
+#: Round trips/s a served Crazyflie gets at least (keep-alives, link-lost detection).
+KEEPALIVE_FLOOR_HZ = 10.0
+#: Log packets/s of the fixed topics on the current firmware: one 10 ms block (IMU) and one 100 ms block.
+FIXED_LOG_PACKETS_HZ = 110.0
+#: Setpoints/s assumed for a Crazyflie when nobody says: the chapter's controller sends cmd_vel at 50 Hz.
+DEFAULT_SETPOINT_HZ = 50.0
+BROADCAST_SWITCHES = 4              # control transfers per broadcast burst on a dongle with unicast links
+
+
+@dataclass(frozen=True)
+class CrazyflieDemand:
+    """What one Crazyflie asks of its dongle, per second."""
+
+    name: str
+    uri: RadioUri
+    setpoint_hz: float = 0.0        # streamed setpoints (cmd_vel, cmd_position...)
+    pose_hz: float = 0.0            # external position/pose sent by unicast
+    log_packets_hz: float = 0.0     # log packets its blocks produce
+
+    @property
+    def round_trips_hz(self) -> float:
+        return max(self.setpoint_hz + self.pose_hz, self.log_packets_hz, KEEPALIVE_FLOOR_HZ)
+
+
+@dataclass(frozen=True)
+class BroadcastDemand:
+    """Broadcast bursts on one dongle (e.g. packed mocap poses): ``frames_hz`` bursts of ``packets`` packets."""
+
+    dongle: int
+    frames_hz: float
+    packets: int
+
+
+@dataclass(frozen=True)
+class DongleBudget:
+    """One dongle's budget: ``load`` is the share of each second its planned traffic takes."""
+
+    index: int
+    crazyflies: Tuple[str, ...]
+    round_trips_hz: float
+    broadcast_packets_hz: float
+    round_trip_s: float              # dongle time per unicast round trip as it is shared
+    capacity_per_s: float            # unicast round trips/s at that cost
+    load: float
+    level: int                       # 0 OK, 1 WARN, 2 ERROR (diagnostic levels)
+    advice: Tuple[str, ...] = field(default=())
+
+    def message(self) -> str:
+        head = ("radio %d: %d Crazyflie(s) need %.0f round trips/s%s = %.0f %% of its capacity (%.0f round trips/s "
+                "at %.1f ms each)" % (self.index, len(self.crazyflies), self.round_trips_hz,
+                                      " + %.0f broadcast packets/s" % self.broadcast_packets_hz
+                                      if self.broadcast_packets_hz else "", self.load * 100, self.capacity_per_s,
+                                      self.round_trip_s * 1e3))
+        return head + ("; " + "; ".join(self.advice) if self.advice else "")
+
+
+def round_trip_cost_s(uris: Sequence[RadioUri]) -> float:
+    """Dongle time of one unicast round trip when ``uris`` share it (interleaved), s."""
+    switches = sum(len(set(values)) > 1 for values in (
+        [u.address for u in uris], [u.channel for u in uris], [u.datarate for u in uris]))
+    return BULK_ROUND_TRIP_S + switches * CONTROL_TRANSFER_S
+
+
+def capacity_per_s(uris: Sequence[RadioUri]) -> float:
+    """Unicast round trips/s a dongle can carry for these Crazyflies."""
+    return 1.0 / round_trip_cost_s(uris) if uris else 1.0 / BULK_ROUND_TRIP_S
+
+
+def log_packets_hz(enable_logging: bool, custom_periods_ms: Iterable[int] = ()) -> float:
+    """Log packets/s before connecting (the fixed topics' estimate + one block per custom topic);
+    once connected, the worker's planned blocks give the exact figure."""
+    return (FIXED_LOG_PACKETS_HZ if enable_logging else 0.0) + sum(1000.0 / max(1, p) for p in custom_periods_ms)
+
+
+def mocap_broadcast(dongle: int, crazyflies: int, rate_hz: float, full_pose: bool = True) -> BroadcastDemand:
+    """Packed mocap by broadcast: one burst per frame, 2 poses (or 4 positions) per packet."""
+    per = POSES_PER_PACKET if full_pose else POSITIONS_PER_PACKET
+    return BroadcastDemand(dongle, rate_hz, -(-crazyflies // per))
+
+
+def check_budget(demands: Sequence[CrazyflieDemand], broadcasts: Sequence[BroadcastDemand] = ()) -> List[DongleBudget]:
+    """The budget of every dongle used, in dongle order, with a level and what to change."""
+    by_dongle: Dict[int, List[CrazyflieDemand]] = {}
+    for d in demands:
+        by_dongle.setdefault(d.uri.index, []).append(d)
+    bursts: Dict[int, List[BroadcastDemand]] = {}
+    for b in broadcasts:
+        bursts.setdefault(b.dongle, []).append(b)
+    out = []
+    for index in sorted(set(by_dongle) | set(bursts)):
+        members = by_dongle.get(index, [])
+        uris = [m.uri for m in members]
+        cost = round_trip_cost_s(uris) if uris else BULK_ROUND_TRIP_S
+        rt_hz = sum(m.round_trips_hz for m in members)
+        bc = bursts.get(index, [])
+        bc_packets = sum(b.frames_hz * b.packets for b in bc)
+        switch = BROADCAST_SWITCHES * CONTROL_TRANSFER_S if members else 0.0
+        load = rt_hz * cost + sum(b.frames_hz * (switch + b.packets * BULK_ROUND_TRIP_S) for b in bc)
+        level = 2 if load > T.RADIO_LOAD_ERROR else 1 if load > T.RADIO_LOAD_WARN else 0
+        advice = _advice(members, bc, load) if level else ()
+        out.append(DongleBudget(index, tuple(m.name for m in members), rt_hz, bc_packets, cost, 1.0 / cost, load,
+                                level, advice))
+    return out
+
+
+def _advice(members: Sequence[CrazyflieDemand], bursts: Sequence[BroadcastDemand], load: float) -> Tuple[str, ...]:
+    advice = []
+    logs = sum(m.log_packets_hz for m in members)
+    commands = sum(m.setpoint_hz + m.pose_hz for m in members)
+    if len(members) > 1:
+        keep = max(1, int(len(members) / max(load, 1e-9) * T.RADIO_LOAD_WARN))
+        advice.append("put at most %d of these Crazyflies on this Crazyradio and the others on another one"
+                      % min(keep, len(members) - 1))
+    if logs > 0 and logs >= commands:
+        advice.append("log less: %.0f log packets/s planned (fewer log blocks, longer periods, or enable_logging "
+                      "false: the fixed topics alone are %.0f packets/s per Crazyflie)" % (logs, FIXED_LOG_PACKETS_HZ))
+    if any(m.pose_hz for m in members):
+        advice.append("send motion capture by broadcast (packed poses: one burst for every 2 Crazyflies) instead "
+                      "of a unicast pose each")
+    if any(m.setpoint_hz for m in members) and len(members) > 1:
+        advice.append("fly by the onboard high-level commander (broadcast take-off, go_to, trajectories) instead "
+                      "of streaming setpoints")
+    if bursts:
+        advice.append("broadcast less often%s" % (
+            " or from a Crazyradio of its own (each burst here costs %.1f ms of address and ack switches)"
+            % (BROADCAST_SWITCHES * CONTROL_TRANSFER_S * 1e3) if members else ""))
+    return tuple(advice)
+
+
+def demands_for(entries: Iterable[Tuple[str, str, float, float, float]]) -> List[CrazyflieDemand]:
+    """(name, uri, setpoint Hz, unicast pose Hz, log packets Hz) -> demands; a bad URI raises ValueError."""
+    out = []
+    for name, uri, setpoint_hz, pose_hz, log_hz in entries:
+        out.append(CrazyflieDemand(name, parse_uri(uri), float(setpoint_hz), float(pose_hz), float(log_hz)))
+    return out
+
+
+def budget_messages(budgets: Sequence[DongleBudget], only_problems: bool = True) -> List[Tuple[int, str]]:
+    """(level, text) per dongle, for the log: what it will carry and what to change."""
+    return [(b.level, b.message()) for b in budgets if b.level or not only_problems]
+
+
+def find(budgets: Sequence[DongleBudget], index: int) -> Optional[DongleBudget]:
+    for b in budgets:
+        if b.index == index:
+            return b
+    return None

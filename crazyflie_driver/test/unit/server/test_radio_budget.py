@@ -1,0 +1,166 @@
+"""The radio budget: its cost model against the fake dongle's timing (on a virtual clock), and its verdicts."""
+from __future__ import annotations
+
+import pytest
+
+from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.radio.broadcast import BroadcastLink
+from crazyflie_driver.radio.link import open_link
+from crazyflie_driver.radio.shared_radio import RadioManager
+from crazyflie_driver.server import radio_budget as rb
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+from crazyflie_driver.sim.air.medium import LocalMedium
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+
+from support.sim_doubles import FakeVehicle
+
+
+class VirtualClock:
+    """The fake dongle's clock: sleeping only moves the time on."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def time(self) -> float:
+        return self.t
+
+    def sleep(self, s: float) -> None:
+        self.t += max(0.0, s)
+
+
+def dongle_with(uris):
+    clock = VirtualClock()
+    medium = LocalMedium(dongles=1, seed=3)
+    backend = FakeUsbBackend(medium, dongles=1, timing=DongleTiming(), clock=clock)
+    for u in uris:
+        p = parse_uri(u)
+        medium.add_crazyflie(SimulatedCrazyflie(p.address, FakeVehicle()), p.channel, p.datarate)
+    return clock, RadioManager(backend)
+
+
+def seconds_per_round_trip(uris, rounds=50):
+    """Virtual dongle time per round trip, the links' packets interleaved as the server's workers do."""
+    clock, manager = dongle_with(uris)
+    links = [open_link(u, manager) for u in uris]
+    try:
+        for link in links:          # settle each link's address once before counting
+            link.poll()
+        t0 = clock.time()
+        for _ in range(rounds):
+            for link in links:
+                assert link.poll()
+        return (clock.time() - t0) / (rounds * len(links))
+    finally:
+        for link in links:
+            link.close()
+
+
+def test_model_figures_are_the_fake_dongles():
+    t = DongleTiming()
+    assert rb.BULK_ROUND_TRIP_S == t.bulk_round_trip_s
+    assert rb.CONTROL_TRANSFER_S == t.control_transfer_s
+
+
+@pytest.mark.parametrize("uris", [
+    ["radio://0/80/2M/E7E7E7E701"],
+    ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702"],
+    ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702", "radio://0/80/2M/E7E7E7E703"],
+    ["radio://0/80/2M/E7E7E7E701", "radio://0/90/2M/E7E7E7E702"],
+    ["radio://0/80/2M/E7E7E7E701", "radio://0/90/1M/E7E7E7E702"],
+])
+def test_round_trip_cost_matches_the_fake_dongle(uris):
+    measured = seconds_per_round_trip(uris)
+    modelled = rb.round_trip_cost_s([parse_uri(u) for u in uris])
+    assert measured == pytest.approx(modelled, rel=1e-6)
+    assert rb.capacity_per_s([parse_uri(u) for u in uris]) == pytest.approx(1.0 / measured)
+
+
+def test_capacity_figures():
+    one = [parse_uri("radio://0/80/2M/E7E7E7E701")]
+    two = one + [parse_uri("radio://0/80/2M/E7E7E7E702")]
+    assert rb.capacity_per_s(one) == pytest.approx(1250.0)
+    assert rb.capacity_per_s(two) == pytest.approx(1 / 0.0023)       # ~435/s
+
+
+def test_broadcast_burst_cost_matches_the_fake_dongle():
+    uri = "radio://0/80/2M/E7E7E7E701"
+    clock, manager = dongle_with([uri])
+    link = open_link(uri, manager)
+    bc = BroadcastLink(0, 80, 2, manager)
+    bc.open()
+    try:
+        link.poll()
+        t0 = clock.time()
+        bc.send_all([bytes([0x60]) + bytes(20)] * 3)     # 3 packets, not paired (PA 0.53 takes one per transfer)
+        link.poll()
+        spent = clock.time() - t0
+        modelled = (rb.BROADCAST_SWITCHES * rb.CONTROL_TRANSFER_S + 3 * rb.BULK_ROUND_TRIP_S
+                    + rb.round_trip_cost_s([parse_uri(uri)]))
+        assert spent == pytest.approx(modelled, rel=1e-6)
+    finally:
+        bc.close()
+        link.close()
+
+
+def demand(name, uri, setpoint_hz=0.0, pose_hz=0.0, log_hz=0.0):
+    return rb.CrazyflieDemand(name, parse_uri(uri), setpoint_hz, pose_hz, log_hz)
+
+
+def test_one_crazyflie_with_default_logging_fits():
+    (b,) = rb.check_budget([demand("cf1", "radio://0/80/2M/E7E7E7E701", 100, 0, rb.log_packets_hz(True))])
+    assert b.round_trips_hz == pytest.approx(110.0)             # logs dominate: 110 packets/s
+    assert b.load == pytest.approx(110 * 0.0008)
+    assert b.level == 0 and b.advice == ()
+
+
+def test_four_logging_crazyflies_on_one_dongle_warn_with_what_to_change():
+    ds = [demand("cf%d" % i, "radio://0/80/2M/E7E7E7E70%d" % i, 50, 0, 110) for i in range(1, 5)]
+    (b,) = rb.check_budget(ds)
+    # 4 x 110 round trips/s x 2.3 ms = 1.012 s per s: more than the dongle has
+    assert b.load == pytest.approx(4 * 110 * 0.0023)
+    assert b.level == 2
+    text = b.message()
+    assert "radio 0: 4 Crazyflie(s) need 440 round trips/s = 101 %" in text
+    assert "at most 3 of these Crazyflies" in text
+    assert "log less" in text
+
+
+def test_two_dongles_are_budgeted_apart():
+    ds = [demand(n, "radio://%d/80/2M/E7E7E7E70%d" % (i // 2, i), 100, 0, 110) for i, n in enumerate("abcd")]
+    budgets = rb.check_budget(ds)
+    assert [b.index for b in budgets] == [0, 1]
+    assert all(b.load == pytest.approx(2 * 110 * 0.0023) and b.level == 0 for b in budgets)
+
+
+def test_unicast_mocap_advice_and_broadcast_cost():
+    ds = [demand("cf%d" % i, "radio://0/80/2M/E7E7E7E70%d" % i, 100, 100, 0) for i in range(1, 4)]
+    (b,) = rb.check_budget(ds)
+    assert b.round_trips_hz == pytest.approx(600)
+    assert b.level == 2
+    assert any("broadcast" in a for a in b.advice)
+    assert any("high-level commander" in a for a in b.advice)
+    # poses by broadcast instead, flown by the high-level commander: a burst of 2 packets per frame,
+    # whose switches (4 x 1.5 ms) dominate: 100 frames/s are 83 % of the dongle, 50 frames/s 45 %
+    ds = [demand("cf%d" % i, "radio://0/80/2M/E7E7E7E70%d" % i, 0, 0, 0) for i in range(1, 4)]
+    for rate, load, level in ((100.0, 0.829, 1), (50.0, 0.449, 0)):
+        bc = rb.mocap_broadcast(0, 3, rate)
+        assert bc.packets == 2
+        (b,) = rb.check_budget(ds, [bc])
+        assert b.broadcast_packets_hz == pytest.approx(2 * rate)
+        assert b.load == pytest.approx(3 * rb.KEEPALIVE_FLOOR_HZ * 0.0023 + rate * (4 * 0.0015 + 2 * 0.0008))
+        assert b.load == pytest.approx(load, abs=0.001)
+        assert b.level == level
+        assert bool(b.advice) == bool(level)
+    (b,) = rb.check_budget(ds, [rb.mocap_broadcast(0, 3, 100.0)])
+    assert "broadcast less often or from a Crazyradio of its own" in b.message()
+
+
+def test_log_estimate_before_connecting():
+    assert rb.log_packets_hz(False) == 0.0
+    assert rb.log_packets_hz(True, [10, 100]) == pytest.approx(110 + 100 + 10)
+
+
+def test_demands_for_refuses_a_bad_uri():
+    with pytest.raises(ValueError):
+        rb.demands_for([("x", "radio://0/80/9M/E7E7E7E701", 0, 0, 0)])
