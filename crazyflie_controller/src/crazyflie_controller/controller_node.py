@@ -15,6 +15,8 @@ to use every pose), and the timer only steps the controller when no pose came fo
 (take-off ramp, stale-pose handling). ``~cmd_vel_stamped``
 (geometry_msgs/TwistStamped) repeats each command stamped with the pose it was computed from,
 for measuring the control path's latency; it costs nothing while nobody subscribes.
+``/diagnostics`` (every second): the state, the pose's age and how often the thrust sat at a limit
+(``diagnostics.controller_entry``), named ``<node>: <frame>``.
 """
 from __future__ import annotations
 
@@ -25,14 +27,15 @@ from typing import Any, Dict, Optional, Sequence
 import rospy
 import tf2_ros
 import yaml
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 from std_srvs.srv import Empty, EmptyResponse
 
-from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
+from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 
+from .diagnostics import SaturationWindow, controller_entry, thrust_saturated
 from .pid import PidGains
 from .position_controller import ControllerConfig, PoseSample, PositionController, Safety, yaw_from_quaternion
 
@@ -148,6 +151,9 @@ class ControllerNode:
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
         self.stamped_pub = rospy.Publisher("~cmd_vel_stamped", TwistStamped, queue_size=10)
         self.state_pub = rospy.Publisher("~state", String, queue_size=1, latch=True)
+        self._saturation = SaturationWindow()
+        self.diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=2)
+        self.diag_timer = rospy.Timer(rospy.Duration(1.0), self._on_diagnostics)
         rospy.Subscriber("goal", PoseStamped, self._on_goal, queue_size=1)
         rospy.Subscriber("status", DiagnosticStatus, self._on_server_status, queue_size=5)
         rospy.Service("takeoff", Empty, self._on_takeoff)
@@ -203,6 +209,9 @@ class ControllerNode:
                 now = rospy.get_time()
                 cmd = self.controller.update(now, pose)
                 self._last_step = now
+                z = self.controller.pids["z"].gains
+                self._saturation.record(now, thrust_saturated(self.controller.state, cmd[2], z.min_output,
+                                                              z.max_output))
                 if stamp is not None:
                     self._pose_stamp = stamp
                 msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z = cmd
@@ -218,6 +227,21 @@ class ControllerNode:
             # before is_shutdown() turns true, so ask whether a shutdown has begun
             if not shutting_down():
                 raise
+
+    def _on_diagnostics(self, _event) -> None:
+        with self._lock:
+            c = self.controller
+            pose = c.pose
+            now = rospy.get_time()
+            level, message, values = controller_entry(
+                c.state, c.safety, None if pose is None else max(0.0, now - pose.stamp), c.config.pose_timeout,
+                c.last_command[2], self._saturation.share(), self._saturation.steps)
+        status = DiagnosticStatus(level=level, name="%s: %s" % (rospy.get_name().lstrip("/"), self.frame),
+                                  message=message, hardware_id=self.frame,
+                                  values=[KeyValue(k, v) for k, v in values])
+        arr = DiagnosticArray(status=[status])
+        arr.header.stamp = rospy.Time.now()
+        publish_unless_shutting_down(self.diag_pub, arr)
 
     def _remind_no_pose(self, now: float) -> None:
         """Idle without a pose: say so every NO_POSE_REPEAT_S, naming the frames tf does know."""

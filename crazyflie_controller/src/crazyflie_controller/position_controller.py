@@ -319,6 +319,11 @@ class PositionController:
         return self._emit(self._closed_loop(now, dt))
 
     @property
+    def pose(self) -> Optional[PoseSample]:
+        """The newest pose seen (None before the first)."""
+        return self._pose
+
+    @property
     def ramp_active(self) -> bool:
         """True while the setpoint is still gliding to the goal (after take-off, during landing)."""
         return self._ramp is not None
