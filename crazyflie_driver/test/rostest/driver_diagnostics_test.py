@@ -86,7 +86,7 @@ class DriverDiagnostics(unittest.TestCase):
             self.assertEqual(link.hardware_id, "radio://0/80/2M/E7E7E7E70%s" % name[-1])
             self.assertEqual(v["ack ratio"], "1.000")
             self.assertGreaterEqual(int(v["round trips"]), 20)
-            self.assertGreater(float(v["log packets/s"]), 50.0)       # the IMU block at 100 Hz, on a shared dongle
+            self.assertGreater(float(v["log packets/s"]), 10.0)   # 110/s of world time; host time: the world may lag
             self.assertEqual(v["setpoints/s"], "0.0")
             battery = entries["crazyflie_server: %s battery" % name]
             self.assertEqual(battery.level, OK, battery.message)
@@ -127,7 +127,7 @@ class DriverDiagnostics(unittest.TestCase):
                     self.assertEqual(link.level, level, (name, link.message))
                     self.assertIn("ack ratio %.2f <" % ack, link.message)
                     status = entries["crazyflie_server: %s" % name]
-                    self.assertEqual(status.message, "running", status.message)
+                    self.assertEqual(values(status)["state"], "running", status.message)    # served throughout
         finally:
             self.world.set_dongle_faults(0, packet_loss=0.0)
         since = rospy.Time.now().to_sec()

@@ -396,7 +396,11 @@ class CrazyflieServer:
             broadcasts = {i: sum(s.packets for s in stats) for i, stats in self._broadcasts.items()}
         by_dongle: Dict[int, List[Any]] = {}
         for key, ros in served:
-            arr.status.extend(ros.diagnostics())
+            try:
+                arr.status.extend(ros.diagnostics())
+            except Exception as e:      # one Crazyflie's bookkeeping must not hide the others
+                arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, hardware_id=key, message=(
+                    "diagnostics failed: %r" % e), name="crazyflie_server: %s" % (ros.config.tf_prefix or key)))
             by_dongle.setdefault(parse_uri(key).index, []).append((key, ros))
         now = time.monotonic()
         for index in sorted(set(by_dongle) | set(broadcasts)):
