@@ -371,9 +371,10 @@ class CrazyflieServer:
                 self._broadcast_plan.append(plan)
         self.check_radio_budget()
 
-    def check_radio_budget(self) -> List[radio_budget.DongleBudget]:
+    def check_radio_budget(self, warn: bool = True) -> List[radio_budget.DongleBudget]:
         """The radio budget of the Crazyflies served now (their log blocks, ``~budget_setpoint_rate`` and
-        ``~budget_pose_rate``) and the broadcasts added; a dongle that will be short is logged as a warning."""
+        ``~budget_pose_rate``) and the broadcasts added; a dongle that will be short is logged as a warning
+        (``warn``)."""
         with self._lock:
             served = [(key, ros) for key, ros in self._ros.items() if ros.worker is not None]
             plan = list(self._broadcast_plan)
@@ -383,9 +384,16 @@ class CrazyflieServer:
         budget = radio_budget.check_budget(demands, plan)
         self._budget = budget
         for b in budget:
-            if b.level:
+            if b.level and warn:
                 rospy.logwarn("radio budget: %s", b.message())
         return budget
+
+    def _replan_quietly(self) -> None:
+        """The budget without the Crazyflie that left (its radio entry's planned load follows)."""
+        try:
+            self.check_radio_budget(warn=False)
+        except Exception as e:      # bookkeeping must never fail a removal
+            rospy.logerr("radio budget check failed: %r", e)
 
     def diagnostics(self) -> DiagnosticArray:
         arr = DiagnosticArray()
@@ -444,6 +452,7 @@ class CrazyflieServer:
         except KeyError:
             pass
         ros.detach()
+        self._replan_quietly()
         rospy.logerr("%s removed: its worker failed repeatedly (see the errors above); add it again to fly it", key)
 
     def _on_add(self, req) -> AddCrazyflieResponse:
@@ -513,6 +522,7 @@ class CrazyflieServer:
         if ros is not None:
             ros.detach()
         rospy.loginfo("%s removed", key)
+        self._replan_quietly()
         return RemoveCrazyflieResponse()
 
     def shutdown(self) -> None:
