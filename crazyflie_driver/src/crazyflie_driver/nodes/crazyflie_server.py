@@ -417,7 +417,7 @@ class CrazyflieServer:
             span, grown = window.update(now, {"broadcasts": broadcasts.get(index, 0)})
             links = [ros.figures.link for _, ros in members if ros.figures.link is not None]
             planned = radio_budget.find(self._budget, index)
-            names = tuple(ros.config.tf_prefix or key for key, ros in members)
+            names = tuple(sorted(ros.config.tf_prefix or key for key, ros in members))
             figures = RadioFigures(
                 index, span, sum(f.per_s(f.round_trips) for f in links), int(grown["broadcasts"]), names,
                 radio_budget.capacity_per_s([parse_uri(key) for key, _ in members]),
