@@ -657,6 +657,8 @@ def main() -> int:
     os.environ.setdefault("ROS_IP", "127.0.0.1")
     core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
+    commit = subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
+                            universal_newlines=True).stdout.strip()[:100]
     t_start = time.monotonic()
     results: List[Tuple[Row, Dict[str, Any]]] = []
     bench = None
@@ -697,7 +699,8 @@ def main() -> int:
             "safe = on the floor with the motors off, or within %.2f m of the goal and slower than %.1f m/s until "
             "the row ends; times from the fault; truth sampled at %.0f Hz" % (HOVER_TOLERANCE_M, HOVER_SPEED_MS,
                                                                              SAMPLE_HZ),
-            "command: flock /tmp/ros.lock bench/bench_faults.py   (%.0f s for %d rows)" % (took, len(results)),
+            "command: flock /tmp/ros.lock bench/bench_faults.py --readme   (%.0f s for %d rows)" % (took, len(results)),
+            "stack at: %s" % commit,
             "machine: %s, %s, Python %s, %d CPUs, load average %s" % (
                 platform.machine(), platform.platform(terse=True), platform.python_version(), os.cpu_count() or 0,
                 " ".join("%.2f" % x for x in os.getloadavg())),
