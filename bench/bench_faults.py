@@ -617,6 +617,36 @@ def markdown(results: List[Tuple[Row, Dict[str, Any]]]) -> List[str]:
 # rows that usually leave the vehicle hovering first, so the graph is reused; the table keeps rows()'s order
 RUN_FIRST = ("loss30", "loss80", "ackloss", "latency", "freeze02", "freeze2", "battery_warn", "unplug1")
 
+def write(args: argparse.Namespace, results: List[Tuple[Row, Dict[str, Any]]], commit: str, took: float,
+          partial: bool) -> None:
+    results = sorted(results, key=lambda rr: [r.key for r in rows()].index(rr[0].key))
+    head = ["fault table: one Crazyflie hovering at (0, 0, 0.5) in the full ROS stack (crazyflie_sim_node with "
+            "Vicon-style mocap at 100 Hz, crazyflie_server over the fake Crazyradio; path chapter: the chapter's "
+            "controller node; path onboard: the high-level commander with the mocap as external_position)",
+            "safe = on the floor with the motors off, or within %.2f m of the goal and slower than %.1f m/s until "
+            "the row ends; times from the fault; truth sampled at %.0f Hz" % (HOVER_TOLERANCE_M, HOVER_SPEED_MS,
+                                                                             SAMPLE_HZ),
+            "command: flock /tmp/ros.lock bench/bench_faults.py --readme   (%.0f s for %d rows%s)" % (
+                took, len(results), ", run still going" if partial else ""),
+            "stack at: %s" % commit,
+            "machine: %s, %s, Python %s, %d CPUs, load average %s" % (
+                platform.machine(), platform.platform(terse=True), platform.python_version(), os.cpu_count() or 0,
+                " ".join("%.2f" % x for x in os.getloadavg())),
+            ""]
+    text = "\n".join(head + table(results) + ["", "README table:", ""] + markdown(results)) + "\n"
+    if args.out == "-":
+        if not partial:
+            print("\n".join(markdown(results)))
+        return
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w") as f:
+        f.write(text)
+    if args.readme:
+        update_readme(markdown(results))
+    if not partial:
+        print("written to %s (%.0f s)" % (args.out, took))
+
+
 README_MARKERS = ("<!-- fault table: bench/bench_faults.py --readme writes below -->", "<!-- fault table end -->")
 
 
@@ -683,6 +713,8 @@ def main() -> int:
                     bench.graph = None
             results.append((row, r))
             print("\n".join(table([(row, r)])), flush=True)
+            if args.out != "-":                  # what is measured so far, should the run be cut short
+                write(args, results, commit, time.monotonic() - t_start, partial=True)
     finally:
         if bench is not None:
             bench.close()
@@ -691,30 +723,7 @@ def main() -> int:
             core.wait(15)
         except subprocess.TimeoutExpired:
             os.killpg(core.pid, signal.SIGKILL)
-    took = time.monotonic() - t_start
-    results.sort(key=lambda rr: chosen.index(rr[0]))
-    head = ["fault table: one Crazyflie hovering at (0, 0, 0.5) in the full ROS stack (crazyflie_sim_node with "
-            "Vicon-style mocap at 100 Hz, crazyflie_server over the fake Crazyradio; path chapter: the chapter's "
-            "controller node; path onboard: the high-level commander with the mocap as external_position)",
-            "safe = on the floor with the motors off, or within %.2f m of the goal and slower than %.1f m/s until "
-            "the row ends; times from the fault; truth sampled at %.0f Hz" % (HOVER_TOLERANCE_M, HOVER_SPEED_MS,
-                                                                             SAMPLE_HZ),
-            "command: flock /tmp/ros.lock bench/bench_faults.py --readme   (%.0f s for %d rows)" % (took, len(results)),
-            "stack at: %s" % commit,
-            "machine: %s, %s, Python %s, %d CPUs, load average %s" % (
-                platform.machine(), platform.platform(terse=True), platform.python_version(), os.cpu_count() or 0,
-                " ".join("%.2f" % x for x in os.getloadavg())),
-            ""]
-    text = "\n".join(head + table(results) + ["", "README table:", ""] + markdown(results)) + "\n"
-    if args.out != "-":
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as f:
-            f.write(text)
-        print("written to %s (%.0f s)" % (args.out, took))
-        if args.readme:
-            update_readme(markdown(results))
-    else:
-        print("\n".join(markdown(results)))
+    write(args, results, commit, time.monotonic() - t_start, partial=False)
     return 0 if all("error" not in r for _, r in results) else 1
 
 
