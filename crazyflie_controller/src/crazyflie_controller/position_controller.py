@@ -74,7 +74,7 @@ class Safety(enum.Enum):
     HOLDING = "pose stale: holding level"       # airborne, pose older than pose_timeout
     BLIND_DESCENT = "pose lost: descending"     # stale longer than lost_pose_land_timeout
     LANDED_BLIND = "pose lost: motors stopped"  # blind descent over, idle until a new take-off
-    EMERGENCY = "emergency stop: re-add the Crazyflie to fly"   # the server's emergency service was called
+    EMERGENCY = "emergency stop: restart and re-add the Crazyflie to fly"   # the server's emergency service was called
 
 
 class Command(NamedTuple):
@@ -244,7 +244,8 @@ class PositionController:
         if pose is not None:
             self._observe(pose)
         if self.safety == Safety.EMERGENCY:
-            self._log("error", "takeoff refused: the Crazyflie was stopped by emergency; remove and add it again")
+            self._log("error", "takeoff refused: the Crazyflie was stopped by emergency; restart it (off and "
+                      "on), then remove and add it again")
             return False
         if self.state != State.IDLE:
             self._log("warn", "takeoff ignored: state is %s" % self.state.value)

@@ -13,7 +13,7 @@ def test_emergency_in_flight_is_never_automatic_ok():
         t += DT
         assert c.update(t, pose(t, z=0.5)) == ZERO
     assert (c.state, c.safety) == (State.IDLE, Safety.EMERGENCY)
-    assert c.status_text() == "Idle: emergency stop: re-add the Crazyflie to fly"
+    assert c.status_text() == "Idle: emergency stop: restart and re-add the Crazyflie to fly"
     assert not c.takeoff(t, pose(t))
     assert any("takeoff refused" in m and "emergency" in m for _, m in c.messages)
 

@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from support.flight_support import WorldProbe, inbound_connected, wait_until  # noqa: E402
 
 TAKEOFF, EMERGENCY = 2, 1            # the chapter's buttons
-EMERGENCY_STATUS = "Idle: emergency stop: re-add the Crazyflie to fly"
+EMERGENCY_STATUS = "Idle: emergency stop: restart and re-add the Crazyflie to fly"
 
 
 class MultiHoverJoy(unittest.TestCase):

@@ -206,8 +206,8 @@ class RosCrazyflie(WorkerListener):
                 rospy.logwarn("%s: cmd_vel held to the firmware's limits: %s" % (self.config.uri, text))
         if not self.worker.set_setpoint(setpoint) and not self._said_ignored:
             self._said_ignored = True       # once: the status topic keeps saying it
-            rospy.logwarn("%s: cmd_vel ignored after emergency (remove and add the Crazyflie again to fly)"
-                          % self.config.uri)
+            rospy.logwarn("%s: cmd_vel ignored after emergency (the Crazyflie stays stopped until a reboot: "
+                          "switch it off and on, then remove and add it again to fly)" % self.config.uri)
 
     def _on_emergency(self, _req) -> EmptyResponse:
         self.worker.emergency()

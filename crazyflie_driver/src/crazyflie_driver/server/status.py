@@ -29,7 +29,8 @@ def worker_status(worker: Any) -> CrazyflieStatus:
     if state == WorkerState.FAILED:
         level, message = ERROR, "worker gave up: %s" % (worker.last_unexpected_error or "connect failed")
     elif worker.emergency_active:
-        level, message = ERROR, "emergency: motors stopped, remove and add it again to fly"
+        level, message = ERROR, ("emergency: motors stopped until a reboot: switch it off and on, then remove and "
+                                 "add it again to fly")
     elif state == WorkerState.RESTARTING:
         level, message = ERROR, "worker restarting after: %s" % worker.last_unexpected_error
     elif state == WorkerState.LOST:
