@@ -34,7 +34,6 @@ import math
 import os
 import platform
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -49,6 +48,8 @@ try:
     import crazyflie_driver.srv  # noqa: F401  (the catkin workspace: source tools/env.sh first)
 except ImportError:
     sys.exit("bench_faults: the catkin workspace is not on the path: source tools/env.sh first")
+
+from bench_support import free_port  # noqa: E402  (after the workspace check: it names the fix)
 
 SIM_ADDRESS = "127.0.0.1:19897"
 URI = "radio://0/80/2M/E7E7E7E701"
@@ -88,14 +89,6 @@ def launch_text(path: str) -> str:
                  "    </node>"]
     rows += ["  </group>", "</launch>"]
     return "\n".join(rows) + "\n"
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 class Recorder:
