@@ -228,10 +228,19 @@ class RosSwarm:
             self.watch.pose_seen(name, now)
 
     def _first_fix(self, name: str, position) -> None:
-        """The estimator starts where motion capture first saw the Crazyflie (as Crazyswarm does)."""
+        """The estimator starts where motion capture first saw the Crazyflie (as Crazyswarm does).
+
+        The parameter writes wait for their answers, which take long on a radio busy with the
+        motion-capture broadcasts: they run on a thread of their own, so the stream never waits for
+        them and the Crazyflies of a swarm are set up side by side, not one after the other.
+        """
         member = next((m for m in self.members if m.name == name), None)
         if member is None:
             return
+        threading.Thread(target=self._write_initial_position, args=(member, name, position),
+                         name="first-fix-%s" % name, daemon=True).start()
+
+    def _write_initial_position(self, member, name: str, position) -> None:
         values = initial_position_params(position)
         _, errors = member.worker.update_params(values)
         if errors:
