@@ -115,34 +115,31 @@ def main() -> int:
     ap.add_argument("--modes", default="threads,round-robin")
     args = ap.parse_args()
     model = DongleTiming()
-    lines = ["RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink -> Crazyradio -> pyusb ->",
-             "FakeUsbBackend -> LocalMedium -> simulated nRF + commander), %.1f s per case after %.1f s warm-up"
-             % (args.seconds, WARMUP_S),
-             "timing model: bulk round trip %.2f ms, control transfer %.2f ms; 'off' = DongleTiming.instant()"
-             % (1000 * model.bulk_round_trip_s, 1000 * model.control_transfer_s),
-             bs.machine_line(),
-             "",
-             "%-6s %-11s %3s %10s %12s %13s %9s %12s %12s %10s" % (
-                 "timing", "mode", "CFs", "packets/s", "slowest CF/s", "CPU us/packet", "CPU load",
-                 "ctrl/packet", "model RTT ms", "capacity/s")]
-    print("\n".join(lines), flush=True)
+    table = bs.Table(
+        ["RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink -> Crazyradio -> pyusb ->",
+         "FakeUsbBackend -> LocalMedium -> simulated nRF + commander), %.1f s per case after %.1f s warm-up"
+         % (args.seconds, WARMUP_S),
+         "timing model: bulk round trip %.2f ms, control transfer %.2f ms; 'off' = DongleTiming.instant()"
+         % (1000 * model.bulk_round_trip_s, 1000 * model.control_transfer_s),
+         bs.machine_line(),
+         ""],
+        [("timing", "<6"), ("mode", "<11"), ("CFs", "3d"), ("packets/s", "10.0f"), ("slowest CF/s", "12.0f"),
+         ("CPU us/packet", "13.1f"), ("CPU load", "9.0%"), ("ctrl/packet", "12.2f"), ("model RTT ms", "12.2f"),
+         ("capacity/s", "10.0f")])
     for label, timing in (("model", model), ("off", DongleTiming.instant())):
         for mode in args.modes.split(","):
             for n in bs.counts_of(args.counts):
                 r = run_case(n, timing, mode, args.seconds)
                 if r["failures"] or abs(r["delivered_ratio"] - 1.0) > 0.01:
                     print("warning: %d unacked, delivered/acked = %.3f" % (r["failures"], r["delivered_ratio"]))
-                capacity = "%10.0f" % r["capacity"] if label == "model" else "%10s" % "-"
-                line = "%-6s %-11s %3d %10.0f %12.0f %13.1f %8.0f%% %12.2f %12.2f %s" % (
-                    label, mode, n, r["rate"], r["rate_min"], r["cpu_us"], 100 * r["cpu_share"],
-                    r["ctrl_per_packet"], r["modelled_rtt_ms"] if label == "model" else 0.0, capacity)
-                print(line, flush=True)
-                lines.append(line)
-    lines += ["",
-              "packets/s: acked setpoints of all Crazyflies together (each was delivered to the simulated",
-              "commander once: safelink drops duplicates). CPU us/packet: process CPU time (all threads) /",
-              "packets. capacity/s = 1 / model RTT, model RTT = bulk round trip + ctrl/packet x control transfer."]
-    bs.write_lines(args.out, lines)
+                modelled = label == "model"
+                table.row(label, mode, n, r["rate"], r["rate_min"], r["cpu_us"], r["cpu_share"],
+                          r["ctrl_per_packet"], r["modelled_rtt_ms"] if modelled else 0.0,
+                          r["capacity"] if modelled else None)
+    table.write(args.out, [
+        "packets/s: acked setpoints of all Crazyflies together (each was delivered to the simulated",
+        "commander once: safelink drops duplicates). CPU us/packet: process CPU time (all threads) /",
+        "packets. capacity/s = 1 / model RTT, model RTT = bulk round trip + ctrl/packet x control transfer."])
     return 0
 
 

@@ -1,4 +1,4 @@
-"""What the benchmarks share: the source tree on the path, their common arguments and header lines,
+"""What the benchmarks share: the source tree on the path, their common arguments, header lines and tables,
 percentiles, a world server served in this process, and one ROS graph per case in a child process
 with the simulated world (the unmodified ``crazyflie_sim`` node) running inside it, where a bench
 can tap the simulated air.
@@ -14,6 +14,7 @@ import importlib.util
 import json
 import os
 import platform
+import re
 import socket
 import subprocess
 import sys
@@ -58,6 +59,42 @@ def write_lines(path: str, lines: Sequence[str]) -> None:
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
     print("written to %s" % path)
+
+
+class Table:
+    """A bench's table, printed a row at a time as its cases finish (a long run shows its progress, a run cut
+    short keeps what it measured), then written whole with its heading and notes.
+
+    ``columns`` are (title, cell format) pairs; a cell format is a ``format()`` spec with a width: ``"14.2f"``,
+    ``"10.0%"`` (a share shown in percent), ``"<6"`` (text on the left). Cells and titles sit on the right
+    unless the spec says otherwise; a title takes its column's width and side, a cell of None shows ``-``.
+    """
+
+    def __init__(self, heading: Sequence[str], columns: Sequence[Tuple[str, str]]) -> None:
+        self._specs = [spec if spec[:1] in "<>^" else ">" + spec for _, spec in columns]
+        self._blanks = [re.match(r"[<>^]\d+", spec).group(0) for spec in self._specs]
+        self.lines = list(heading) + [self._join(title for title, _ in columns)]
+        print("\n".join(self.lines), flush=True)
+
+    def _join(self, cells) -> str:
+        return " ".join(format(cell, blank) for cell, blank in zip(cells, self._blanks))
+
+    def row(self, *cells) -> str:
+        """Formats one row (a cell per column), prints and keeps it; returns the line."""
+        if len(cells) != len(self._specs):
+            raise ValueError("a row of %d cells in a table of %d columns" % (len(cells), len(self._specs)))
+        return self.add(" ".join(format("-", blank) if cell is None else format(cell, spec)
+                                 for cell, spec, blank in zip(cells, self._specs, self._blanks)))
+
+    def add(self, line: str) -> str:
+        """A line of its own in the table (a case that failed, a warning): printed and kept."""
+        print(line, flush=True)
+        self.lines.append(line)
+        return line
+
+    def write(self, path: str, notes: Sequence[str] = ()) -> None:
+        """Writes heading, rows and, after a blank line, ``notes``."""
+        write_lines(path, self.lines + ([""] + list(notes) if notes else []))
 
 
 def percentile(values: Sequence[float], p: float) -> float:

@@ -93,30 +93,27 @@ def run_case(n: int, timeout: float) -> dict:
 def main() -> int:
     ap = bs.parser(__doc__, "swarm_flight.txt", 0.0, counts="1,9,49")
     args = ap.parse_args()
-    lines = ["swarm demo flight (swarm.launch sim:=true): figure-8 2 x 1 m, 8 s, 0.76 m/s mean, 1.48 m/s top,",
-             "started by one broadcast relative to each start; Mellinger controller, Kalman estimator fed by the",
-             "server's packed broadcasts of the world's VRPN motion capture (100 Hz, 0.5 mm noise, 5 ms latency)",
-             bs.machine_line(), "",
-             "%4s %14s %14s %12s %10s %11s %10s %8s" % ("CFs", "fig-8 mean cm", "worst CF cm", "max cm",
-                                                       "server CPU", "world CPU", "connect s", "result")]
-    print("\n".join(lines), flush=True)
+    table = bs.Table(
+        ["swarm demo flight (swarm.launch sim:=true): figure-8 2 x 1 m, 8 s, 0.76 m/s mean, 1.48 m/s top,",
+         "started by one broadcast relative to each start; Mellinger controller, Kalman estimator fed by the",
+         "server's packed broadcasts of the world's VRPN motion capture (100 Hz, 0.5 mm noise, 5 ms latency)",
+         bs.machine_line(), ""],
+        [("CFs", "4d"), ("fig-8 mean cm", "14.2f"), ("worst CF cm", "14.2f"), ("max cm", "12.2f"),
+         ("server CPU", "10.0%"), ("world CPU", "11.0%"), ("connect s", "10.1f"), ("result", "8")])
     for n in bs.counts_of(args.counts):
         r = run_case(n, timeout=300.0)
         fig = (r.get("phases") or {}).get("figure8")
         cpu = r.get("cpu", {})
         if fig is None:
-            line = "%4d   failed: %s (logs in %s)" % (n, r.get("error") or r.get("result"), r["work"])
+            table.add("%4d   failed: %s (logs in %s)" % (n, r.get("error") or r.get("result"), r["work"]))
         else:
-            line = "%4d %14.2f %14.2f %12.2f %9.0f%% %10.0f%% %10.1f %8s" % (
-                n, 100 * fig["mean"], 100 * fig["worst_mean"], 100 * fig["max"],
-                100 * cpu.get("/crazyflie_server", float("nan")), 100 * cpu.get("/crazyflie_sim", float("nan")),
-                r.get("connect_s", float("nan")), r.get("result"))
-        print(line, flush=True)
-        lines.append(line)
-    lines += ["", "fig-8 mean: the swarm's mean of each Crazyflie's mean error (true position - plan) over the",
-              "figure-8 and its settling second; worst CF: the largest of those means; max: the largest single error.",
-              "CPU: share of one core from every Crazyflie connected to the end of the flight (user + system)."]
-    bs.write_lines(args.out, lines)
+            table.row(n, 100 * fig["mean"], 100 * fig["worst_mean"], 100 * fig["max"],
+                      cpu.get("/crazyflie_server", float("nan")), cpu.get("/crazyflie_sim", float("nan")),
+                      r.get("connect_s", float("nan")), r.get("result"))
+    table.write(args.out, [
+        "fig-8 mean: the swarm's mean of each Crazyflie's mean error (true position - plan) over the",
+        "figure-8 and its settling second; worst CF: the largest of those means; max: the largest single error.",
+        "CPU: share of one core from every Crazyflie connected to the end of the flight (user + system)."])
     return 0
 
 
