@@ -21,7 +21,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable, Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.protocol.supervisor import decode_state
 from crazyflie_driver.server import diagnostic_thresholds as T
@@ -51,6 +51,29 @@ def worst(levels: Iterable[int]) -> int:
         if order.get(level, 3) > order[best]:
             best = level
     return best
+
+
+BELOW, ABOVE = "below", "above"     # the side of its thresholds where a figure is bad (``graded``)
+
+
+def graded(value: float, warn: float, error: float, reason: Union[str, Tuple[str, str]],
+           direction: str = BELOW) -> Tuple[int, str]:
+    """``value`` against a warning and an error threshold: (OK, "") when it is past neither, else (WARN
+    or ERROR, why). ``direction`` is the side that is bad: BELOW (a ratio or a voltage, worse as it falls)
+    or ABOVE (a time, a load). A value exactly at a threshold has not passed it. ``why`` is ``reason %
+    {"value": value, "limit": the threshold passed}``; a pair of reasons gives the warning's and the error's.
+    """
+    if direction not in (BELOW, ABOVE):
+        raise ValueError("direction must be BELOW or ABOVE, got %r" % (direction,))
+    sign = 1.0 if direction == ABOVE else -1.0
+    if sign * value > sign * error:
+        level, limit = ERROR, error
+    elif sign * value > sign * warn:
+        level, limit = WARN, warn
+    else:
+        return OK, ""
+    template = reason if isinstance(reason, str) else reason[level == ERROR]
+    return level, template % {"value": value, "limit": limit}
 
 
 def _values(pairs: Iterable[Tuple[str, object]]) -> Values:
@@ -202,27 +225,20 @@ def link_entry(f: LinkFigures) -> Entry:
     if f.state != "running":
         level = worst([level, ERROR if f.state in ("lost", "failed", "restarting") else STALE])
         why.append("link %s" % f.state)
-    if ack is not None and f.round_trips >= T.MIN_ROUND_TRIPS:
-        if ack < T.ACK_RATIO_ERROR:
-            level = worst([level, ERROR])
-            why.append("ack ratio %.2f < %.2f" % (ack, T.ACK_RATIO_ERROR))
-        elif ack < T.ACK_RATIO_WARN:
-            level = worst([level, WARN])
-            why.append("ack ratio %.2f < %.2f" % (ack, T.ACK_RATIO_WARN))
-    if rtt is not None and f.round_trips >= T.MIN_ROUND_TRIPS:
-        if rtt > T.ROUND_TRIP_ERROR_S:
-            level = worst([level, ERROR])
-            why.append("round trip %.1f ms > %.0f ms" % (rtt * 1e3, T.ROUND_TRIP_ERROR_S * 1e3))
-        elif rtt > T.ROUND_TRIP_WARN_S:
-            level = worst([level, WARN])
-            why.append("round trip %.1f ms > %.0f ms" % (rtt * 1e3, T.ROUND_TRIP_WARN_S * 1e3))
+    grades = []
+    if f.round_trips >= T.MIN_ROUND_TRIPS:
+        if ack is not None:
+            grades.append(graded(ack, T.ACK_RATIO_WARN, T.ACK_RATIO_ERROR, "ack ratio %(value).2f < %(limit).2f"))
+        if rtt is not None:
+            grades.append(graded(rtt * 1e3, T.ROUND_TRIP_WARN_S * 1e3, T.ROUND_TRIP_ERROR_S * 1e3,
+                                 "round trip %(value).1f ms > %(limit).0f ms", ABOVE))
     if rx is not None and f.log_packets + f.log_lost >= T.MIN_LOG_PACKETS:
-        if rx < T.LOG_RECEIVE_RATIO_ERROR:
-            level = worst([level, ERROR])
-            why.append("log packets received %.2f < %.2f" % (rx, T.LOG_RECEIVE_RATIO_ERROR))
-        elif rx < T.LOG_RECEIVE_RATIO_WARN:
-            level = worst([level, WARN])
-            why.append("log packets received %.2f < %.2f" % (rx, T.LOG_RECEIVE_RATIO_WARN))
+        grades.append(graded(rx, T.LOG_RECEIVE_RATIO_WARN, T.LOG_RECEIVE_RATIO_ERROR,
+                             "log packets received %(value).2f < %(limit).2f"))
+    for grade, reason in grades:
+        if grade != OK:
+            level = worst([level, grade])
+            why.append(reason)
     if f.round_trips == 0 and f.span_s > 0 and f.state == "running":
         level = worst([level, WARN])
         why.append("no round trips")
@@ -257,13 +273,9 @@ def battery_entry(vbat: Optional[float], pm_state: Optional[int], age_s: Optiona
         return Entry("battery", STALE if logging_on else OK,
                      "no battery sample yet" if logging_on else "n/a (logging off)", ())
     state_name = pm_state_name(pm_state)
-    level, why = OK, []
-    if vbat < T.BATTERY_CRITICAL_V:
-        level = ERROR
-        why.append("%.2f V < %.1f V (critical)" % (vbat, T.BATTERY_CRITICAL_V))
-    elif vbat < T.BATTERY_WARN_V:
-        level = WARN
-        why.append("%.2f V < %.1f V (low)" % (vbat, T.BATTERY_WARN_V))
+    level, reason = graded(vbat, T.BATTERY_WARN_V, T.BATTERY_CRITICAL_V,
+                           ("%(value).2f V < %(limit).1f V (low)", "%(value).2f V < %(limit).1f V (critical)"))
+    why = [reason] if reason else []
     if pm_state == T.PM_STATE_SHUTDOWN:
         level = worst([level, ERROR])
         why.append("power state: shutdown")
@@ -349,12 +361,10 @@ def radio_entry(f: RadioFigures) -> Entry:
     bc_s = f.broadcasts / f.span_s if f.span_s > 0 else 0.0
     load = (rt_s + bc_s) / f.capacity_per_s if f.capacity_per_s > 0 else 0.0
     level, why = OK, []
-    if f.planned_load is not None and f.planned_load > T.RADIO_LOAD_ERROR:
-        level = ERROR
-        why.append("planned load %.0f %% of capacity" % (f.planned_load * 100))
-    elif f.planned_load is not None and f.planned_load > T.RADIO_LOAD_WARN:
-        level = WARN
-        why.append("planned load %.0f %% of capacity" % (f.planned_load * 100))
+    if f.planned_load is not None:
+        level, reason = graded(f.planned_load * 100, T.RADIO_LOAD_WARN * 100, T.RADIO_LOAD_ERROR * 100,
+                               "planned load %(value).0f %% of capacity", ABOVE)
+        why = [reason] if reason else []
     if load > T.RADIO_LOAD_WARN:
         level = worst([level, WARN])
         why.append("in use %.0f %% of capacity" % (load * 100))

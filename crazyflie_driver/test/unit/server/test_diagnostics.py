@@ -8,10 +8,10 @@ import pytest
 
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.server import diagnostic_thresholds as T
-from crazyflie_driver.server.diagnostics import (ERROR, OK, STALE, WARN, CounterWindow, CrazyflieDiagnostics,
-                                                 CrazyflieHealth, LinkFigures, RadioFigures, Reports,
-                                                 ack_ratio_tolerance, battery_entry, commands_entry, link_entry,
-                                                 radio_entry, supervisor_entry, worst)
+from crazyflie_driver.server.diagnostics import (ABOVE, BELOW, ERROR, OK, STALE, WARN, CounterWindow,
+                                                 CrazyflieDiagnostics, CrazyflieHealth, LinkFigures, RadioFigures,
+                                                 Reports, ack_ratio_tolerance, battery_entry, commands_entry, graded,
+                                                 link_entry, radio_entry, supervisor_entry, worst)
 from crazyflie_driver.server.status import worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
 
@@ -27,6 +27,26 @@ def test_worst_orders_levels():
     assert worst([OK, STALE]) == STALE
     assert worst([STALE, WARN]) == WARN
     assert worst([WARN, ERROR, OK]) == ERROR
+
+
+@pytest.mark.parametrize("value, direction, level, why", [
+    (0.95, BELOW, OK, ""), (0.9, BELOW, OK, ""), (0.89, BELOW, WARN, "0.89 < 0.90"),
+    (0.5, BELOW, WARN, "0.50 < 0.90"), (0.49, BELOW, ERROR, "0.49 < 0.50"), (2.0, BELOW, OK, ""),
+    (10.0, ABOVE, OK, ""), (10.5, ABOVE, WARN, "10.50 > 10.00"), (50.0, ABOVE, WARN, "50.00 > 10.00"),
+    (50.1, ABOVE, ERROR, "50.10 > 50.00"), (-1.0, ABOVE, OK, ""),
+])
+def test_graded_follows_the_direction_and_leaves_a_threshold_itself_alone(value, direction, level, why):
+    warn, error = (0.9, 0.5) if direction == BELOW else (10.0, 50.0)
+    sign = "<" if direction == BELOW else ">"
+    assert graded(value, warn, error, "%(value).2f " + sign + " %(limit).2f", direction) == (level, why)
+
+
+def test_graded_takes_a_reason_per_level_and_refuses_an_unknown_direction():
+    reasons = ("%(value).1f V low", "%(value).1f V critical")
+    assert graded(3.1, 3.2, 3.0, reasons) == (WARN, "3.1 V low")
+    assert graded(2.9, 3.2, 3.0, reasons) == (ERROR, "2.9 V critical")
+    with pytest.raises(ValueError):
+        graded(1.0, 2.0, 3.0, "%(value)s", "sideways")
 
 
 @pytest.mark.parametrize("acked, level", [(200, OK), (180, OK), (179, WARN), (100, WARN), (99, ERROR), (0, ERROR)])
