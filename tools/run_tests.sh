@@ -2,7 +2,16 @@
 # Runs every test of the stack on a fresh machine: installs what is missing, builds the
 # workspace, then runs the linter, the pytest unit tests and every rostest launch file
 # (simulated Crazyflies, no hardware). Ends with one summary line "N passed, N failed"
-# (the lint counts as one check).
+# (the lint counts as one check). Extra arguments go to pytest.
+#
+# pytest and the rostests run side by side, CRAZYFLIE_TEST_JOBS (default 3) at a time, the longest
+# first (expected seconds in tools/test_durations.txt), so the run ends on short tests. Most
+# rostests wait on simulated flight time rather than compute, so a two-core machine carries three.
+# The rostests are isolated from each other: each has its own master (rostest picks a free port)
+# and its own world address and ports (test_rostest_ports.py holds that). One line per test as it
+# ends: "PASS <pkg>/<file>.test (<wall> s, CPU <cpu> s)" or FAIL with the log's tail; logs, the
+# pytest output and the measured durations (durations.txt) are in .ws/test_results/.
+# CRAZYFLIE_ROSTESTS="driver_single.test hover_vicon.test" runs only those rostests ("none": none).
 set -uo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -10,17 +19,111 @@ REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$REPO/tools/env.sh"
 cd "$REPO"
 
+JOBS="${CRAZYFLIE_TEST_JOBS:-3}"
+case "$JOBS" in ''|*[!0-9]*|0) echo "CRAZYFLIE_TEST_JOBS must be a whole number >= 1, got '$JOBS'" >&2; exit 2 ;; esac
 RESULTS="$REPO/.ws/test_results"
-rm -rf "$RESULTS"; mkdir -p "$RESULTS"
+rm -rf "$RESULTS"; mkdir -p "$RESULTS/jobs"
 export ROS_LOG_DIR="$RESULTS/ros_log"
-export CRAZYFLIE_TOC_CACHE="$RESULTS/toc_cache"
+export CRAZYFLIE_TOC_CACHE="$RESULTS/toc_cache"     # written atomically: concurrent writers are safe
 
 echo "== lint (ruff, settings in ruff.toml) =="
 if "$REPO/.ws/venv/bin/ruff" check --no-cache "$REPO"; then lint_pass=1; lint_fail=0; else lint_pass=0; lint_fail=1; fi
 
-echo "== unit tests (pytest) =="
-/usr/bin/python3 -m pytest -q -rs --junitxml="$RESULTS/pytest.xml" "$@"
-pytest_rc=$?
+# The jobs: "pytest" and every rostest as <pkg>/<file>.test.
+rostests=()
+for t in $(ls crazyflie_*/test/rostest/*.test 2>/dev/null | sort); do
+  id="${t%%/*}/$(basename "$t")"
+  if [ -n "${CRAZYFLIE_ROSTESTS+set}" ]; then
+    case " $CRAZYFLIE_ROSTESTS " in *" $(basename "$t") "*|*" $id "*) ;; *) continue ;; esac
+  fi
+  rostests+=("$id")
+done
+
+# Longest first; a job without a recorded duration counts as 60 s.
+expected() {
+  awk -v id="$1" '$1 !~ /^#/ && $3 == id { print $1; found = 1; exit } END { if (!found) print 60 }' \
+    "$REPO/tools/test_durations.txt" 2>/dev/null || echo 60
+}
+queue=()
+while read -r _ id; do queue+=("$id"); done < <(
+  for id in pytest "${rostests[@]}"; do echo "$(expected "$id") $id"; done | sort -k1,1nr -k2,2)
+
+log_of() {
+  case "$1" in pytest) echo "$RESULTS/pytest.log" ;; *) echo "$RESULTS/rostest_${1%%/*}_${1#*/}.log" ;; esac
+}
+key_of() { echo "${1//\//_}"; }
+
+# Each job runs in its own process group (job control on), so stopping the run stops its whole tree.
+set -m
+declare -A pid_of start_of
+running=()
+stop_all() {
+  for id in "${running[@]:-}"; do
+    [ -n "$id" ] || continue
+    pkill -TERM -P "${pid_of[$id]}" 2>/dev/null; kill -TERM -- "-${pid_of[$id]}" 2>/dev/null
+  done
+}
+trap 'stop_all; exit 130' INT TERM
+
+start_job() {
+  local id="$1" key; key="$(key_of "$1")"
+  if [ "$id" = pytest ]; then
+    set -- /usr/bin/python3 -m pytest -q -rs --junitxml="$RESULTS/pytest.xml" "${PYTEST_ARGS[@]}"
+  else
+    set -- timeout 600 rostest "${id%%/*}" "${id#*/}"
+  fi
+  ( "$@" > "$(log_of "$id")" 2>&1 < /dev/null
+    rc=$?
+    times > "$RESULTS/jobs/$key.cpu"
+    echo "$rc" > "$RESULTS/jobs/$key.tmp" && mv "$RESULTS/jobs/$key.tmp" "$RESULTS/jobs/$key.rc" ) &
+  pid_of[$id]=$!
+  start_of[$id]=$(date +%s)
+  running+=("$id")
+}
+
+# CPU of the job's processes: the children's line of `times` ("0m12.345s 0m1.234s"), user + sys seconds
+cpu_seconds() {
+  awk 'NR == 2 { s = 0; for (i = 1; i <= 2; i++) { split($i, p, "m"); sub("s", "", p[2]); s += p[1] * 60 + p[2] } printf "%.0f", s }' "$1"
+}
+
+ros_pass=0; ros_fail=0; failed=""; pytest_rc=1
+finish_job() {
+  local id="$1" key rc took cpu; key="$(key_of "$1")"
+  wait "${pid_of[$id]}" 2>/dev/null
+  rc="$(cat "$RESULTS/jobs/$key.rc")"
+  took=$(( $(date +%s) - ${start_of[$id]} ))
+  cpu="$(cpu_seconds "$RESULTS/jobs/$key.cpu")"
+  echo "$took $cpu $id" >> "$RESULTS/durations.txt"
+  if [ "$id" = pytest ]; then
+    pytest_rc="$rc"
+    echo "== unit tests (pytest, $took s, CPU $cpu s) =="
+    cat "$RESULTS/pytest.log"
+  elif [ "$rc" -eq 0 ]; then
+    ros_pass=$((ros_pass + 1)); echo "PASS $id ($took s, CPU $cpu s)"
+  else
+    ros_fail=$((ros_fail + 1)); failed="$failed $id"
+    echo "FAIL $id ($took s, CPU $cpu s)"
+    tail -n 40 "$(log_of "$id")" | sed 's/^/    /'
+  fi
+}
+
+PYTEST_ARGS=("$@")
+echo "== unit tests (pytest) and integration tests (rostest, simulated Crazyflies), $JOBS at a time =="
+echo "load average at start: $(cut -d' ' -f1-3 /proc/loadavg)"
+t0=$(date +%s)
+while [ "${#queue[@]}" -gt 0 ] || [ "${#running[@]}" -gt 0 ]; do
+  while [ "${#running[@]}" -lt "$JOBS" ] && [ "${#queue[@]}" -gt 0 ]; do
+    start_job "${queue[0]}"; queue=("${queue[@]:1}")
+  done
+  sleep 0.5
+  still=()
+  for id in "${running[@]}"; do
+    if [ -f "$RESULTS/jobs/$(key_of "$id").rc" ]; then finish_job "$id"; else still+=("$id"); fi
+  done
+  running=("${still[@]:-}"); [ -n "${running[0]:-}" ] || running=()
+done
+set +m
+
 read -r py_pass py_fail <<<"$(/usr/bin/python3 - "$RESULTS/pytest.xml" <<'PY'
 import sys, xml.etree.ElementTree as ET
 try:
@@ -34,21 +137,8 @@ PY
 )"
 if [ "$pytest_rc" -ne 0 ] && [ "$py_fail" -eq 0 ]; then py_fail=1; fi
 
-echo "== integration tests (rostest, simulated Crazyflies) =="
-ros_pass=0; ros_fail=0; failed=""
-for t in $(ls crazyflie_*/test/rostest/*.test 2>/dev/null | sort); do
-  pkg="${t%%/*}"; name="$(basename "$t")"
-  start=$(date +%s)
-  if timeout 600 rostest "$pkg" "$name" > "$RESULTS/rostest_${pkg}_${name}.log" 2>&1; then
-    ros_pass=$((ros_pass + 1)); echo "PASS $pkg/$name ($(( $(date +%s) - start )) s)"
-  else
-    ros_fail=$((ros_fail + 1)); failed="$failed $pkg/$name"
-    echo "FAIL $pkg/$name ($(( $(date +%s) - start )) s)"
-    tail -n 40 "$RESULTS/rostest_${pkg}_${name}.log" | sed 's/^/    /'
-  fi
-done
-
 echo "== summary =="
+echo "tests took $(( $(date +%s) - t0 )) s ($JOBS at a time); load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "lint: $( [ "$lint_fail" -eq 0 ] && echo clean || echo FAILED ); pytest: $py_pass passed, $py_fail failed;" \
      "rostest: $ros_pass passed, $ros_fail failed${failed:+ (failed:$failed)}"
 echo "$((lint_pass + py_pass + ros_pass)) passed, $((lint_fail + py_fail + ros_fail)) failed"
