@@ -36,6 +36,7 @@ A1 = bytes.fromhex("E7E7E7E701")
     ("mocap crazyflie1 --freeze", "set_mocap_faults", {"uri": "crazyflie1", "freeze_s": True}),
     ("mocap cf --hide 200ms --noise 0.01 --latency 30ms --rate 20 --dropout 0.1", "set_mocap_faults",
      {"uri": "cf", "hide_s": 0.2, "noise_m": 0.01, "latency_s": 0.03, "rate_hz": 20.0, "dropout": 0.1}),
+    ("mocap cf --noise 0", "set_mocap_faults", {"uri": "cf", "noise_m": 0.0}),
     ("mocap cf --clear", "set_mocap_faults", {"uri": "cf", "clear": True}),
     ("list", "faults", {}),
     ("clear", "clear_faults", {}),
@@ -64,7 +65,10 @@ def test_words_become_one_control_operation(words, op, args):
     ("battery cf1 full", "volts"),
     ("mocap cf1", "say what goes wrong"),
     ("mocap cf1 --noise -1", ">= 0 m"),
+    ("mocap cf1 --noise lots", "--noise must be a number >= 0 m, got 'lots'"),
+    ("mocap cf1 --noise nan", ">= 0 m"),
     ("mocap cf1 --rate 0", "> 0 Hz"),
+    ("mocap cf1 --rate fast", "--rate must be a number > 0 Hz, got 'fast'"),
     ("mocap cf1 --freeze -2", ">= 0"),
     ("unplug 0 'unclosed", "cannot read"),
 ])

@@ -57,6 +57,18 @@ def duration(what: str, text: Union[str, float]) -> float:
     return value
 
 
+def _number(flag: str, text: Union[str, float], unit: str, minimum: float, inclusive: bool = True) -> float:
+    """``text`` as a number of ``unit`` from ``minimum`` on (just above it with ``inclusive=False``)."""
+    bound = "%s %g %s" % (">=" if inclusive else ">", minimum, unit)
+    try:
+        value = float(text)
+    except ValueError:
+        raise FaultError("%s must be a number %s, got %r" % (flag, bound, text)) from None
+    if not (value >= minimum if inclusive else value > minimum):
+        raise FaultError("%s must be a number %s, got %r" % (flag, bound, text))
+    return value
+
+
 def battery_level(text: str) -> Dict[str, float]:
     """``3.3`` / ``3.3V`` -> {"voltage": 3.3}; ``20%`` -> {"charge": 0.2}."""
     s = str(text).strip()
@@ -270,21 +282,11 @@ def _mocap_args(a: argparse.Namespace) -> Dict[str, Any]:
     if a.hide is not None:
         args["hide_s"] = _span("--hide", a.hide)
     if a.noise is not None:
-        try:
-            args["noise_m"] = float(a.noise)
-        except ValueError:
-            raise FaultError("--noise must be a standard deviation in metres, got %r" % (a.noise,)) from None
-        if not args["noise_m"] >= 0:
-            raise FaultError("--noise must be >= 0 m, got %r" % (a.noise,))
+        args["noise_m"] = _number("--noise", a.noise, "m", 0.0)
     if a.latency is not None:
         args["latency_s"] = duration("--latency", a.latency)
     if a.rate is not None:
-        try:
-            args["rate_hz"] = float(a.rate)
-        except ValueError:
-            raise FaultError("--rate must be in Hz, got %r" % (a.rate,)) from None
-        if not args["rate_hz"] > 0:
-            raise FaultError("--rate must be > 0 Hz, got %r" % (a.rate,))
+        args["rate_hz"] = _number("--rate", a.rate, "Hz", 0.0, inclusive=False)
     if a.dropout is not None:
         args["dropout"] = fraction("--dropout", a.dropout)
     if len(args) == 1:
