@@ -15,7 +15,6 @@ import json
 import os
 import platform
 import re
-import socket
 import subprocess
 import sys
 import tempfile
@@ -30,6 +29,11 @@ PACKAGES = ("crazyflie_driver", "crazyflie_demo", "crazyflie_tools")
 for _package in PACKAGES:          # the catkin devel space (messages, services) when sourced, else the sources
     if importlib.util.find_spec(_package) is None:
         sys.path.insert(0, os.path.join(REPO, _package, "src"))
+TEST_SUPPORT = os.path.join(REPO, "crazyflie_driver", "test")      # the ``support`` package the tests share
+if TEST_SUPPORT not in sys.path:
+    sys.path.append(TEST_SUPPORT)
+
+from support.ports import free_port  # noqa: E402,F401  (one home for tests and benches; benches take it from here)
 
 
 # --- arguments and reports ---------------------------------------------------------------------
@@ -100,14 +104,6 @@ class Table:
 def percentile(values: Sequence[float], p: float) -> float:
     s = sorted(values)
     return s[min(len(s) - 1, int(round(p / 100.0 * (len(s) - 1))))]
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def process_cpu_seconds(pid: int) -> float:

@@ -13,7 +13,7 @@ import pytest
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
 sys.path.insert(0, os.path.join(REPO, "bench"))
-from bench_support import served_world  # noqa: E402
+from bench_support import free_port, served_world  # noqa: E402
 SCRIPTS = os.path.join(REPO, "crazyflie_tools", "scripts")
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"
@@ -65,13 +65,6 @@ def run_without_sim_backend(tmp_path, name, sim_address, *args):
     return subprocess.run([sys.executable, os.path.join(SCRIPTS, name)] + list(args), env=env,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
                           timeout=60)
-
-
-def free_port():
-    import socket
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_scan_without_dongle_points_at_running_world(server, tmp_path):

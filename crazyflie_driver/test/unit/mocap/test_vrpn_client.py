@@ -15,6 +15,8 @@ from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, config_from_params
 from crazyflie_driver.mocap.vrpn_client import VrpnClient
 from crazyflie_driver.mocap.vrpn_server import GARBAGE_KINDS, VrpnTestServer
 
+from support.ports import free_port
+
 
 def wait_until(cond, timeout=5.0, period=0.01):
     end = time.monotonic() + timeout
@@ -52,14 +54,6 @@ class Recorder:
     def count(self):
         with self.lock:
             return len(self.poses)
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 @pytest.fixture

@@ -12,13 +12,14 @@ import os
 import pathlib
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
 import xmlrpc.client
 
 import pytest
+
+from support.ports import free_port
 
 pytest.importorskip("rospy")
 if shutil.which("rosmaster") is None:
@@ -64,12 +65,6 @@ print("ready", flush=True)
 rospy.spin()
 print(" | ".join(seen), flush=True)
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def start_child(code: str, master_uri: str) -> subprocess.Popen:

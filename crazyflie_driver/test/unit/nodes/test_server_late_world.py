@@ -1,7 +1,6 @@
 """crazyflie_server started before the simulated world: the first add waits for the world instead of failing."""
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
@@ -12,15 +11,9 @@ from crazyflie_driver.server.worker import WorkerConfig, WorkerListener, WorkerS
 from crazyflie_driver.sim.air.server import WorldServer
 from crazyflie_driver.sim.world.world import World
 
+from support.ports import free_port
+
 URI = "radio://0/80/2M/E7E7E7E701"
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def test_a_world_that_starts_after_the_server_is_waited_for(monkeypatch):
