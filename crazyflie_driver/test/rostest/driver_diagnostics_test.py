@@ -19,7 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from crazyflie_driver.server.diagnostics import ack_ratio_tolerance
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import start_test_node, wait_until  # noqa: E402
 
 NAMES = ("crazyflie1", "crazyflie2")
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
@@ -62,10 +62,7 @@ class Diagnostics:
 class DriverDiagnostics(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_diagnostics_test")
-        cls.world = world(rospy.get_param("~sim_address"))
-        for name in NAMES:
-            wait_for_crazyflie(name, 60.0)
+        cls.world = start_test_node("driver_diagnostics_test", NAMES)
         cls.diag = Diagnostics()
 
     def link(self, entries, name):

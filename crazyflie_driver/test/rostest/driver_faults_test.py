@@ -17,7 +17,7 @@ from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest, UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import (  # noqa: E402
-    RosoutRecorder, TopicRecorder, rates_per_world_second, wait_for_crazyflie, wait_until, world)
+    RosoutRecorder, TopicRecorder, rates_per_world_second, start_test_node, wait_until)
 
 NAMES = ("crazyflie1", "crazyflie2", "crazyflie3")
 
@@ -33,10 +33,7 @@ def add_request(uri: str, tf_prefix: str, blocks=()) -> AddCrazyflieRequest:
 class DriverFaults(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_faults_test")
-        cls.world = world(rospy.get_param("~sim_address"))
-        for name in NAMES:
-            wait_for_crazyflie(name, 60.0)
+        cls.world = start_test_node("driver_faults_test", NAMES)
         cls.rosout = RosoutRecorder("/crazyflie_server")
         cls.imu = {n: TopicRecorder("/%s/imu" % n, Imu) for n in NAMES}
         cls.add = rospy.ServiceProxy("/add_crazyflie", AddCrazyflie)

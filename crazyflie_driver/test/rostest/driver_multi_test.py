@@ -14,7 +14,8 @@ from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Imu
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, rates_per_world_second, wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import (TopicRecorder, rates_per_world_second, start_test_node,  # noqa: E402
+                                     wait_connected, wait_until)
 
 CRAZYFLIES = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702",
               "crazyflie3": "radio://1/90/2M/E7E7E7E703"}
@@ -23,13 +24,10 @@ CRAZYFLIES = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio:/
 class DriverMulti(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_multi_test")
-        cls.world = world(rospy.get_param("~sim_address"))
-        for name in CRAZYFLIES:
-            wait_for_crazyflie(name, 60.0)
+        cls.world = start_test_node("driver_multi_test", CRAZYFLIES)
         cls.imu = {n: TopicRecorder("/%s/imu" % n, Imu) for n in CRAZYFLIES}
         cls.cmd = {n: rospy.Publisher("/%s/cmd_vel" % n, Twist, queue_size=1) for n in CRAZYFLIES}
-        wait_until(lambda: all(p.get_num_connections() for p in cls.cmd.values()), 10.0)
+        wait_connected(list(cls.cmd.values()), 10.0)
 
     def test_a_every_crazyflie_publishes_imu_at_100hz(self):
         rates = rates_per_world_second(self.imu, self.world, 3.0)     # per second of the firmware's clock

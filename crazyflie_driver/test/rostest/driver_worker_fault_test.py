@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
 import unittest
 
 import rospy
@@ -17,8 +16,8 @@ from crazyflie_driver.nodes.crazyflie_server import start_server
 from crazyflie_driver.srv import AddCrazyflieRequest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (TopicRecorder, add_crazyflies, service_registered, wait_until,  # noqa: E402
-                                     world)
+from support.rostest_support import (Repeating, TopicRecorder, add_crazyflies, service_registered,  # noqa: E402
+                                     start_test_node, wait_until)
 
 URI = "radio://0/80/2M/E7E7E7E701"
 THRUST = 20000.0        # below hover: the vehicle stays on the floor
@@ -31,8 +30,7 @@ class InjectedBug(RuntimeError):
 class DriverWorkerFault(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_worker_fault_test")
-        cls.world = world(rospy.get_param("~sim_address"))
+        cls.world = start_test_node("driver_worker_fault_test")
         cls.server = start_server(timeout=1.0, add_timeout=30.0)
         cls.status = TopicRecorder("/crazyflie1/status", DiagnosticStatus)
         cls.diagnostics = TopicRecorder("/diagnostics", DiagnosticArray)
@@ -40,20 +38,13 @@ class DriverWorkerFault(unittest.TestCase):
                                             enable_parameters=False)])
         cls.worker = cls.server.registry.get(URI)
         cls.pub = rospy.Publisher("/crazyflie1/cmd_vel", Twist, queue_size=1)
-        cls._stop = threading.Event()
-        cls._streamer = threading.Thread(target=cls._stream, daemon=True)
-        cls._streamer.start()
+        setpoint = Twist()
+        setpoint.linear.z = THRUST
+        cls.streamer = Repeating(lambda: cls.pub.publish(setpoint), 0.02)
 
     @classmethod
     def tearDownClass(cls):
-        cls._stop.set()
-
-    @classmethod
-    def _stream(cls):
-        msg = Twist()
-        msg.linear.z = THRUST
-        while not cls._stop.wait(0.02):
-            cls.pub.publish(msg)
+        cls.streamer.stop()
 
     def firmware(self):
         return self.world.crazyflie_state(URI)

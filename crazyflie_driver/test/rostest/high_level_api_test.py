@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 import os
 import sys
-import threading
 import time
 import unittest
 
@@ -19,7 +18,7 @@ from crazyflie_driver.msg import TrajectoryPolynomialPiece
 from crazyflie_driver.srv import GoTo, Land, StartTrajectory, Takeoff, UpdateParams, UploadTrajectory
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import Repeating, start_test_node, wait_connected, wait_until  # noqa: E402
 
 NS = "/crazyflie1"
 MOCAP_PERIOD_S = 0.02
@@ -51,24 +50,19 @@ def planned(t: float):
 class HighLevelApi(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("high_level_api_test")
+        cls.world = start_test_node("high_level_api_test", ["crazyflie1"])
         cls.uri = rospy.get_param("~uri")
-        cls.world = world(rospy.get_param("~sim_address"))
-        wait_for_crazyflie("crazyflie1", 60.0)
         for s in ("takeoff", "land", "go_to", "upload_trajectory", "start_trajectory"):
             rospy.wait_for_service(NS + "/" + s, 10.0)
         rospy.set_param(NS + "/stabilizer/estimator", 2)
         rospy.ServiceProxy(NS + "/update_params", UpdateParams)(["stabilizer/estimator"])
         cls.mocap = rospy.Publisher(NS + "/external_position", PointStamped, queue_size=1)
-        wait_until(lambda: cls.mocap.get_num_connections() > 0, 5.0)
-        cls.stop = threading.Event()
-        cls.thread = threading.Thread(target=cls.mocap_loop, daemon=True)
-        cls.thread.start()
+        wait_connected([cls.mocap], 5.0)
+        cls.mocap_stream = Repeating(cls.send_truth, MOCAP_PERIOD_S)
 
     @classmethod
     def tearDownClass(cls):
-        cls.stop.set()
-        cls.thread.join(2.0)
+        cls.mocap_stream.stop()
 
     @classmethod
     def truth(cls):
@@ -81,12 +75,10 @@ class HighLevelApi(unittest.TestCase):
         return state["time"], state["position"]
 
     @classmethod
-    def mocap_loop(cls):
-        while not cls.stop.is_set() and not rospy.is_shutdown():
-            point = PointStamped()
-            point.point.x, point.point.y, point.point.z = cls.truth()
-            cls.mocap.publish(point)
-            time.sleep(MOCAP_PERIOD_S)
+    def send_truth(cls):
+        point = PointStamped()
+        point.point.x, point.point.y, point.point.z = cls.truth()
+        cls.mocap.publish(point)
 
     def reaches(self, goal, tolerance=0.05, timeout=10.0):
         return wait_until(lambda: math.dist(self.truth(), goal) < tolerance, timeout)

@@ -18,7 +18,7 @@ from std_msgs.msg import Float32
 from crazyflie_driver.srv import InjectFault
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world, world_window  # noqa: E402
+from support.rostest_support import TopicRecorder, start_test_node, wait_until, world_window  # noqa: E402
 
 NAMES = ("crazyflie1", "crazyflie2")
 
@@ -30,10 +30,7 @@ def values(status: DiagnosticStatus) -> dict:
 class SimFaults(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("sim_faults_test")
-        cls.world = world(rospy.get_param("~sim_address"))
-        for name in NAMES:
-            wait_for_crazyflie(name, 60.0)
+        cls.world = start_test_node("sim_faults_test", NAMES)
         rospy.wait_for_service("/crazyflie_sim/fault", 30.0)
         cls.fault = rospy.ServiceProxy("/crazyflie_sim/fault", InjectFault)
         cls.battery = {n: TopicRecorder("/%s/battery" % n, Float32) for n in NAMES}

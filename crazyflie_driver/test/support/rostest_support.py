@@ -117,6 +117,42 @@ def wait_for_crazyflie(tf_prefix: str, timeout: float = 60.0) -> None:
     rospy.wait_for_service("/%s/update_params" % tf_prefix, timeout=timeout)
 
 
+def start_test_node(name: str, crazyflies: Sequence[str] = (), timeout: float = 60.0) -> RemoteMedium:
+    """A test's start: its node ``name``, then each of ``crazyflies`` (tf prefixes) served (at most
+    ``timeout`` s each); returns the world's control API at the test's ``~sim_address`` parameter."""
+    rospy.init_node(name)
+    medium = world(rospy.get_param("~sim_address"))
+    for tf_prefix in crazyflies:
+        wait_for_crazyflie(tf_prefix, timeout)
+    return medium
+
+
+def wait_connected(publishers: Sequence[rospy.Publisher], timeout: float = 10.0) -> bool:
+    """Until each publisher has a subscriber connected (a message published before is lost); False
+    after ``timeout`` s."""
+    return bool(wait_until(lambda: all(p.get_num_connections() > 0 for p in publishers), timeout))
+
+
+class Repeating:
+    """Calls ``fn`` now and then every ``period_s`` s on a thread of its own until :meth:`stop` or
+    shutdown: a stream of setpoints or poses that runs beside a test."""
+
+    def __init__(self, fn: Callable[[], Any], period_s: float) -> None:
+        self._fn, self._period_s = fn, period_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set() and not rospy.is_shutdown():
+            self._fn()
+            self._stop.wait(self._period_s)
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        self._thread.join(timeout)
+
+
 def registered_services() -> Set[str]:
     """Every service name the master knows, from one call. Unlike ``wait_for_service`` with a short
     timeout this does not probe each server's socket, which a busy server may answer late."""
