@@ -68,7 +68,7 @@ def update(b: BatteryStates, dt: float, motor_thrust: np.ndarray) -> None:
     b.current = current
     b.vbat = np.maximum(open_circuit_voltage(b.charge) - current * INTERNAL_RESISTANCE, 0.0)
     low = b.vbat < LOW_VOLTAGE
-    if not low.any() and not b.state.any():     # every battery fine (and none shut down): the same result
+    if not np.count_nonzero(low) and not np.count_nonzero(b.state):     # every battery fine, none shut down: the same
         b.low_time.fill(0.0)
         b.critical_time.fill(0.0)
         return

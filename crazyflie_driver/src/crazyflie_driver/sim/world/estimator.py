@@ -16,7 +16,7 @@ the estimate runs away quadratically; measurements pull the velocity error back.
 from __future__ import annotations
 
 import math
-from typing import Dict, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -166,17 +166,18 @@ class Estimator:
         return True
 
     # --- the tick ---------------------------------------------------------------------------------
-    def update(self, tick: int, now: float, flying: np.ndarray, truth_pos: np.ndarray) -> None:
-        """Kalman prediction at 100 Hz: drift of the estimate while flying; the firmware's bounds."""
+    def update(self, tick: int, now: float, thrust: np.ndarray, truth_pos: np.ndarray) -> None:
+        """Kalman prediction at 100 Hz: drift of the estimate while flying (``thrust`` (N,) > 0); the
+        firmware's bounds."""
         if tick % PREDICT_EVERY or not len(self.s):
             return
         s = self.s
         kalman = s.kind == KALMAN
-        if not kalman.any():                 # estimator 1 everywhere: nothing drifts, nothing to bound
+        if not np.count_nonzero(kalman):                 # estimator 1 everywhere: nothing drifts, nothing to bound
             return
         dt = PREDICT_EVERY * 1e-3
-        coasting = kalman & flying
-        if coasting.any():
+        coasting = kalman & (thrust > 0.0)
+        if np.count_nonzero(coasting):
             acc = s.drift_acc * coasting[:, None]
             s.err += s.verr * dt + 0.5 * acc * dt * dt
             s.verr += acc * dt
@@ -198,6 +199,16 @@ class Estimator:
         if s.kind[i] == KALMAN:
             return truth_vel + s.verr[i]
         return np.array([0.0, 0.0, truth_vel[2]])
+
+    def row_estimate(self, i: int, truth_pos: List[float], truth_vel: List[float],
+                     ground_asl: float) -> Tuple[List[float], List[float]]:
+        """``position`` and ``velocity`` of row ``i`` as Python floats (the same sums)."""
+        s = self.s
+        if s.kind[i] == KALMAN:
+            e, ve = s.err[i].tolist(), s.verr[i].tolist()
+            return ([truth_pos[0] + e[0], truth_pos[1] + e[1], truth_pos[2] + e[2]],
+                    [truth_vel[0] + ve[0], truth_vel[1] + ve[1], truth_vel[2] + ve[2]])
+        return [0.0, 0.0, truth_pos[2] + ground_asl], [0.0, 0.0, truth_vel[2]]
 
     def positions(self, truth_pos: np.ndarray, ground_asl: float) -> np.ndarray:
         """Estimated positions (N,3) of all vehicles."""

@@ -18,8 +18,7 @@ from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RA
 from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import Evaluation, Piece
-from crazyflie_driver.sim.world.position_control import (CONTROLLER_MELLINGER, POSITION_EVERY, PRIORITY_CRTP,
-                                                         PRIORITY_HIGH_LEVEL, PositionControl)
+from crazyflie_driver.sim.world.position_control import PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")
@@ -174,23 +173,31 @@ class OnboardFlight:
         """Before the stabilizer's tick: estimator prediction, then (100 Hz) the position controller.
 
         Returns True when it wrote new setpoints into the stabilizer's rows."""
-        self.estimator.update(tick, now, stab.thrust > 0.0, bodies.position)
+        self.estimator.update(tick, now, stab.thrust, bodies.position)
         wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
-        active = self.control.s.active
-        if tick % MELLINGER_EVERY or not active.any():
+        if tick % MELLINGER_EVERY:
             return wrote
-        if tick % POSITION_EVERY and not (active & (self.control.s.controller == CONTROLLER_MELLINGER)).any():
+        est = self.estimator
+
+        def row_inputs(i: int):
+            q0, q1, q2, q3 = bodies.quaternion[i].tolist()
+            body_z = (2.0 * (q0 * q2 + q3 * q1), 2.0 * (q1 * q2 - q3 * q0), 1.0 - 2.0 * (q0 * q0 + q1 * q1))
+            pos, vel = est.row_estimate(i, bodies.position[i].tolist(), bodies.velocity[i].tolist(), ground_asl)
+            return pos, vel, float(stab.attitude[i, 2]), bool(stab.thrust[i] > 0.0), body_z
+
+        def all_inputs():
+            q = bodies.quaternion
+            body_z = np.stack([2.0 * (q[:, 0] * q[:, 2] + q[:, 3] * q[:, 1]),
+                               2.0 * (q[:, 1] * q[:, 2] - q[:, 3] * q[:, 0]),
+                               1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)], axis=1)
+            return (est.positions(bodies.position, ground_asl), est.velocities(bodies.velocity),
+                    stab.attitude[:, 2], stab.thrust > 0.0, body_z)
+
+        rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp)
+        if not rows:
             return wrote
-        est_pos = self.estimator.positions(bodies.position, ground_asl)
-        est_vel = self.estimator.velocities(bodies.velocity)
-        q = bodies.quaternion
-        body_z = np.stack([2.0 * (q[:, 0] * q[:, 2] + q[:, 3] * q[:, 1]), 2.0 * (q[:, 1] * q[:, 2] - q[:, 3] * q[:, 0]),
-                           1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)], axis=1)
-        if self.control.update(tick, est_pos, est_vel, stab.attitude[:, 2], stab.sp, stab.yaw_sp, stab.thrust > 0.0,
-                               body_z):
-            stab.thrust_locked[active] = False
-            return True
-        return wrote
+        stab.thrust_locked[rows] = False
+        return True
 
     # --- log variables ---------------------------------------------------------------------------------
     def readings(self, i: int, group: str, bodies: BodyStates, attitude_deg: np.ndarray,

@@ -223,7 +223,7 @@ class RigidBodyBackend:
         rotor_speed = a[:, 0:1] * u + a[:, 1:2]
         rotor_speed *= spinning
         return Drive(actions, target, self._blend(states, h), rotor_speed @ _MINUS_ONES4 * states.body_drag,
-                     not spinning.any())
+                     not np.count_nonzero(spinning))
 
     def _blend(self, states: BodyStates, h: float) -> np.ndarray:
         """(N,1) motor lag over a substep of h seconds; kept while the vehicles' time constants stay the same."""
@@ -252,8 +252,8 @@ class RigidBodyBackend:
         lag = d.target - f
         lag *= d.blend
         f += lag
-        if d.motors_off and s.on_ground.all() and s.position[:, 2].max() <= 0.0 and not s.velocity.any() \
-                and not s.omega.any():
+        if d.motors_off and np.count_nonzero(s.on_ground) == len(s.on_ground) and s.position[:, 2].max() <= 0.0 \
+                and not np.count_nonzero(s.velocity) and not np.count_nonzero(s.omega):
             return      # every vehicle rests on the floor, still, with its motors off: nothing moves
         ft = f @ _FORCE_PATTERN                          # (N,4): torque about x, y, z (unscaled), total thrust
         total = ft[:, 3]
@@ -290,7 +290,7 @@ class RigidBodyBackend:
             resting = touching & ~lifting
             np.maximum(p_new[:, 2], 0.0, out=p_new[:, 2])                 # on the floor, not under it
             v_new[:, 2] = np.where(touching, np.maximum(v_new[:, 2], 0.0), v_new[:, 2])
-            if resting.any():
+            if np.count_nonzero(resting):
                 v_new[resting] = 0.0
                 w_new[resting] = 0.0
                 q = q_new[resting]

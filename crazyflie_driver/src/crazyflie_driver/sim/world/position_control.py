@@ -10,12 +10,14 @@ gains: docs/simulation.md ("Onboard position control").
 """
 from __future__ import annotations
 
-from typing import Dict, Tuple
+import math
+from typing import Callable, Dict, List, Sequence, Tuple
 
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, MODE_DISABLE, MODE_VELOCITY, Setpoint
 from crazyflie_driver.sim.world import mellinger as _mel
+from crazyflie_driver.sim.world.scalar import clamp, maximum, safe_cos, safe_sin
 from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 POSITION_EVERY = 10                 # ticks: the position controller runs at 100 Hz
@@ -30,6 +32,8 @@ M_X, M_Y, M_Z, M_ROLL, M_PITCH, M_YAW, M_QUAT = range(7)
 PRIORITY_HIGH_LEVEL, PRIORITY_CRTP = 1, 2
 CONTROLLER_PID, CONTROLLER_MELLINGER = 1, 2
 TERMS = ("Kp", "Ki", "Kd")
+SCALAR_ROWS = 3                     # up to this many rows of a controller: Python floats, row by row (faster
+                                    # than numpy's per-call cost); more: one numpy pass over all of them
 
 # current firmware defaults: gains (kp, ki, kd, kff) per axis, then limits and thrust
 POS_GAINS = ((2.0, 0.0, 0.0, 0.0), (2.0, 0.0, 0.0, 0.0), (2.0, 0.5, 0.0, 0.0))
@@ -57,6 +61,10 @@ def default_params() -> Dict[str, float]:
 
 
 _PARAMS = default_params()
+# one row's estimated position and velocity (m, m/s), yaw (deg), motors running, body z axis
+RowInputs = Tuple[Sequence[float], Sequence[float], float, bool, Sequence[float]]
+# the same for all rows: (N,3), (N,3), (N,), (N,) bool, (N,3)
+AllInputs = Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def _param_slot(name: str) -> Tuple[str, Tuple[int, ...]]:
@@ -88,6 +96,7 @@ class PositionStates(Rows):
         "att": ((3,), float),             # roll, pitch, yaw (deg)
         "rate": ((3,), float),            # roll, pitch, yaw rate (deg/s, yaw counter-clockwise)
         "quat": ((4,), float),
+        "quat_yaw": ((), float),          # yaw of the setpoint's quaternion (deg)
         "thrust_sp": ((), float),
         "vbody": ((), bool),
         "pos_gains": ((3, 4), float),
@@ -107,12 +116,35 @@ class PositionStates(Rows):
         "mel_integ": ((3,), float),
     }
 
+    def __init__(self) -> None:
+        super().__init__()
+        self.version = 0                  # changes whenever the set of rows or their roles may have changed
+
+    def append_row(self, **values) -> int:
+        self.version += 1
+        return super().append_row(**values)
+
+    def delete_row(self, index: int) -> None:
+        self.version += 1
+        super().delete_row(index)
+
 
 class PositionControl:
     """Generic setpoints of all vehicles and the PID position controller they drive."""
 
     def __init__(self) -> None:
         self.s = PositionStates()
+        self._rows_version = -1
+        self._rows: Tuple[List[int], List[int]] = ([], [])
+
+    def rows(self) -> Tuple[List[int], List[int]]:
+        """(PID rows, Mellinger rows) among the active ones; recomputed only after a change."""
+        s = self.s
+        if self._rows_version != s.version:
+            mel = s.controller == CONTROLLER_MELLINGER
+            self._rows = (np.flatnonzero(s.active & ~mel).tolist(), np.flatnonzero(s.active & mel).tolist())
+            self._rows_version = s.version
+        return self._rows
 
     def add(self) -> int:
         i = self.s.append_row()
@@ -133,10 +165,12 @@ class PositionControl:
         s.vel_max[i] = VEL_MAX
         s.controller[i] = CONTROLLER_PID
         s.mel_gains[i] = [_mel.DEFAULTS[n] for n in _mel.GAIN_ORDER]
+        s.version += 1
 
     def set_param(self, i: int, name: str, value: float) -> bool:
         if name == "stabilizer.controller":       # 0 (auto) and the controllers not simulated run PID
             self.s.controller[i] = CONTROLLER_MELLINGER if int(value) == CONTROLLER_MELLINGER else CONTROLLER_PID
+            self.s.version += 1
             return True
         if name not in _PARAMS:
             return False
@@ -147,59 +181,147 @@ class PositionControl:
     # --- setpoints (under the world lock) ---------------------------------------------------------
     def set_setpoint(self, i: int, sp: Setpoint) -> None:
         s = self.s
-        s.active[i] = True
+        if not s.active[i]:
+            s.active[i] = True
+            s.version += 1
         s.kind[i] = sp.kind
         s.modes[i] = (sp.mode_x, sp.mode_y, sp.mode_z, sp.mode_roll, sp.mode_pitch, sp.mode_yaw, sp.mode_quat)
         s.pos[i], s.vel[i], s.acc[i] = sp.position, sp.velocity, sp.acceleration
         s.att[i], s.rate[i], s.quat[i] = sp.attitude, sp.attitude_rate, sp.quaternion
+        x, y, z, w = sp.quaternion
+        s.quat_yaw[i] = math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
         s.thrust_sp[i] = sp.thrust
         s.vbody[i] = sp.velocity_body
 
     def release(self, i: int) -> None:
         """The legacy path (RPYT) drives this vehicle again."""
-        self.s.active[i] = False
+        if self.s.active[i]:
+            self.s.active[i] = False
+            self.s.version += 1
 
     # --- the tick -----------------------------------------------------------------------------------
-    def update(self, tick: int, est_pos: np.ndarray, est_vel: np.ndarray, yaw_deg: np.ndarray,
-               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, thrust_on: np.ndarray, body_z: np.ndarray) -> bool:
+    def update(self, tick: int, row_inputs: Callable[[int], RowInputs], all_inputs: Callable[[], AllInputs],
+               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> List[int]:
         """New roll, pitch, yaw and thrust setpoints for the active rows of the stabilizer: PID rows at
-        100 Hz, Mellinger rows at 500 Hz. Returns whether it wrote anything.
+        100 Hz, Mellinger rows at 500 Hz. Returns the rows it wrote.
 
         ``stab_sp`` (N,4: roll, pitch, yaw rate as the wire has it, thrust) and ``stab_yaw_sp`` (N,)
-        are the stabilizer's own setpoint arrays, written in place. ``thrust_on`` (N,) is False
-        where the motors were off at the last tick (the firmware then resets the PIDs); ``body_z``
-        (N,3) the current body z axes.
+        are the stabilizer's own setpoint arrays, written in place. ``row_inputs(i)`` gives one row's
+        estimated position and velocity, yaw (deg), whether its motors ran at the last tick (the
+        firmware resets the PIDs when they did not) and its body z axis; ``all_inputs()`` the same
+        as arrays over all rows, for the numpy pass (more than ``SCALAR_ROWS`` rows of a controller).
         """
+        if tick % _mel.MELLINGER_EVERY:
+            return []
+        pid, mel = self.rows()
+        if tick % POSITION_EVERY:
+            pid = []
+        if not pid and not mel:
+            return []
+        arrays = all_inputs() if len(mel) > SCALAR_ROWS or len(pid) > SCALAR_ROWS else None
+        if len(mel) > SCALAR_ROWS:
+            self._update_mellinger(np.asarray(mel), arrays, stab_sp, stab_yaw_sp)
+        else:
+            for i in mel:
+                self._mellinger_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
+        if len(pid) > SCALAR_ROWS:
+            est_pos, est_vel, yaw_deg, thrust_on, _ = arrays
+            self._update_pid(np.asarray(pid), est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
+        else:
+            for i in pid:
+                self._pid_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
+        return pid + mel
+
+    def _update_mellinger(self, rows: np.ndarray, arrays: AllInputs, stab_sp: np.ndarray,
+                          stab_yaw_sp: np.ndarray) -> None:
         s = self.s
-        if tick % _mel.MELLINGER_EVERY or not s.active.any():
-            return False
-        wrote = False
-        mel = s.active & (s.controller == CONTROLLER_MELLINGER)
-        if mel.any():
-            rows = np.flatnonzero(mel)
-            s.mel_integ[rows[~thrust_on[rows]]] = 0.0
-            modes = s.modes[rows]
-            yaw_des = np.radians(self._yaw_target(rows, yaw_deg[rows], _mel.DT))
-            roll, pitch, thrust, s.mel_integ[rows] = _mel.force_and_attitude(
-                s.mel_gains[rows], s.mel_integ[rows], est_pos[rows], est_vel[rows], s.pos[rows], s.vel[rows],
-                s.acc[rows], s.att[rows], modes[:, M_X] == MODE_ABS, modes[:, M_Z] == MODE_ABS, yaw_des, body_z[rows])
-            self._write(rows, roll, pitch, thrust, stab_sp, stab_yaw_sp)
-            wrote = True
-        if tick % POSITION_EVERY == 0:
-            pid = s.active & (s.controller != CONTROLLER_MELLINGER)
-            if pid.any():
-                self._update_pid(np.flatnonzero(pid), est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
-                wrote = True
-        return wrote
+        est_pos, est_vel, yaw_deg, thrust_on, body_z = arrays
+        s.mel_integ[rows[~thrust_on[rows]]] = 0.0
+        modes = s.modes[rows]
+        yaw_des = np.radians(self._yaw_target(rows, yaw_deg[rows], _mel.DT))
+        roll, pitch, thrust, s.mel_integ[rows] = _mel.force_and_attitude(
+            s.mel_gains[rows], s.mel_integ[rows], est_pos[rows], est_vel[rows], s.pos[rows], s.vel[rows],
+            s.acc[rows], s.att[rows], modes[:, M_X] == MODE_ABS, modes[:, M_Z] == MODE_ABS, yaw_des, body_z[rows])
+        self._write(rows, roll, pitch, thrust, stab_sp, stab_yaw_sp)
+
+    # --- one row in Python floats (the numpy passes below, for one vehicle) ---------------------------
+    def _mellinger_row(self, i: int, inputs: RowInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
+        s = self.s
+        pos, vel, yaw_deg, thrust_on, body_z = inputs
+        modes = s.modes[i].tolist()
+        att, rate = s.att[i].tolist(), s.rate[i].tolist()
+        if modes[M_YAW] == MODE_ABS:
+            yaw_des = att[2]
+        elif modes[M_QUAT] == MODE_ABS:
+            yaw_des = float(s.quat_yaw[i])
+        else:
+            yaw_des = yaw_deg + rate[2] * _mel.DT
+        integ = s.mel_integ[i].tolist() if thrust_on else (0.0, 0.0, 0.0)
+        roll, pitch, thrust, s.mel_integ[i] = _mel.force_and_attitude_row(
+            s.mel_gains[i].tolist(), integ, pos, vel, s.pos[i].tolist(), s.vel[i].tolist(), s.acc[i].tolist(), att,
+            modes[M_X] == MODE_ABS, modes[M_Z] == MODE_ABS, math.radians(yaw_des), body_z)
+        self._write_row(i, modes, att, rate, roll, pitch, thrust, stab_sp, stab_yaw_sp)
+
+    def _pid_row(self, i: int, inputs: RowInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
+        s = self.s
+        (px, py, pz), (vx, vy, vz), yaw_deg, thrust_on, _ = inputs
+        modes = s.modes[i].tolist()
+        if modes != s.prev_modes[i].tolist() or not thrust_on:
+            s.pos_integ[i] = s.pos_prev[i] = s.vel_integ[i] = s.vel_prev[i] = 0.0
+            s.prev_modes[i] = modes
+        yaw = math.radians(yaw_deg)
+        c, sn = safe_cos(yaw), safe_sin(yaw)
+        (sx, sy, sz), (svx, svy, svz) = s.pos[i].tolist(), s.vel[i].tolist()
+        absolute = (modes[M_X] == MODE_ABS, modes[M_Y] == MODE_ABS, modes[M_Z] == MODE_ABS)
+        # position PID (absolute axes), x/y in the yaw-rotated frame
+        desired = (sx * c + sy * sn, -sx * sn + sy * c, sz)
+        measured = (px * c + py * sn, -px * sn + py * c, pz)
+        vmax = s.vel_max[i].tolist()
+        limits = (vmax[0] * LIMIT_OVERHEAD, vmax[1] * LIMIT_OVERHEAD,
+                  maximum(vmax[2], Z_VEL_MAX_FLOOR) * LIMIT_OVERHEAD)
+        pos_out = _pid_step_row(desired, measured, s.pos_gains[i].tolist(), s.pos_integ, s.pos_prev, i, limits,
+                                absolute)
+        # velocity setpoint: the position PID output, or the setpoint's own velocity
+        vel_sp = (svx, svy, svz) if s.vbody[i] else (svx * c + svy * sn, svy * c - svx * sn, svz)
+        vel_sp = tuple(pos_out[k] if absolute[k] else vel_sp[k] for k in range(3))
+        body_v = (vx * c + vy * sn, -vx * sn + vy * c, vz)
+        rp = s.rp_limit[i].tolist()
+        limits = (rp[1] * LIMIT_OVERHEAD, rp[0] * LIMIT_OVERHEAD, VZ_OUTPUT_LIMIT)
+        vel_out = _pid_step_row(vel_sp, body_v, s.vel_gains[i].tolist(), s.vel_integ, s.vel_prev, i, limits,
+                           (True, True, True))
+        s.vel_target[i] = vel_sp
+        pitch = clamp(-vel_out[0], -rp[1], rp[1])
+        roll = clamp(-vel_out[1], -rp[0], rp[0])
+        thrust = clamp(maximum(vel_out[2] * THRUST_SCALE + float(s.thrust_base[i]), float(s.thrust_min[i])),
+                       0.0, UINT16_MAX)
+        # disabled axes: attitude and thrust straight from the setpoint
+        att = s.att[i].tolist()
+        if modes[M_X] == MODE_DISABLE or modes[M_Y] == MODE_DISABLE:
+            roll, pitch = att[0], att[1]
+        if modes[M_Z] == MODE_DISABLE:
+            thrust = float(s.thrust_sp[i])
+        self._write_row(i, modes, att, s.rate[i].tolist(), roll, pitch, thrust, stab_sp, stab_yaw_sp)
+
+    def _write_row(self, i: int, modes: List[int], att: List[float], rate: List[float], roll: float, pitch: float,
+                   thrust: float, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
+        """``_write`` for one row."""
+        self.s.out[i] = (roll, pitch, thrust)
+        yaw_mode = modes[M_YAW]
+        stab_sp[i] = (roll, pitch, -rate[2] if yaw_mode == MODE_VELOCITY else 0.0, thrust)
+        if yaw_mode == MODE_ABS:
+            target = att[2]
+        elif modes[M_QUAT] == MODE_ABS:
+            target = float(self.s.quat_yaw[i])
+        else:
+            return
+        if target == target:
+            stab_yaw_sp[i] = (target + 180.0) % 360.0 - 180.0
 
     def _yaw_target(self, rows: np.ndarray, yaw_now_deg: np.ndarray, dt: float) -> np.ndarray:
         """Desired yaw (deg): the setpoint's angle, its quaternion's yaw, or now + rate·dt."""
         s = self.s
         modes = s.modes[rows]
-        q = s.quat[rows]
-        quat_yaw = np.degrees(np.arctan2(2.0 * (q[:, 3] * q[:, 2] + q[:, 0] * q[:, 1]),
-                                         1.0 - 2.0 * (q[:, 1] ** 2 + q[:, 2] ** 2)))
-        target = np.where(modes[:, M_QUAT] == MODE_ABS, quat_yaw, yaw_now_deg + s.rate[rows, 2] * dt)
+        target = np.where(modes[:, M_QUAT] == MODE_ABS, s.quat_yaw[rows], yaw_now_deg + s.rate[rows, 2] * dt)
         return np.where(modes[:, M_YAW] == MODE_ABS, s.att[rows, 2], target)
 
     def _update_pid(self, rows: np.ndarray, est_pos: np.ndarray, est_vel: np.ndarray, yaw_deg: np.ndarray,
@@ -262,10 +384,7 @@ class PositionControl:
         yaw_mode = modes[:, M_YAW]
         stab_sp[rows, 2] = np.where(yaw_mode == MODE_VELOCITY, -s.rate[rows, 2], 0.0)
         target = np.where(yaw_mode == MODE_ABS, s.att[rows, 2], np.nan)
-        q = s.quat[rows]
-        quat_yaw = np.degrees(np.arctan2(2.0 * (q[:, 3] * q[:, 2] + q[:, 0] * q[:, 1]),
-                                         1.0 - 2.0 * (q[:, 1] ** 2 + q[:, 2] ** 2)))
-        target = np.where((yaw_mode != MODE_ABS) & (modes[:, M_QUAT] == MODE_ABS), quat_yaw, target)
+        target = np.where((yaw_mode != MODE_ABS) & (modes[:, M_QUAT] == MODE_ABS), s.quat_yaw[rows], target)
         fixed = ~np.isnan(target)
         if fixed.any():
             stab_yaw_sp[rows[fixed]] = (target[fixed] + 180.0) % 360.0 - 180.0
@@ -291,3 +410,20 @@ class PositionControl:
         names = ("x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az")
         values = list(s.pos[i]) + list(s.vel[i]) + list(s.acc[i])
         return {"ctrltarget." + n: float(val) for n, val in zip(names, values)}
+
+
+def _pid_step_row(desired: Sequence[float], measured: Sequence[float], gains: List[List[float]], integ_all: np.ndarray,
+             prev_all: np.ndarray, i: int, limit: Sequence[float], run: Sequence[bool]) -> List[float]:
+    """``PositionControl._pid`` for one row ``i`` in Python floats (its state arrays updated in place)."""
+    integ, prev = integ_all[i].tolist(), prev_all[i].tolist()
+    out = []
+    for k in range(3):
+        err = desired[k] - measured[k]
+        new_integ = clamp(integ[k] + err * DT, -INTEGRATION_LIMIT, INTEGRATION_LIMIT)
+        deriv = (err - prev[k]) / DT
+        g = gains[k]
+        out.append(clamp(g[0] * err + g[1] * new_integ + g[2] * deriv + g[3] * desired[k], -limit[k], limit[k]))
+        if run[k]:
+            integ[k], prev[k] = new_integ, err
+    integ_all[i], prev_all[i] = integ, prev
+    return out

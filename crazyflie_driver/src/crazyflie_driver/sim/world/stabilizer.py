@@ -216,24 +216,24 @@ class OnboardController:
         age = now - s.sp_time
         level = age > WATCHDOG_LEVEL_S
         self._cut_soon = False
-        if level.any():
+        if np.count_nonzero(level):
             flying = s.sp[:, 3] > 0.0
             cut = (age > WATCHDOG_SHUTDOWN_S) & flying
-            if cut.any():
+            if np.count_nonzero(cut):
                 # 2016.02: thrust 0 and relock; current: supervisor locked until reboot
                 s.thrust_locked |= cut
                 s.sp[:, 3] = np.where(cut, 0.0, s.sp[:, 3])
                 self._lock_rows(cut & ~s.gen2016, LOCK_WATCHDOG)
-            self._cut_soon = bool(((age > WATCHDOG_SHUTDOWN_S - WATCHDOG_MARGIN_S) & flying).any())
+            self._cut_soon = bool(np.count_nonzero((age > WATCHDOG_SHUTDOWN_S - WATCHDOG_MARGIN_S) & flying))
         else:
             level = None
-        if battery_empty.any():
+        if np.count_nonzero(battery_empty):
             self._lock_rows(battery_empty, LOCK_BATTERY)
 
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
         off = s.thrust_locked | (s.lock != LOCK_NONE)
-        if off.any():
+        if np.count_nonzero(off):
             thrust[off] = 0.0
 
         if tick % CONTROL_TICKS == 0:
@@ -242,11 +242,11 @@ class OnboardController:
                 thrust[s.lock != LOCK_NONE] = 0.0
             s.attitude = _attitude_from_terms(terms)
             # attitude loop: 500 Hz (current), 250 Hz (2016.02, still with dt = 1/500 in its PIDs)
-            due = None if tick % (2 * CONTROL_TICKS) == 0 or not s.gen2016.any() else ~s.gen2016
+            due = None if tick % (2 * CONTROL_TICKS) == 0 or not np.count_nonzero(s.gen2016) else ~s.gen2016
             self._attitude_loop(due, level)
             self._rate_loop(gyro_deg)
             idle = thrust <= 0.0
-            if idle.any():
+            if np.count_nonzero(idle):
                 self._reset(idle)
 
         m = s.rate_out @ MIX
@@ -257,7 +257,7 @@ class OnboardController:
         np.fmax(m, 0.0, out=m)                 # NaN (a NaN setpoint) -> 0, as the MCU converts it
         np.minimum(m, 65535.0, out=m)
         m *= (thrust > 0.0)[:, None]
-        if s.motor_power_enable.any():
+        if np.count_nonzero(s.motor_power_enable):
             m = np.where((s.motor_power_enable & (s.lock == LOCK_NONE))[:, None], s.motor_power, m)
         s.thrust = thrust
         s.motors = m
@@ -294,24 +294,24 @@ class OnboardController:
         was locked by this call.
         """
         s = self.s
-        if tilt_cos.min() >= TUMBLE_TILT_COS and not s.tilt_time.any():
+        if tilt_cos.min() >= TUMBLE_TILT_COS and not np.count_nonzero(s.tilt_time):
             return False                    # nobody tilted, no tilt being timed
         flying = thrust > 0.0
         tilted = flying & (tilt_cos < TUMBLE_TILT_COS)
-        if not (tilted.any() or s.tilt_time.any()):
+        if not (np.count_nonzero(tilted) or np.count_nonzero(s.tilt_time)):
             return False
         dt = CONTROL_PERIOD_S
         s.tilt_time = np.where(tilted, s.tilt_time + dt, 0.0)
         s.upside_time = np.where(flying & (tilt_cos < 0.0), s.upside_time + dt, 0.0)
         tumbled = ~s.gen2016 & ((s.tilt_time > TUMBLE_TILT_S) | (s.upside_time > TUMBLE_UPSIDE_DOWN_S))
-        if tumbled.any():
+        if np.count_nonzero(tumbled):
             self._lock_rows(tumbled, LOCK_TUMBLE)
             return True
         return False
 
     def _attitude_loop(self, due, level) -> None:
         s = self.s
-        old = s.gen2016.any()
+        old = np.count_nonzero(s.gen2016)
         dt_yaw = np.where(s.gen2016, 2 * PID_DT, PID_DT) if old else PID_DT
         sp = s.sp[:, :3] if level is None else np.where(level[:, None], 0.0, s.sp[:, :3])
         yaw_sp = wrap_deg(s.yaw_sp - sp[:, 2] * dt_yaw)           # the firmware negates the yaw rate
@@ -339,7 +339,7 @@ class OnboardController:
         meas = gyro_deg * _LEGACY_RATE_SIGNS                      # legacy pitch: −gyro_y
         err = s.rate_desired - meas
         integ = np.minimum(np.maximum(s.rate_integ + err * PID_DT, -s.rate_ilimit), s.rate_ilimit)
-        src = np.where(s.gen2016[:, None], err, -meas) if s.gen2016.any() else -meas
+        src = np.where(s.gen2016[:, None], err, -meas) if np.count_nonzero(s.gen2016) else -meas
         deriv = (src - s.rate_prev) * (1.0 / PID_DT)
         g = s.rate_gains
         out = g[:, :, 0] * err + g[:, :, 1] * integ + g[:, :, 2] * deriv

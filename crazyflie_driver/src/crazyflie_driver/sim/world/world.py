@@ -408,7 +408,7 @@ class World:
                 self.physics.step(b, motors, CONTROL_PERIOD_S, drive)
             if k % BATTERY_EVERY == 0:
                 _battery.update(self.battery, FIRMWARE_TICK_S * BATTERY_EVERY, b.thrust)
-                if self.battery.empty.any():
+                if np.count_nonzero(self.battery.empty):
                     onboard.dirty = True
         self.ticks = k + 1
 
