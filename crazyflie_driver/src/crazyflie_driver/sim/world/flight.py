@@ -13,7 +13,7 @@ import numpy as np
 
 from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.sim.firmware.setpoint_decode import Setpoint
-from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, Estimator
+from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, PREDICT_EVERY, Estimator
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
 from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
@@ -21,6 +21,7 @@ from crazyflie_driver.sim.world.planner import Evaluation, Piece
 from crazyflie_driver.sim.world.position_control import PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
+assert PREDICT_EVERY % MELLINGER_EVERY == 0 and HL_RATE_EVERY % MELLINGER_EVERY == 0   # see OnboardFlight.step
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")
 
 
@@ -173,10 +174,10 @@ class OnboardFlight:
         """Before the stabilizer's tick: estimator prediction, then (100 Hz) the position controller.
 
         Returns True when it wrote new setpoints into the stabilizer's rows."""
+        if tick % MELLINGER_EVERY:          # every stage here runs on even ticks only
+            return False
         self.estimator.update(tick, now, stab.thrust, bodies.position)
         wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
-        if tick % MELLINGER_EVERY:
-            return wrote
         est = self.estimator
 
         def row_inputs(i: int):
@@ -196,7 +197,8 @@ class OnboardFlight:
         rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp)
         if not rows:
             return wrote
-        stab.thrust_locked[rows] = False
+        for i in rows:
+            stab.thrust_locked[i] = False
         return True
 
     # --- log variables ---------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 GRAVITY = 9.81
 MAX_COMMAND = 65535
+SCALAR_ROWS = 3              # up to this many vehicles a substep runs in Python floats, row by row
 PHYSICS_TICK_S = 0.001
 
 
@@ -207,23 +208,33 @@ class RigidBodyBackend:
         self.tick = float(tick)
         self._blend_key: Optional[tuple] = None
         self._blend_value = np.zeros((0, 1))
+        self._columns_key: Optional[tuple] = None
+        self._columns_value: Tuple[np.ndarray, ...] = ()
 
     def drive(self, states: BodyStates, actions: np.ndarray, dt: float) -> Drive:
         """The per-substep constants of holding motor commands ``actions`` (N,4, 0..65535) for ``dt`` s."""
         actions = np.asarray(actions, dtype=float)
-        if actions.shape != (len(states), 4):
+        if actions.shape != (states.position.shape[0], 4):
             raise ValueError("actions must have shape (%d, 4), got %s" % (len(states), actions.shape))
         h = dt / max(1, int(round(dt / self.tick)))
         u = np.minimum(np.maximum(actions, 0.0), MAX_COMMAND)
         spinning = u > 0.0
-        c = states.thrust_coeffs
-        target = (c[:, 0:1] * u + c[:, 1:2]) * u + c[:, 2:3]
+        c2, c1, c0, a1, a0 = self._columns(states)
+        target = (c2 * u + c1) * u + c0
         target *= spinning
-        a = states.rotor_speed_coeffs
-        rotor_speed = a[:, 0:1] * u + a[:, 1:2]
+        rotor_speed = a1 * u + a0
         rotor_speed *= spinning
         return Drive(actions, target, self._blend(states, h), rotor_speed @ _MINUS_ONES4 * states.body_drag,
                      not np.count_nonzero(spinning))
+
+    def _columns(self, states: BodyStates) -> Tuple[np.ndarray, ...]:
+        """(N,1) columns of the thrust and rotor-speed coefficients; kept while those arrays stay the same."""
+        c, a = states.thrust_coeffs, states.rotor_speed_coeffs
+        key = self._columns_key
+        if key is None or key[0] is not c or key[1] is not a:
+            self._columns_key = (c, a)
+            self._columns_value = (c[:, 0:1], c[:, 1:2], c[:, 2:3], a[:, 0:1], a[:, 1:2])
+        return self._columns_value
 
     def _blend(self, states: BodyStates, h: float) -> np.ndarray:
         """(N,1) motor lag over a substep of h seconds; kept while the vehicles' time constants stay the same."""
@@ -244,8 +255,29 @@ class RigidBodyBackend:
             drive = self.drive(states, actions, dt)
         n = max(1, int(round(dt / self.tick)))
         h = dt / n
+        rows = states.position.shape[0]
         for _ in range(n):
-            self._substep(states, drive, h)
+            if rows > SCALAR_ROWS or not self._substep_rows(states, drive, h):
+                self._substep(states, drive, h)
+
+    def _substep_rows(self, s: BodyStates, d: Drive, h: float) -> bool:
+        """``_substep`` for a few vehicles in Python floats, row by row (numpy's per-call cost dominates
+        there). Only for vehicles in the air: False, with nothing changed, when a vehicle rests on or
+        reaches the floor (``_substep`` then does the step, floor contact included)."""
+        new = []
+        for i in range(s.position.shape[0]):
+            row = _substep_row(h, s.thrust[i].tolist(), d.target[i].tolist(), float(d.blend[i, 0]),
+                               d.drag[i].tolist(), s.position[i].tolist(), s.velocity[i].tolist(),
+                               s.quaternion[i].tolist(), s.omega[i].tolist(), s.inertia[i].tolist(),
+                               s.torque_scale[i].tolist(), float(s.inv_mass[i, 0]), s.inv_inertia[i].tolist(),
+                               float(s.gravity[i]))
+            if row is None or s.on_ground[i]:
+                return False
+            new.append(row)
+        for i, (thrust, position, velocity, omega, quaternion, acceleration, specific_force) in enumerate(new):
+            s.thrust[i], s.position[i], s.velocity[i], s.omega[i] = thrust, position, velocity, omega
+            s.quaternion[i], s.acceleration[i], s.specific_force[i] = quaternion, acceleration, specific_force
+        return True
 
     def _substep(self, s: BodyStates, d: Drive, h: float) -> None:
         f = s.thrust
@@ -306,6 +338,56 @@ class RigidBodyBackend:
         s.on_ground = resting
         sf_world = acc + s.gravity_vector
         s.specific_force = (sf_world[:, None, :] @ r)[:, 0, :]     # R^T (a + g)
+
+
+def _substep_row(h: float, f: List[float], target: List[float], blend: float, drag: List[float],
+                 p: List[float], v: List[float], q: List[float], w: List[float], inertia: List[float],
+                 torque_scale: List[float], inv_mass: float, inv_inertia: List[float], g: float):
+    """One vehicle's ``_substep`` in floats (the same sums; the matrices written out), or None when the
+    vehicle would reach the floor. Returns (thrust, position, velocity, omega, quaternion, acceleration,
+    specific force)."""
+    f = [fk + (tk - fk) * blend for fk, tk in zip(f, target)]
+    f1, f2, f3, f4 = f
+    tx, ty, tz, total = -f1 - f2 + f3 + f4, -f1 + f2 + f3 - f4, -f1 + f2 - f3 + f4, f1 + f2 + f3 + f4
+    x, y, z, qw = q
+    ww, xx, yy, zz = qw * qw, x * x, y * y, z * z
+    xy, xz, yz, wx, wy, wz = 2.0 * x * y, 2.0 * x * z, 2.0 * y * z, 2.0 * qw * x, 2.0 * qw * y, 2.0 * qw * z
+    r00, r01, r02 = ww + xx - yy - zz, xy - wz, xz + wy
+    r10, r11, r12 = xy + wz, ww - xx + yy - zz, yz - wx
+    r20, r21, r22 = xz - wy, yz + wx, ww - xx - yy + zz
+    v0, v1, v2 = v
+    b0 = (v0 * r00 + v1 * r10 + v2 * r20) * drag[0]                    # body frame: rotor drag, thrust
+    b1 = (v0 * r01 + v1 * r11 + v2 * r21) * drag[1]
+    b2 = (v0 * r02 + v1 * r12 + v2 * r22) * drag[2] + total
+    a0 = (r00 * b0 + r01 * b1 + r02 * b2) * inv_mass
+    a1 = (r10 * b0 + r11 * b1 + r12 * b2) * inv_mass
+    a2 = (r20 * b0 + r21 * b1 + r22 * b2) * inv_mass - g
+    w0, w1, w2 = w
+    i0, i1, i2 = inertia[0] * w0, inertia[1] * w1, inertia[2] * w2
+    n0 = (tx * torque_scale[0] - (w1 * i2 - w2 * i1)) * inv_inertia[0] * h
+    n1 = (ty * torque_scale[1] - (w2 * i0 - w0 * i2)) * inv_inertia[1] * h
+    n2 = (tz * torque_scale[2] - (w0 * i1 - w1 * i0)) * inv_inertia[2] * h
+    w0, w1, w2 = w0 + n0, w1 + n1, w2 + n2
+    nv0, nv1, nv2 = v0 + a0 * h, v1 + a1 * h, v2 + a2 * h
+    half = 0.5 * h
+    p2 = (v2 + nv2) * half + p[2]
+    if p2 <= 0.0 or p2 != p2:
+        return None
+    position = [(v0 + nv0) * half + p[0], (v1 + nv1) * half + p[1], p2]
+    rx, ry, rz = w0 * h, w1 * h, w2 * h                                 # rotation of the substep
+    a_sq = rx * rx + ry * ry + rz * rz
+    (s0, c0), (s1, c1), (s2, c2), (s3, c3) = _ROTATION_SERIES.tolist()
+    sinc = ((a_sq * s0 + s1) * a_sq + s2) * a_sq + s3
+    cosine = ((a_sq * c0 + c1) * a_sq + c2) * a_sq + c3
+    bx, by, bz = rx * sinc, ry * sinc, rz * sinc
+    qx = qw * bx + x * cosine + y * bz - z * by
+    qy = qw * by - x * bz + y * cosine + z * bx
+    qz = qw * bz + x * by - y * bx + z * cosine
+    qn = qw * cosine - x * bx - y * by - z * bz
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz + qn * qn)
+    sf0, sf1, sf2 = a0, a1, a2 + g                                       # R^T (a + g), with the old R
+    return (f, position, [nv0, nv1, nv2], [w0, w1, w2], [qx / norm, qy / norm, qz / norm, qn / norm], [a0, a1, a2],
+            [sf0 * r00 + sf1 * r10 + sf2 * r20, sf0 * r01 + sf1 * r11 + sf2 * r21, sf0 * r02 + sf1 * r12 + sf2 * r22])
 
 
 def quadratic_form(fn, size: int) -> np.ndarray:

@@ -84,7 +84,10 @@ def _finite_or_zero(value: float) -> float:
 
 
 def wrap_deg(a: np.ndarray) -> np.ndarray:
-    return (a + 180.0) % 360.0 - 180.0
+    return (a + _HALF_TURN) % _TURN - _HALF_TURN
+
+
+_HALF_TURN, _TURN = np.array(180.0), np.array(360.0)    # deg; 0-d arrays: cheaper in numpy calls than floats
 
 
 class OnboardStates(Rows):

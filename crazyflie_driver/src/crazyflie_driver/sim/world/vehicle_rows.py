@@ -21,8 +21,7 @@ class Rows:
             setattr(self, name, np.zeros((0,) + tuple(tail), dtype=dtype))
 
     def __len__(self) -> int:
-        first = next(iter(self.FIELDS))
-        return int(getattr(self, first).shape[0])
+        return int(getattr(self, next(iter(self.FIELDS))).shape[0])
 
     def append_row(self, **values: Any) -> int:
         """Add one vehicle; fields not given start at zero. Returns its row index."""
