@@ -197,8 +197,10 @@ class OnboardFlight:
         rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp)
         if not rows:
             return wrote
-        for i in rows:
-            stab.thrust_locked[i] = False
+        if len(rows) > 1:
+            stab.thrust_locked[rows] = False
+        else:
+            stab.thrust_locked[rows[0]] = False
         return True
 
     # --- log variables ---------------------------------------------------------------------------------

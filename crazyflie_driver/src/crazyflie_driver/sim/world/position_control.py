@@ -136,13 +136,15 @@ class PositionControl:
         self.s = PositionStates()
         self._rows_version = -1
         self._rows: Tuple[List[int], List[int]] = ([], [])
+        self._row_arrays: Tuple[np.ndarray, np.ndarray] = (np.zeros(0, int), np.zeros(0, int))
 
     def rows(self) -> Tuple[List[int], List[int]]:
         """(PID rows, Mellinger rows) among the active ones; recomputed only after a change."""
         s = self.s
         if self._rows_version != s.version:
             mel = s.controller == CONTROLLER_MELLINGER
-            self._rows = (np.flatnonzero(s.active & ~mel).tolist(), np.flatnonzero(s.active & mel).tolist())
+            self._row_arrays = (np.flatnonzero(s.active & ~mel), np.flatnonzero(s.active & mel))
+            self._rows = (self._row_arrays[0].tolist(), self._row_arrays[1].tolist())
             self._rows_version = s.version
         return self._rows
 
@@ -220,17 +222,17 @@ class PositionControl:
             return []
         arrays = all_inputs() if len(mel) > SCALAR_ROWS or len(pid) > SCALAR_ROWS else None
         if len(mel) > SCALAR_ROWS:
-            self._update_mellinger(np.asarray(mel), arrays, stab_sp, stab_yaw_sp)
+            self._update_mellinger(self._row_arrays[1], arrays, stab_sp, stab_yaw_sp)
         else:
             for i in mel:
                 self._mellinger_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
         if len(pid) > SCALAR_ROWS:
             est_pos, est_vel, yaw_deg, thrust_on, _ = arrays
-            self._update_pid(np.asarray(pid), est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
+            self._update_pid(self._row_arrays[0], est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
         else:
             for i in pid:
                 self._pid_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
-        return pid + mel
+        return pid + mel if pid and mel else (pid or mel)
 
     def _update_mellinger(self, rows: np.ndarray, arrays: AllInputs, stab_sp: np.ndarray,
                           stab_yaw_sp: np.ndarray) -> None:
