@@ -254,20 +254,6 @@ class DeniedBackend(FakeUsbBackend):
         raise usb.core.USBError("Access denied (insufficient permissions)", -3, errno.EACCES)
 
 
-def test_permission_denied_mentions_udev_and_plugdev(monkeypatch, tmp_path, capsys):
-    monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path))
-    s = Sim(DeniedBackend)
-    try:
-        with usb_backend.use_backend(s.backend):
-            for tool in (list_params.main, scan.main):
-                assert tool([]) == 1
-                err = capsys.readouterr().err
-                assert "permission denied" in err and "plugdev" in err
-                assert "crazyflie_driver/udev" in err and err.count("\n") == 1
-    finally:
-        s.stop()
-
-
 class BusyBackend(FakeUsbBackend):
     """A dongle another program holds (its interface is claimed elsewhere)."""
 
@@ -275,15 +261,24 @@ class BusyBackend(FakeUsbBackend):
         raise usb.core.USBError("Resource busy", -6, errno.EBUSY)
 
 
-def test_dongle_in_use_says_so_without_udev_or_switched_on_hints(monkeypatch, tmp_path, capsys):
+@pytest.mark.parametrize("backend_class, runs, says, never_says", [
+    pytest.param(DeniedBackend, [(list_params.main, []), (scan.main, [])],
+                 ["permission denied", "plugdev", "crazyflie_driver/udev"], [], id="permission denied: udev, plugdev"),
+    pytest.param(BusyBackend, [(get_param.main, ["--uri", URI1, "--name", "ring.effect"])],
+                 ["in use by another program", "crazyflie_server"], ["plugdev", "permission denied", "switched on"],
+                 id="in use: no udev or switched-on hints"),
+])
+def test_a_dongle_that_cannot_be_opened_says_why_in_one_line(backend_class, runs, says, never_says, monkeypatch,
+                                                             tmp_path, capsys):
     monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path))
-    s = Sim(BusyBackend)
+    s = Sim(backend_class)
     try:
         with usb_backend.use_backend(s.backend):
-            assert get_param.main(["--uri", URI1, "--name", "ring.effect"]) == 1
-            err = capsys.readouterr().err
-            assert "in use by another program" in err and "crazyflie_server" in err
-            assert "plugdev" not in err and "permission denied" not in err and "switched on" not in err
+            for tool, args in runs:
+                assert tool(args) == 1
+                err = capsys.readouterr().err
+                assert all(w in err for w in says) and not any(w in err for w in never_says), err
+                assert err.count("\n") == 1, err
     finally:
         s.stop()
 

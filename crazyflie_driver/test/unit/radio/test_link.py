@@ -176,27 +176,25 @@ class SteppingClock:
         return self.now
 
 
-def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink(monkeypatch):
+@pytest.mark.parametrize("safelink, sends", [
+    pytest.param(False, 5, id="plain acks: first send + one per 50 ms (0.05, 0.10, 0.15, 0.20)"),
+    pytest.param(True, 1, id="safelink: sent (and delivered) once"),
+])
+def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink(monkeypatch, safelink, sends):
     import crazyflie_driver.radio.link as link_module
     clock = SteppingClock(0.001)
     monkeypatch.setattr(link_module, "time", clock)
-    peer = NrfPeer(safelink_capable=False)
+    peer = NrfPeer(safelink_capable=safelink)
     medium, backend, manager = setup(peer)
     link = open_link(URI, manager)
+    assert link.safelink == safelink
     with pytest.raises(LinkTimeout) as info:
         link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.25, resend_interval=0.05,
                      what="param TOC info")
     assert "radio://0/80/2M/E7E7E7E701" in str(info.value) and "param TOC info" in str(info.value)
     assert "within 0.25 s" in str(info.value)            # gave up after 0.25 s of silence, on the clock it reads
-    sends = sum(1 for r in peer.received if r == b"\x20\x03")
-    assert sends == 5                                    # first send + one per 50 ms: 0.05, 0.10, 0.15, 0.20
-
-    peer2 = NrfPeer()
-    medium2, backend2, manager2 = setup(peer2)
-    link2 = open_link(URI, manager2)
-    with pytest.raises(LinkTimeout):
-        link2.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.15, resend_interval=0.02)
-    assert peer2.received == [b"\x20\x03"]               # safelink: sent (and delivered) once
+    handshake = b"\xf3\x05\x01"                         # the safelink greetings a plain peer hears
+    assert [r for r in peer.received if r != handshake] == [b"\x20\x03"] * sends
 
 
 class SlowAir(Air):
@@ -424,34 +422,17 @@ def test_several_threads_share_one_safelink_link():
         assert mine == [bytes([0x30, k, i]) for i in range(100)]
 
 
-def test_fair_lock_serves_waiters_in_arrival_order():
+@pytest.mark.parametrize("urgent, order", [
+    pytest.param((False, False, False, False), [0, 1, 2, 3], id="arrival order"),
+    pytest.param((False, False, True, True), [2, 3, 0, 1], id="urgent first, each kind in arrival order"),
+])
+def test_fair_lock_serves_waiters_in_arrival_order_urgent_ones_first(urgent, order):
     lock = FairLock()
-    order = []
+    served = []
     lock.acquire()
     threads = []
-    for k in range(4):
-        t = threading.Thread(target=lambda k=k: (lock.acquire(), order.append(k), lock.release()))
-        t.start()
-        threads.append(t)
-        while len(lock._waiters) < k + 1:
-            time.sleep(0.001)
-    lock.release()
-    for t in threads:
-        t.join(5)
-    assert order == [0, 1, 2, 3]
-    assert lock.acquire(timeout=0.01)
-    assert not FairLock.acquire(lock, timeout=0.01)    # held: times out
-    lock.release()
-    assert not lock.locked()
-
-
-def test_fair_lock_lets_urgent_waiters_go_first_in_their_own_arrival_order():
-    lock = FairLock()
-    order = []
-    lock.acquire()
-    threads = []
-    for k, urgent in enumerate((False, False, True, True)):
-        t = threading.Thread(target=lambda k=k, u=urgent: (lock.acquire(urgent=u), order.append(k), lock.release()))
+    for k, u in enumerate(urgent):
+        t = threading.Thread(target=lambda k=k, u=u: (lock.acquire(urgent=u), served.append(k), lock.release()))
         t.start()
         threads.append(t)
         while len(lock._waiters) + len(lock._urgent) < k + 1:
@@ -459,7 +440,15 @@ def test_fair_lock_lets_urgent_waiters_go_first_in_their_own_arrival_order():
     lock.release()
     for t in threads:
         t.join(5)
-    assert order == [2, 3, 0, 1]
+    assert served == order
+    assert not lock.locked()
+
+
+def test_fair_lock_times_out_while_held():
+    lock = FairLock()
+    assert lock.acquire(timeout=0.01)
+    assert not FairLock.acquire(lock, timeout=0.01)    # held: times out
+    lock.release()
     assert not lock.locked()
 
 

@@ -85,30 +85,25 @@ def test_types_in_a_second_file(tmp_path):
     assert config.types["big"].battery_voltage_critical == 3.6
 
 
-def test_duplicate_id_named_with_both_lines():
-    msg = refused("""
+@pytest.mark.parametrize("entries, says", [
+    pytest.param("""
         - {id: 1, channel: 80}
         - {id: 2, channel: 80}
         - {id: 1, channel: 90}
-        """)
-    assert msg.startswith("s.yaml:4: crazyflies[2] (id 1): id 1 is already used by crazyflies[0] (line 2)"), msg
-
-
-def test_duplicate_uri_refused():
-    msg = refused("""
+        """, "s.yaml:4: crazyflies[2] (id 1): id 1 is already used by crazyflies[0] (line 2)", id="same id"),
+    pytest.param("""
         - {uri: "radio://0/80/2M/E7E7E7E701", tf_prefix: a}
         - {uri: "radio://0/80/2M/E7E7E7E701", id: 1, tf_prefix: b}
-        """)
-    assert msg.startswith("s.yaml:3: crazyflies[1] (id 1): id 1 is already used"), msg
-
-
-def test_same_last_address_byte_is_the_same_id():
+        """, "s.yaml:3: crazyflies[1] (id 1): id 1 is already used", id="same uri"),
     # packed motion capture reaches a Crazyflie by the last address byte: on any radio, one per swarm
-    msg = refused("""
+    pytest.param("""
         - {uri: "radio://0/80/2M/E7E7E7E701"}
         - {uri: "radio://1/90/2M/E7E7E7E801", tf_prefix: other}
-        """)
-    assert msg.startswith("s.yaml:3: crazyflies[1]: id 1 is already used by crazyflies[0] (line 2)"), msg
+        """, "s.yaml:3: crazyflies[1]: id 1 is already used by crazyflies[0] (line 2)", id="same last address byte"),
+])
+def test_an_id_used_twice_is_refused_naming_both_lines(entries, says):
+    msg = refused(entries)
+    assert msg.startswith(says), msg
 
 
 def test_unknown_type_names_the_defined_ones():

@@ -64,15 +64,21 @@ def test_stabilizer_stop_locks_until_reboot():
     assert rig.truth()[2] == pytest.approx(0.5, abs=0.05)
 
 
-def test_tumble_in_flight_is_a_crash_that_recovery_clears():
+def turned_upside_down_in_flight() -> Rig:
+    """A Crazyflie hovering at 1 m, turned upside down (half a turn about x) and given 0.3 s to notice."""
     rig = Rig()
     hl(rig, takeoff(1.0, 1.5))
     rig.fly(2.0)
     rig.vehicle.place((0.0, 0.0, 1.0), yaw=0.0)
+    rig.world.bodies.quaternion[0] = (math.sin(math.pi / 2), 0.0, 0.0, math.cos(math.pi / 2))
+    rig.fly(0.3)
+    return rig
+
+
+def test_tumble_in_flight_is_a_crash_that_recovery_clears():
+    rig = turned_upside_down_in_flight()
     w = rig.world
     i = 0
-    w.bodies.quaternion[i] = (math.sin(math.pi / 2), 0.0, 0.0, math.cos(math.pi / 2))   # upside down
-    rig.fly(0.3)
     b = bits(rig)
     assert b & (CRASHED | LOCKED | CAN_FLY | TUMBLED) == CRASHED | TUMBLED and rig.vehicle.motors().max() == 0
     rig.fly(1.5)                                     # falls, lies on its back
@@ -88,11 +94,7 @@ def test_tumble_in_flight_is_a_crash_that_recovery_clears():
 
 
 def test_emergency_stop_during_a_crash_locks():
-    rig = Rig()
-    hl(rig, takeoff(1.0, 1.5))
-    rig.fly(2.0)
-    rig.world.bodies.quaternion[0] = (1.0, 0.0, 0.0, 0.0)
-    rig.fly(0.3)
+    rig = turned_upside_down_in_flight()
     assert bits(rig) & CRASHED
     rig.send(9, 1, b"\x03")
     assert bits(rig) & (CRASHED | LOCKED) == LOCKED
