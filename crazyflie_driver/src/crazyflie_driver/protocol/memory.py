@@ -108,14 +108,8 @@ class MemoryClient:
     def write(self, mem_id: int, address: int, data: bytes) -> None:
         """Write ``data`` at ``address``, chunk by chunk; CommandRejected when a chunk is refused."""
         for addr, chunk in chunks(address, data):
-            head = _ADDRESS.pack(mem_id, addr)
-            reply = self._request(write_packet(mem_id, addr, chunk),
-                                  match=lambda p, h=head: p.port == PORT_MEM and p.channel == CH_WRITE
-                                  and p.data[:5] == h and len(p.data) >= 6,
-                                  timeout=self.timeout, what="memory %d write at %d (4:2)" % (mem_id, addr))
-            if reply.data[5] != 0:
-                raise CommandRejected("%s: memory %d refused %d bytes at address %d (status %d)"
-                                      % (self.label, mem_id, len(chunk), addr, reply.data[5]))
+            self._answered(write_packet(mem_id, addr, chunk), CH_WRITE, mem_id, addr, "write",
+                           "%d bytes" % len(chunk))
 
     def read(self, mem_id: int, address: int, length: int) -> bytes:
         """``length`` bytes from ``address``; CommandRejected when the Crazyflie reports an error."""
@@ -123,16 +117,23 @@ class MemoryClient:
         while len(out) < length:
             addr = address + len(out)
             n = min(CHUNK, length - len(out))
-            head = _ADDRESS.pack(mem_id, addr)
-            reply = self._request(read_packet(mem_id, addr, n),
-                                  match=lambda p, h=head: p.port == PORT_MEM and p.channel == CH_READ
-                                  and p.data[:5] == h and len(p.data) >= 6,
-                                  timeout=self.timeout, what="memory %d read at %d (4:1)" % (mem_id, addr))
-            if reply.data[5] != 0:
-                raise CommandRejected("%s: memory %d refused a read of %d bytes at address %d (status %d)"
-                                      % (self.label, mem_id, n, addr, reply.data[5]))
+            reply = self._answered(read_packet(mem_id, addr, n), CH_READ, mem_id, addr, "read",
+                                   "a read of %d bytes" % n)
             out += reply.data[6:6 + n]
         return out
+
+    def _answered(self, packet: CRTPPacket, channel: int, mem_id: int, addr: int, action: str,
+                  refused: str) -> CRTPPacket:
+        """The Crazyflie's answer to a read or write of memory ``mem_id`` at ``addr`` (the one that
+        names both); CommandRejected, naming ``refused``, when its status byte is not 0."""
+        head = _ADDRESS.pack(mem_id, addr)
+        reply = self._request(packet, match=lambda p: p.port == PORT_MEM and p.channel == channel
+                              and p.data[:5] == head and len(p.data) >= 6,
+                              timeout=self.timeout, what="memory %d %s at %d (4:%d)" % (mem_id, action, addr, channel))
+        if reply.data[5] != 0:
+            raise CommandRejected("%s: memory %d refused %s at address %d (status %d)"
+                                  % (self.label, mem_id, refused, addr, reply.data[5]))
+        return reply
 
 
 def _is_info(packet: CRTPPacket, cmd: int) -> bool:
