@@ -19,7 +19,7 @@ import socket
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Dict, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 from crazyflie_driver.mocap import vrpn_protocol as vp
 
@@ -192,15 +192,22 @@ class VrpnSession:
             self._handlers[described] = handler
 
     # -- data messages ---------------------------------------------------------------------------
-    def _pos_quat(self, msg: vp.Message, sender: str, receive_time: float) -> None:
+    def _decoded(self, msg: vp.Message, sender: str, decode: Callable[[bytes], Any], kind: str, noun: str) -> Any:
+        """``decode(payload)`` of a data message; None, counted, from a sender that is not a tracker we
+        report, or for a payload that does not decode (warned of now and then per ``kind``)."""
         if not self._tracker_ok.get(msg.sender_id, False):
             self.stats.ignored += 1
-            return
+            return None
         try:
-            p = vp.decode_pos_quat(msg.payload)
+            return decode(msg.payload)
         except vp.VrpnProtocolError as e:
             self.stats.malformed += 1
-            self._warn("pos_quat", "VRPN: skipped a pose of %r (%s)" % (sender, e))
+            self._warn(kind, "VRPN: skipped a %s of %r (%s)" % (noun, sender, e))
+            return None
+
+    def _pos_quat(self, msg: vp.Message, sender: str, receive_time: float) -> None:
+        p = self._decoded(msg, sender, vp.decode_pos_quat, "pos_quat", "pose")
+        if p is None:
             return
         self.stats.poses += 1
         if self.on_pose is not None:
@@ -208,14 +215,8 @@ class VrpnSession:
                                                 msg.sec, msg.usec, receive_time))
 
     def _velocity(self, msg: vp.Message, sender: str, receive_time: float) -> None:
-        if not self._tracker_ok.get(msg.sender_id, False):
-            self.stats.ignored += 1
-            return
-        try:
-            v = vp.decode_velocity(msg.payload)
-        except vp.VrpnProtocolError as e:
-            self.stats.malformed += 1
-            self._warn("velocity", "VRPN: skipped a velocity of %r (%s)" % (sender, e))
+        v = self._decoded(msg, sender, vp.decode_velocity, "velocity", "velocity")
+        if v is None:
             return
         self.stats.velocities += 1
         if self.on_twist is not None:
