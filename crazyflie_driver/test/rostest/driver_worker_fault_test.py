@@ -50,9 +50,10 @@ class DriverWorkerFault(unittest.TestCase):
         return self.world.crazyflie_state(URI)
 
     def my_diagnostic(self):
-        arr = self.diagnostics.latest()
-        found = [s for s in (arr.status if arr else []) if s.hardware_id == URI]
-        return found[0] if found else None
+        def mine(arr):
+            return [s for s in arr.status if s.hardware_id == URI]
+        arr = self.diagnostics.latest_where(mine)      # the server's, not the world's
+        return mine(arr)[0] if arr else None
 
     def inject(self, times):
         """The next ``times`` setpoint sends raise (a bug's stand-in); returns the count raised."""

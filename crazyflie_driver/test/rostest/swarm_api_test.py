@@ -110,8 +110,9 @@ class SwarmApi(unittest.TestCase):
         self.assertTrue(wait_until(lambda: self.rosout.find("cf3: landing by itself: no pose for"), 5.0))
 
         def cf3_error_on_diagnostics():
-            msg = self.diagnostics.latest()
-            return msg is not None and any(s.name == "crazyflie_server swarm: cf3" and s.level == DiagnosticStatus.ERROR
+            name = "crazyflie_server swarm: cf3"
+            msg = self.diagnostics.latest_where(lambda a: any(s.name == name for s in a.status))  # not the world's
+            return msg is not None and any(s.name == name and s.level == DiagnosticStatus.ERROR
                                            and ("stale" in s.message or "landing" in s.message) for s in msg.status)
         self.assertTrue(wait_until(cf3_error_on_diagnostics, 5.0))
         hide(True)

@@ -49,6 +49,13 @@ class TopicRecorder:
         with self._lock:
             return self.messages[-1][1] if self.messages else None
 
+    def latest_where(self, accept: Callable[[Any], Any]) -> Optional[Any]:
+        """The newest message ``accept`` takes: on a topic with several publishers (/diagnostics has
+        the server's and the simulated world's), the newest message is often the other one's."""
+        with self._lock:
+            newest_first = [m for _, m in reversed(self.messages)]
+        return next((m for m in newest_first if accept(m)), None)
+
     def count(self) -> int:
         with self._lock:
             return len(self.messages)
