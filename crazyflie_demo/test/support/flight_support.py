@@ -125,9 +125,14 @@ class WorldProbe:
 class Track:
     """Samples vehicles' true positions in a background thread (world time-stamped by monotonic)."""
 
+    # A sample is stamped with the middle of its question and answer, so it is only as precise as
+    # that round trip; on a busy machine the test's thread may read an answer long after the world
+    # gave it. Interpolation uses the samples answered within this many seconds when they exist.
+    PRECISE_S = 0.01
+
     def __init__(self, probe: WorldProbe, names: Sequence[str], period: float = 0.05) -> None:
         self.probe, self.names, self.period = probe, list(names), period
-        self.samples: Dict[str, List[Tuple[float, Dict[str, Any]]]] = {n: [] for n in names}
+        self.samples: Dict[str, List[Tuple[float, Dict[str, Any], float]]] = {n: [] for n in names}
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="track", daemon=True)
@@ -141,9 +146,10 @@ class Track:
                     s = self.probe.state(n)
                 except Exception:   # the world going away at shutdown
                     return
+                answered = time.monotonic()
                 # the world answered somewhere between the question and the answer: stamp the middle
                 with self._lock:
-                    self.samples[n].append(((asked + time.monotonic()) / 2.0, s))
+                    self.samples[n].append(((asked + answered) / 2.0, s, answered - asked))
             self._stop.wait(self.period)
 
     def stop(self) -> None:
@@ -162,18 +168,20 @@ class Track:
         """The true position of ``name`` at monotonic time ``t``, interpolated between the samples around it.
 
         A vehicle moving at 0.5 m/s covers 25 mm in half a sampling period: the closest sample
-        alone is too coarse to judge a 0.3 m tolerance while it flies through a waypoint.
+        alone is too coarse to judge a 0.3 m tolerance while it flies through a waypoint. A sample
+        whose answer took 0.1 s could be 50 ms off in time, so precise samples are preferred.
         """
         with self._lock:
             rows = list(self.samples[name])
-        before = [r for r in rows if r[0] <= t]
-        after = [r for r in rows if r[0] > t]
-        if not before or not after:
-            return tuple(self.at(name, t)["position"])
-        (t0, s0), (t1, s1) = before[-1], after[0]
-        f = (t - t0) / (t1 - t0)
-        return tuple(a + f * (b - a) for a, b in zip(s0["position"], s1["position"]))
+        for usable in ([r for r in rows if r[2] <= self.PRECISE_S], rows):
+            before = [r for r in usable if r[0] <= t]
+            after = [r for r in usable if r[0] > t]
+            if before and after:
+                (t0, s0, _), (t1, s1, _) = before[-1], after[0]
+                f = (t - t0) / (t1 - t0)
+                return tuple(a + f * (b - a) for a, b in zip(s0["position"], s1["position"]))
+        return tuple(self.at(name, t)["position"])
 
     def between(self, name: str, t0: float, t1: float) -> List[Dict[str, Any]]:
         with self._lock:
-            return [s for t, s in self.samples[name] if t0 <= t <= t1]
+            return [s for t, s, _ in self.samples[name] if t0 <= t <= t1]
