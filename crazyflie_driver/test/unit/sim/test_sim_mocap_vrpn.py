@@ -118,6 +118,42 @@ def test_each_delivered_frame_is_sent_once_with_the_model_rate_and_dropouts():
     assert np.median(np.abs(ticks - np.round(ticks))) < 0.2
 
 
+def test_frames_of_a_catch_up_burst_keep_their_capture_spacing():
+    """A world that fell behind (here its stepping thread stalls 80 ms) steps the missed ticks in one
+    go; the frames of that burst are stamped by the world's schedule, a frame period apart, not
+    crowded at their delivery time."""
+    world = World(speed=1.0, seed=3)
+    world.add_vehicle("cf1", position=(0.0, 0.0, 0.0))
+    mocap = MocapModel(world, rate=100.0, seed=3).attach()
+    stamps, lock = [], threading.Lock()
+
+    def on_pose(report):
+        with lock:
+            stamps.append(report.server_sec + report.server_usec * 1e-6)
+
+    stalls = []
+
+    def stall(world_t):
+        if not stalls:
+            stalls.append(world_t)
+            time.sleep(0.08)
+    server = WorldVrpnServer(world, mocap, port=0)
+    world.start()
+    try:
+        server.start()
+        with VrpnClient("127.0.0.1", server.port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
+            assert wait_until(lambda: len(stamps) > 5, timeout=10.0)
+            world.add_tick_listener(stall, period=10.0, first=world.time + 0.2)
+            assert wait_until(lambda: stalls and len(stamps) > 60, timeout=10.0)
+    finally:
+        server.stop()
+        world.stop()
+    with lock:
+        steps = np.diff(stamps)
+    off_grid = steps[np.abs(steps - 0.01) >= 0.001]
+    assert len(off_grid) <= world.overruns, np.round(off_grid, 4)     # a world that let go starts a new schedule
+
+
 def test_world_server_command_line_places_a_swarm_file_and_serves_vrpn():
     """``crazyflie_world_server --swarm FILE --vrpn PORT``: the swarm file's Crazyflies on the URIs the
     server derives (one dongle per channel), at their initial positions, one VRPN tracker each."""

@@ -111,7 +111,11 @@ class WorldVrpnServer:
             cycles.setdefault(f.stamp, []).append((f.name, f.position, f.quaternion))
         with self._lock:
             for captured, poses in sorted(cycles.items()):
-                self._cycles.append((capture_wall_time(now_wall, world_now, captured, speed), poses))
+                # the world's schedule, when it steps in real time: a burst of frames a world that fell
+                # behind steps in one go keeps its frame period, as a motion-capture system's stamps do
+                scheduled = self.world.wall_time_of(captured)
+                stamp = capture_wall_time(now_wall, world_now, captured, speed) if scheduled is None else scheduled
+                self._cycles.append((stamp, poses))
         self._ready.set()
 
     def _send_loop(self) -> None:

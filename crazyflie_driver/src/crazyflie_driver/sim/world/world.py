@@ -288,6 +288,7 @@ class World:
         self._drive = None                         # physics drive of the current motor commands
         self.realtime_factor = 0.0                 # measured by the background thread
         self.overruns = 0                          # times the thread could not keep up and let go
+        self._anchor: Optional[Tuple[float, float]] = None     # the thread's schedule: (host time.time(), world time)
         self.ticks_behind = 0                      # how far world time trails wall time × speed, in ticks
         self._last_behind_warning = -math.inf
 
@@ -478,6 +479,16 @@ class World:
         if t is not None and t is not threading.current_thread():
             t.join(timeout)
         self._thread = None
+        self._anchor = None
+
+    def wall_time_of(self, world_t: float) -> Optional[float]:
+        """The host time (``time.time()``) at which the real-time thread's schedule puts world time ``world_t``;
+        None when no thread steps in real time. A world running behind steps a tick later than
+        this; one that let go of its lag (``overruns``) starts a new schedule."""
+        anchor = self._anchor
+        if anchor is None or self.speed <= 0:
+            return None
+        return anchor[0] + (world_t - anchor[1]) / self.speed
 
     @property
     def running(self) -> bool:
@@ -486,6 +497,7 @@ class World:
     def _run(self) -> None:
         """Real-time stepping: wake every WAKE_PERIOD_S of wall time (per ``speed``), step what is due."""
         wall0, world0 = _time.monotonic(), self.time
+        self._anchor = (_time.time(), world0)
         meter_wall, meter_world = wall0, world0
         wake_ticks = max(1, int(round(WAKE_PERIOD_S / FIRMWARE_TICK_S)))
         while not self._stop.is_set():
@@ -503,6 +515,7 @@ class World:
             if due * FIRMWARE_TICK_S > MAX_LAG_S:
                 self.overruns += 1
                 wall0, world0 = now, self.time
+                self._anchor = (_time.time(), world0)
                 due = wake_ticks
             self.step(min(due, MAX_CHUNK_TICKS))
 
