@@ -139,7 +139,7 @@ class RosCrazyflie(WorkerListener):
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
         self._onboard = RosOnboardCommands(self.ns, config.uri, OnboardCommands(
             worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri,
-            on_pose=worker.health.pose_sent))
+            on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent))
         self.publish_status()
 
     @property

@@ -9,9 +9,11 @@ Where this differs from crazyflie_ros HEAD (see the package README):
 * ``go_to`` yaw is radians, the firmware's unit (HEAD's comment says degrees);
 * ``cmd_hover`` / ``cmd_velocity_world`` yaw rates mean the same on every firmware (HEAD passes
   them raw into the legacy types, whose yaw rate the firmware negates);
-* a high-level command after low-level setpoints (the zero setpoints every connect sends included)
-  is preceded by notify-setpoints-stop, because the firmware ignores the high-level commander
-  while low-level setpoints hold the priority; HEAD leaves that to the user.
+* a high-level command after low-level setpoints (the zero setpoints every connect sends, this
+  API's streams and the worker's own: cmd_vel, a controller's RPYT) is preceded by
+  notify-setpoints-stop, because the firmware ignores the high-level commander while low-level
+  setpoints hold the priority (docs/protocol.md, "The commander's priority"); HEAD leaves that to
+  the user.
 """
 from __future__ import annotations
 
@@ -32,12 +34,17 @@ class OnboardCommands:
     """The HEAD API for one Crazyflie. ``cf`` is a connected ``Crazyflie`` (its ``high_level``,
     ``link``, ``protocol_version``); ``stream(packet) -> bool`` hands a setpoint to the worker
     (False after emergency); ``emergency_active()`` tells whether the worker is in emergency;
-    ``on_pose()``, if given, is called for each external position/pose sent (for ``/diagnostics``)."""
+    ``on_pose()``, if given, is called for each external position/pose sent (for ``/diagnostics``);
+    ``low_level_sent()``, if given, counts the low-level setpoints the worker has sent (any source):
+    one sent since the last notify-setpoints-stop holds the firmware's priority again."""
 
     def __init__(self, cf, stream: Callable[[CRTPPacket], bool], emergency_active: Callable[[], bool],
-                 label: str = "", on_pose: Optional[Callable[[], None]] = None) -> None:
+                 label: str = "", on_pose: Optional[Callable[[], None]] = None,
+                 low_level_sent: Optional[Callable[[], int]] = None) -> None:
         self.cf = cf
         self._on_pose = on_pose
+        self._low_level_sent = low_level_sent
+        self._sent_at_notify: Optional[int] = None
         self._stream = stream
         self._emergency_active = emergency_active
         self.label = label or str(getattr(cf, "uri", ""))
@@ -49,7 +56,9 @@ class OnboardCommands:
     def low_level_active(self) -> bool:
         """Low-level setpoints (or the connect's zero setpoints) hold the firmware's priority: a
         high-level command needs notify-setpoints-stop first."""
-        return self._low_level_active
+        if self._low_level_active:
+            return True
+        return self._low_level_sent is not None and self._low_level_sent() != self._sent_at_notify
 
     # -- streaming setpoints --------------------------------------------------------------------
     def _set(self, packet: CRTPPacket) -> bool:
@@ -94,7 +103,7 @@ class OnboardCommands:
             if self._emergency_active():
                 raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
                                      "is restarted, removed and added again)" % (self.label, what))
-            if self._low_level_active:
+            if self.low_level_active:
                 self.notify_setpoints_stop(0)
             self.cf.high_level.command(packet, idempotent=idempotent)
 
@@ -102,8 +111,14 @@ class OnboardCommands:
         """Give control back to the high-level commander (stops the worker's low-level stream)."""
         packet = setpoints.notify_setpoints_stop_packet(remain_valid_ms)
         self._stream(None)
-        if not self.cf.link.send(packet) and not self.cf.link.send(packet):
-            raise CrazyflieError("%s: notify-setpoints-stop was not acknowledged" % self.label)
+        count = self._low_level_sent
+        for _ in range(2):                  # a setpoint already in the worker's hands may go out just after
+            before = count() if count is not None else None
+            if not self.cf.link.send(packet) and not self.cf.link.send(packet):
+                raise CrazyflieError("%s: notify-setpoints-stop was not acknowledged" % self.label)
+            if count is None or count() == before:
+                break
+        self._sent_at_notify = count() if count is not None else None
         self._low_level_active = False
 
     def takeoff(self, group_mask: int, height: float, duration_s: float) -> None:

@@ -54,6 +54,28 @@ def test_high_level_after_low_level_setpoints_first_hands_control_back():
     assert struct.unpack("<BBff?f", takeoff) == (7, 0, 0.5, 0.0, True, 2.0)
 
 
+def test_worker_setpoints_since_the_last_notify_need_another_one():
+    """cmd_vel (or a controller's RPYT) streamed by the worker takes the priority back in the firmware: the
+    next high-level command hands control back again, and only then."""
+    cf = Crazyflie()
+    sent = [0]
+    commands = OnboardCommands(cf, lambda packet: True, lambda: False, "cf1", low_level_sent=lambda: sent[0])
+    commands.takeoff(0, 0.5, 2.0)
+    commands.land(0, 0.0, 2.0)               # nothing streamed in between: no notify
+    sent[0] += 3                             # the worker sent cmd_vel setpoints
+    assert commands.low_level_active
+    commands.takeoff(0, 0.5, 2.0)
+    assert wire(cf) == [(7, 1, 0), (8, 0, 7), (8, 0, 8), (7, 1, 0), (8, 0, 7)]
+
+
+def test_a_setpoint_sent_during_notify_gets_a_second_notify():
+    cf = Crazyflie()
+    counts = iter([0, 1, 1, 1, 1, 1])        # one setpoint was already on its way when notify went out
+    commands = OnboardCommands(cf, lambda packet: True, lambda: False, "cf1", low_level_sent=lambda: next(counts))
+    commands.takeoff(0, 0.5, 2.0)
+    assert wire(cf) == [(7, 1, 0), (7, 1, 0), (8, 0, 7)]
+
+
 def test_streaming_topics_become_port_7_packets_for_the_worker():
     commands, cf, streamed, _ = make(version=8)
     commands.cmd_hover(0.1, 0.2, 30.0, 0.4)

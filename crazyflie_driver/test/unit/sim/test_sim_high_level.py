@@ -116,6 +116,83 @@ def test_low_level_setpoint_takes_over_and_notify_hands_back():
     assert rig.truth()[0] == pytest.approx(-0.3, abs=0.05) and rig.vehicle.motors().max() > 0
 
 
+def notify(rig):
+    rig.send(7, 1, b"\x00" + struct.pack("<I", 0))
+
+
+def test_takeoff_after_low_level_setpoints_flies_only_after_notify():
+    """The trap: a connect's zero RPYT setpoints (port 3) take the priority; a takeoff is accepted and
+    planned, but its setpoints lose until notify-setpoints-stop, which then flies the plan as it
+    stands (here: its end point)."""
+    rig = Rig()
+    for _ in range(100):
+        rig.send(3, 0, struct.pack("<fffH", 0.0, 0.0, 0.0, 0))
+    assert hl(rig, takeoff(0.5, 1.0))[-1] == 0                               # accepted
+    rig.fly(3.0)
+    assert rig.truth()[2] < 0.01 and rig.vehicle.motors().max() == 0         # and ignored
+    flags = rig.vehicle.supervisor_flags()
+    assert flags["hl_active"] and not flags["hl_disabled"]
+    notify(rig)
+    rig.fly(3.0)
+    assert rig.truth()[2] == pytest.approx(0.5, abs=0.05)
+
+
+def test_land_while_low_level_holds_the_priority_is_ignored_until_the_watchdog():
+    """Streamed setpoints stop and a land follows without notify: the land is accepted but its setpoints
+    lose; the last streamed setpoint ages, the watchdog levels out after 0.5 s, stops the motors and
+    locks after 2 s. With notify first, the same land flies down softly."""
+    for hand_over in (False, True):
+        rig = Rig()
+        rig.position_setpoint(0.0, 0.0, 0.6)
+        rig.fly(3.0)
+        rig.setpoint = None
+        if hand_over:
+            notify(rig)
+        assert hl(rig, struct.pack("<BBff?f", 8, 0, 0.0, 0.0, False, 1.5))[-1] == 0
+        rig.fly(1.0)
+        if hand_over:
+            assert rig.truth()[2] < 0.5 and rig.vehicle.lock_reason == ""     # on the way down
+            rig.fly(2.5)
+            assert rig.truth()[2] < 0.02 and rig.vehicle.motors().max() == 0 and rig.vehicle.lock_reason == ""
+        else:
+            assert rig.truth()[2] == pytest.approx(0.6, abs=0.05)                # still hovering
+            rig.fly(1.5)
+            assert rig.vehicle.lock_reason == "setpoint watchdog" and rig.vehicle.motors().max() == 0
+
+
+def test_notify_hands_over_at_the_planners_next_tick_and_go_to_starts_at_the_estimate():
+    """After notify an idle planner stops the motors at its next 100 Hz tick, not at once, so a command
+    sent right after it takes over in flight; a go_to from the idle planner starts at the estimated
+    position and velocity."""
+    rig = Rig()
+    rig.position_setpoint(0.0, 0.0, 0.5)
+    rig.fly(3.0)
+    rig.setpoint = bytes([10]) + struct.pack("<ffff", 0.4, 0.0, 0.0, 0.5)      # hover setpoints, 0.4 m/s along x
+    rig.fly(1.0)
+    rig.setpoint = None
+    notify(rig)
+    assert rig.vehicle.motors().min() > 0
+    rig.fly(0.011)
+    assert rig.vehicle.motors().max() == 0                                     # idle with the priority: stopped
+    rig = Rig()
+    rig.position_setpoint(0.0, 0.0, 0.5)
+    rig.fly(3.0)
+    rig.setpoint = bytes([10]) + struct.pack("<ffff", 0.4, 0.0, 0.0, 0.5)
+    rig.fly(1.0)
+    rig.setpoint = None
+    notify(rig)
+    estimate = np.array([rig.vehicle.read("stateEstimate." + k) for k in ("x", "y", "z", "vx", "vy", "vz")])
+    assert hl(rig, struct.pack("<BBBBfffff", 12, 0, 0, 0, 1.0, 0.0, 0.5, 0.0, 2.0))[-1] == 0
+    plan = rig.world.flight.hl.plans[0]
+    start = plan.evaluate(plan.t_begin)
+    assert np.abs(np.concatenate([start.pos, start.vel]) - estimate).max() < 1e-6 and estimate[3] > 0.3
+    lowest = np.inf
+    for _ in range(300):
+        rig.fly(0.01)
+        lowest = min(lowest, rig.vehicle.motors().min())
+    assert lowest > 0 and np.linalg.norm(rig.truth() - (1.0, 0.0, 0.5)) < 0.05
+
+
 def figure_eight_pieces():
     """Two pieces drawing an ellipse-like loop at 0.5 m: enough to test upload and playback."""
     pieces = []

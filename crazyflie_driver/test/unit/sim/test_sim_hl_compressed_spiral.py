@@ -141,9 +141,17 @@ def test_spiral_arguments_are_limited_as_the_planner_limits_them():
     assert hl(rig, spiral(1.0, 0.5, 0.5, 0.3, 0.0))[-1] == 0                      # duration 0: the end at once
     assert plans[0].duration == 0.0
     assert hl(rig, spiral(float("nan"), 0.5, 0.5, 0.0, 2.0))[-1] == 0             # accepted, as the firmware does
-    rig.fly(2.0)
+    rig.fly(0.02)
+    # the NaN plan disables the planner: no setpoint at all, the last one holds until the watchdog,
+    # which levels out after 0.5 s and stops the motors and locks after 2 s
+    assert rig.vehicle.supervisor_flags()["hl_disabled"] and rig.vehicle.motors().max() > 0
+    rig.fly(1.5)
+    assert rig.vehicle.motors().max() > 0 and rig.vehicle.lock_reason == ""
+    rig.fly(1.5)
     state = rig.vehicle.state()
-    assert np.all(np.isfinite(state["position"])) and rig.truth()[2] < 0.02        # a NaN plan stops the motors
+    assert rig.vehicle.lock_reason == "setpoint watchdog" and rig.vehicle.motors().max() == 0
+    assert np.all(np.isfinite(state["position"])) and rig.truth()[2] < 0.02
+    assert hl(rig, takeoff(0.5, 1.0))[-1] == 16                                   # locked: EBUSY
 
 
 def test_takeoff_and_landing_velocity_parameters():

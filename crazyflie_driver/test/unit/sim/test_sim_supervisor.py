@@ -33,9 +33,9 @@ def test_boot_state_and_high_level_bits():
     assert bits(rig) & (FLYING | HL_ACTIVE | HL_FINISHED | HL_DISABLED) == FLYING | HL_ACTIVE
     rig.fly(2.0)
     assert bits(rig) & (HL_ACTIVE | HL_FINISHED) == HL_ACTIVE | HL_FINISHED  # holding the end: still active
-    rig.position_setpoint(0.0, 0.0, 0.5)            # a low-level setpoint disables the planner
+    rig.position_setpoint(0.0, 0.0, 0.5)            # a low-level setpoint stops the planner: idle, not disabled
     rig.fly(0.1)
-    assert bits(rig) & (HL_ACTIVE | HL_DISABLED) == HL_DISABLED
+    assert bits(rig) & (HL_ACTIVE | HL_DISABLED) == 0
     rig.setpoint = None
     rig.send(7, 1, b"\x00" + struct.pack("<I", 0))
     hl(rig, struct.pack("<BBBBfffff", 12, 0, 0, 0, 0.0, 0.0, 0.3, 0.0, 1.0))

@@ -17,7 +17,7 @@ from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS,
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
 from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
-from crazyflie_driver.sim.world.planner import Evaluation, Piece
+from crazyflie_driver.sim.world.planner import IDLE, Evaluation, Piece, Plan
 from crazyflie_driver.sim.world.position_control import PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
@@ -73,19 +73,20 @@ class OnboardFlight:
         """A low-level (CRTP) setpoint: it takes the priority and stops the high-level planner."""
         self.control.set_setpoint(i, sp)
         self.control.s.priority[i] = PRIORITY_CRTP
-        self.hl.disable(i)
+        self.hl.preempt(i)
 
     def release(self, i: int) -> None:
         """The legacy RPYT path drives this vehicle (also a low-level setpoint)."""
         self.control.release(i)
         self.control.s.priority[i] = PRIORITY_CRTP
-        self.hl.disable(i)
+        self.hl.preempt(i)
 
     def notify_stop(self, i: int, stab, now: float) -> None:
-        """Notify-setpoints-stop: the high-level commander gets the control back; idle, it stops the motors."""
+        """Notify-setpoints-stop: the high-level commander gets the priority back. At its next tick
+        (100 Hz) it sends its plan's setpoint, or, idle, the null setpoint that stops the motors, or,
+        disabled, nothing (the low-level setpoint left then ages into the watchdog)."""
         self.control.s.priority[i] = PRIORITY_HIGH_LEVEL
-        if self.hl.plans[i].state == 0:
-            self._null_setpoint(i, stab, now)
+        self.hl.relax(i)
 
     def _null_setpoint(self, i: int, stab, now: float) -> None:
         self.control.release(i)
@@ -98,8 +99,9 @@ class OnboardFlight:
         current = self.hl.current(i, now)
         if current is not None:
             return current
-        pos = self.estimator.position(i, bodies.position[i], ground_asl)
-        return Evaluation(np.asarray(pos, dtype=float), np.zeros(3), np.zeros(3),
+        pos = self.estimator.position(i, bodies.position[i], ground_asl)       # idle or disabled: the estimate
+        vel = self.estimator.velocity(i, bodies.velocity[i])
+        return Evaluation(np.asarray(pos, dtype=float), np.asarray(vel, dtype=float), np.zeros(3),
                           math.radians(float(stab.attitude[i, 2])), 0.0)
 
     def high_level(self, i: int, command: str, args: Dict, bodies: BodyStates, stab, ground_asl: float,
@@ -113,8 +115,6 @@ class OnboardFlight:
             return 0
         if command == "stop":
             hl.stop(i)
-            if self.control.s.priority[i] == PRIORITY_HIGH_LEVEL:
-                self._null_setpoint(i, stab, now)
             return 0
         if stab.lock[i] != 0:
             return EBUSY
@@ -147,23 +147,30 @@ class OnboardFlight:
         raise ValueError("unknown high-level command %r" % (command,))
 
     def _high_level_tick(self, now: float, stab) -> bool:
-        rows: List[int] = self.hl.active()
+        """The planners' 100 Hz tick: each evaluates its plan (also while a low-level setpoint holds the
+        priority: a landing still ends, a NaN plan still disables it); its setpoint counts only with
+        the priority. True when it wrote a setpoint."""
+        rows: List[int] = self.hl.due()
         if not rows:
             return False
-        priority = self.control.s.priority
+        hl, priority = self.hl, self.control.s.priority
+        wrote = False
         for i in rows:
             if stab.lock[i] != 0:           # the supervisor cannot fly: the plan is stopped
-                self.hl.stop(i)
+                hl.plans[i] = Plan()
+                hl.null_due[i] = False
                 continue
+            sp = hl.setpoint(i, now)
             if priority[i] != PRIORITY_HIGH_LEVEL:
-                continue
-            sp = self.hl.setpoint(i, now)
-            if sp is None:
-                self._null_setpoint(i, stab, now)
-            else:
+                continue                    # rejected: a low-level setpoint holds the priority
+            if sp is not None:
                 self.control.set_setpoint(i, sp)
                 stab.sp_time[i] = now
-        return True
+                wrote = True
+            elif hl.plans[i].state == IDLE:
+                self._null_setpoint(i, stab, now)
+                wrote = True
+        return wrote
 
     def measure(self, i: int, position: Sequence[float], quaternion: Optional[Sequence[float]],
                 bodies: BodyStates, now: float) -> bool:

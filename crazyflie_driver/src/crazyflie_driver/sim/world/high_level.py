@@ -2,8 +2,11 @@
 
 The commands come from port 8 (decoded by ``sim/firmware/high_level_port.py``); the result codes are
 the firmware's (0 success, 1 refused by the planner, ENOEXEC, EBUSY). Its setpoints have the
-high-level priority: a low-level (port 3 or 7) setpoint takes over and stops the planner, and
-notify-setpoints-stop hands control back. While idle with the control, it stops the motors.
+high-level priority: a low-level (port 3 or 7) setpoint takes over and stops the planner (IDLE),
+commands are still planned but their setpoints lose against the low-level priority until
+notify-setpoints-stop hands control back. While idle with the control, it stops the motors; a plan
+that evaluates to a NaN position disables the planner (DISABLED: no setpoint at all, the
+supervisor's "high-level disabled" bit). docs/protocol.md, "The commander's priority".
 """
 from __future__ import annotations
 
@@ -13,8 +16,8 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, Setpoint
-from crazyflie_driver.sim.world.planner import (AXES, FLYING, IDLE, LANDING, N_COEFFS, Evaluation, Piece, Plan,
-                                                online_piece, poly7_nojerk, shortest_angle, wrap_angle)
+from crazyflie_driver.sim.world.planner import (AXES, DISABLED, FLYING, IDLE, LANDING, N_COEFFS, Evaluation, Piece,
+                                                Plan, online_piece, poly7_nojerk, shortest_angle, wrap_angle)
 
 HL_RATE_EVERY = 10                 # ticks: the high-level commander runs at 100 Hz
 HL_SETPOINT_KIND = 100             # not a port-7 type: marks setpoints of the high-level commander
@@ -32,7 +35,7 @@ class HighLevelPlans:
         self.group_mask: List[int] = []
         self.takeoff_velocity: List[float] = []       # hlCommander.vtoff, m/s
         self.landing_velocity: List[float] = []       # hlCommander.vland, m/s
-        self.disabled: List[bool] = []                # a low-level setpoint disabled the planner
+        self.null_due: List[bool] = []                # an idle planner with the priority: null setpoint next tick
         self.finish_time: List[float] = []            # world time at which the last plan ends
 
     def __len__(self) -> int:
@@ -43,7 +46,7 @@ class HighLevelPlans:
         self.group_mask.append(0)
         self.takeoff_velocity.append(DEFAULT_VELOCITY)
         self.landing_velocity.append(DEFAULT_VELOCITY)
-        self.disabled.append(False)
+        self.null_due.append(False)
         self.finish_time.append(-math.inf)
         return len(self.plans) - 1
 
@@ -52,7 +55,7 @@ class HighLevelPlans:
         del self.group_mask[index]
         del self.takeoff_velocity[index]
         del self.landing_velocity[index]
-        del self.disabled[index]
+        del self.null_due[index]
         del self.finish_time[index]
 
     def boot(self, i: int) -> None:
@@ -60,29 +63,34 @@ class HighLevelPlans:
         self.group_mask[i] = 0
         self.takeoff_velocity[i] = DEFAULT_VELOCITY
         self.landing_velocity[i] = DEFAULT_VELOCITY
-        self.disabled[i] = False
+        self.null_due[i] = False
         self.finish_time[i] = -math.inf
 
     def _begin(self, i: int, plan: Plan) -> int:
         self.plans[i] = plan
-        self.disabled[i] = False
         self.finish_time[i] = plan.t_begin + plan.duration
         return 0
 
-    def disable(self, i: int) -> None:
-        """A low-level setpoint took over: the plan is forgotten."""
+    def preempt(self, i: int) -> None:
+        """A low-level setpoint took the priority: the planner is stopped (IDLE) and forgets its plan."""
         self.plans[i] = Plan()
-        self.disabled[i] = True
+
+    def relax(self, i: int) -> None:
+        """Notify-setpoints-stop gave the priority back: an idle planner sends its null setpoint at its next tick."""
+        self.null_due[i] = True
 
     def status(self, i: int, now: float) -> Tuple[bool, bool, bool]:
         """(flying a plan, the last plan has ended, disabled): supervisor.info bits 8, 9 and 10."""
-        return (self.plans[i].state in (FLYING, LANDING), now >= self.finish_time[i], self.disabled[i])
+        state = self.plans[i].state
+        return (state in (FLYING, LANDING), now >= self.finish_time[i], state == DISABLED)
 
     def in_group(self, i: int, mask: int) -> bool:
         return mask == 0 or bool(mask & self.group_mask[i])
 
-    def active(self) -> List[int]:
-        return [i for i, p in enumerate(self.plans) if p.state in (FLYING, LANDING)]
+    def due(self) -> List[int]:
+        """Rows whose planner has something to say at this tick: a plan to fly, or its null setpoint."""
+        null_due = self.null_due
+        return [i for i, p in enumerate(self.plans) if p.state == FLYING or p.state == LANDING or null_due[i]]
 
     # --- commands (world time ``now``; ``start`` is the last setpoint or the estimate) ----------------
     def takeoff(self, i: int, start: Evaluation, height: float, yaw: float, duration: float, now: float) -> int:
@@ -172,17 +180,25 @@ class HighLevelPlans:
         return self._begin(i, Plan(FLYING, [Piece(duration if duration > 0 else 0.0, coeffs)], now))
 
     def stop(self, i: int) -> None:
+        """IDLE: with the priority, the planner's null setpoint stops the motors at its next tick."""
         self.plans[i] = Plan()
+        self.null_due[i] = True
 
     # --- the tick ---------------------------------------------------------------------------------
     def setpoint(self, i: int, now: float) -> Optional[Setpoint]:
-        """The setpoint of row i's plan now; None when the plan has ended in IDLE (landing done)."""
+        """The setpoint of row i's plan now. None when there is none: the planner is IDLE (its null
+        setpoint, e.g. a landing just ended) or DISABLED (nothing; a plan whose position evaluates to
+        NaN disables it, as the firmware's planner does)."""
+        self.null_due[i] = False
         plan = self.plans[i]
+        if plan.state != FLYING and plan.state != LANDING:
+            return None
         if plan.state == LANDING and plan.finished(now):
             self.plans[i] = Plan()
             return None
         ev = plan.evaluate(now)
-        if ev is None:
+        if ev is None or not (ev.pos[0] == ev.pos[0] and ev.pos[1] == ev.pos[1] and ev.pos[2] == ev.pos[2]):
+            self.plans[i] = Plan(DISABLED, plan.pieces, plan.t_begin, plan.timescale, plan.reversed, plan.shift)
             return None
         return Setpoint(HL_SETPOINT_KIND, MODE_ABS, MODE_ABS, MODE_ABS, mode_yaw=MODE_ABS,
                         position=tuple(ev.pos), velocity=tuple(ev.vel), acceleration=tuple(ev.acc),
