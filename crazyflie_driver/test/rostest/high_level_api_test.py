@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The onboard high-level commander through crazyflie_server's HEAD services, checked on the world's
-truth: takeoff, go_to, land of one Crazyflie, and an uploaded trajectory flown relative to where it
-starts. A host-side mocap loop feeds the world's true position to ``external_position``."""
+truth: takeoff, go_to, land of one Crazyflie, an uploaded trajectory flown relative to where it
+starts, and a takeoff after cmd_vel (the firmware's priority trap, handled by the server). A host-side
+mocap loop feeds the world's true position to ``external_position``."""
 from __future__ import annotations
 
 import math
@@ -12,7 +13,7 @@ import unittest
 
 import rospy
 import rostest
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, Twist
 
 from crazyflie_driver.msg import TrajectoryPolynomialPiece
 from crazyflie_driver.srv import GoTo, Land, StartTrajectory, Takeoff, UpdateParams, UploadTrajectory
@@ -134,6 +135,25 @@ class HighLevelApi(unittest.TestCase):
         self.assertGreater(max(p[2] for _, p in path) - start[2], TRAJECTORY_DZ - 0.05)
         self.assertLess(math.dist(path[-1][1], (start[0] + TRAJECTORY_DX, start[1], start[2])), 0.05, path[-1])
         self.assertLess(max(abs(p[1] - start[1]) for _, p in path), 0.05)
+        rospy.ServiceProxy(NS + "/land", Land)(groupMask=0, height=0.0, duration=rospy.Duration(2.5))
+        self.assertTrue(wait_until(lambda: self.truth()[2] < 0.03, 10.0), self.truth())
+
+    def test_c_takeoff_after_cmd_vel_flies(self):
+        """cmd_vel's RPYT setpoints take the firmware's priority back from the high-level commander;
+        the takeoff service must hand it over again (notify-setpoints-stop) or the takeoff never flies."""
+        ports = lambda: self.world.crazyflie_state(self.uri)["packets_by_port"]
+        before = int(ports().get("3", 0))
+        cmd_vel = rospy.Publisher(NS + "/cmd_vel", Twist, queue_size=1)
+        wait_connected([cmd_vel], 5.0)
+        sent = Repeating(lambda: cmd_vel.publish(Twist()), 0.02)           # thrust 0: stays on the floor
+        try:
+            self.assertTrue(wait_until(lambda: int(ports().get("3", 0)) >= before + 10, 10.0), ports())
+        finally:
+            sent.stop()
+            cmd_vel.unregister()
+        ground = self.truth()
+        rospy.ServiceProxy(NS + "/takeoff", Takeoff)(groupMask=0, height=0.5, duration=rospy.Duration(2.0))
+        self.assertTrue(self.reaches((ground[0], ground[1], 0.5)), self.truth())
         rospy.ServiceProxy(NS + "/land", Land)(groupMask=0, height=0.0, duration=rospy.Duration(2.5))
         self.assertTrue(wait_until(lambda: self.truth()[2] < 0.03, 10.0), self.truth())
 
