@@ -28,6 +28,7 @@ from crazyflie_driver.nodes import swarm_mocap_sources
 from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
 from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.server.mocap_stream import MocapStream
+from crazyflie_driver.server import radio_budget
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
 from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_param_values
@@ -38,16 +39,24 @@ from crazyflie_driver.server.worker import WorkerConfig, WorkerState
 from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, StartTrajectory, StartTrajectoryResponse,
                                   Stop, StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
 
-WATCH_PERIOD_S = 0.02           # how often stale poses and lost links are checked
 DIAGNOSTICS_PERIOD_S = 1.0
+
+
+WATCH_PERIOD_S = 0.02           # how often stale poses and lost links are checked
+#: Parameter writes of the first fixes at once (each an acknowledged request on its Crazyflie's radio).
+FIRST_FIX_WRITERS = 8
+#: s between a swarm Crazyflie's polls when nothing is queued: the radio budget's keep-alive floor.
+SWARM_KEEPALIVE_S = 1.0 / radio_budget.KEEPALIVE_FLOOR_HZ
 
 
 def worker_config(cf: SwarmCrazyflie, options: SwarmOptions) -> WorkerConfig:
     """No parameter read-back at connect: reading every parameter of 49 Crazyflies one by one takes
-    ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types."""
+    ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types.
+    Polls at the keep-alive floor: nothing streams setpoints, and 17 Crazyflies polling every 10 ms
+    would fill their radio."""
     blocks = (pose_block(options.pose_period_ms),) if options.pose_period_ms else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
-                        enable_parameters=False, log_blocks=blocks)
+                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S)
 
 
 def count_dongles(wait_s: float) -> int:
@@ -87,9 +96,12 @@ class RosSwarm:
         self._sources: List[Any] = []
         self._link_ok: Dict[str, bool] = {}
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        self._first_fixes: Optional[ThreadPoolExecutor] = None
 
     # -- start-up ---------------------------------------------------------------------------------
     def start(self) -> None:
+        if not rospy.has_param("~budget_setpoint_rate"):
+            self.server.budget_setpoint_rate = 0.0     # nothing streams setpoints in swarm mode
         t0 = time.monotonic()
         by_name = {cf.tf_prefix: cf for cf in self.config.crazyflies}
         with ThreadPoolExecutor(max_workers=max(1, min(64, len(by_name)))) as pool:
@@ -214,12 +226,27 @@ class RosSwarm:
             raise ValueError("%d not applied: %s" % (len(errors), "; ".join(errors[:10])))
 
     # -- motion capture ---------------------------------------------------------------------------
+    def mocap_plan(self) -> List[radio_budget.BroadcastDemand]:
+        """Each radio's motion-capture bursts at the rate its budget allows beside its Crazyflies' unicast
+        needs and the reserve for requests (``radio_budget.mocap_rate_hz``)."""
+        demands = [radio_budget.CrazyflieDemand(m.name, parse_uri(m.uri), 0.0, 0.0, m.worker.log_packet_rate)
+                   for m in self.members]
+        return radio_budget.mocap_plan(demands, self.options.mocap_rate, not self.options.position_only)
+
     def _start_mocap(self, uris: Dict[str, str]) -> None:
         if self.options.mocap == "none":
             return
+        plan = self.mocap_plan()
+        for burst in plan:
+            rospy.loginfo("swarm: motion capture on radio %d at %.0f Hz (%d packets a burst; radio budget)",
+                          burst.dongle, burst.frames_hz, burst.packets)
+        for key, link in self.broadcaster.links.items():
+            self.server.add_broadcasts(key[0], link.stats, next((b for b in plan if b.dongle == key[0]), None))
+        self._first_fixes = ThreadPoolExecutor(max_workers=FIRST_FIX_WRITERS, thread_name_prefix="first fix")
         self.stream = MocapStream(uris, self.broadcaster.send_poses, self.options.position_only,
                                   on_first_fix=self._first_fix, on_pose=self._pose_seen,
-                                  radio_of=lambda uri: parse_uri(uri).index).start()
+                                  radio_of=lambda uri: parse_uri(uri).index,
+                                  frame_periods={b.dongle: 1.0 / b.frames_hz for b in plan}).start()
         names = {self.options.mocap_pattern.format(name=name): name for name in uris}
         self._sources.append(swarm_mocap_sources.start(self.options, names, self.stream.pose))
 
@@ -230,17 +257,18 @@ class RosSwarm:
     def _first_fix(self, name: str, position) -> None:
         """The estimator starts where motion capture first saw the Crazyflie (as Crazyswarm does).
 
-        The parameter writes wait for their answers, which take long on a radio busy with the
-        motion-capture broadcasts: they run on a thread of their own, so the stream never waits for
-        them and the Crazyflies of a swarm are set up side by side, not one after the other.
+        The parameter writes wait for their answers: they run in a small pool (``FIRST_FIX_WRITERS``),
+        so the stream never waits for them and the Crazyflies of a swarm are set up several at a
+        time, the radios' unicast reserve shared among them.
         """
         member = next((m for m in self.members if m.name == name), None)
-        if member is None:
+        if member is None or self._first_fixes is None:
             return
-        threading.Thread(target=self._write_initial_position, args=(member, name, position),
-                         name="first-fix-%s" % name, daemon=True).start()
+        self._first_fixes.submit(self._write_initial_position, member, name, position)
 
     def _write_initial_position(self, member, name: str, position) -> None:
+        if shutting_down():
+            return
         values = initial_position_params(position)
         _, errors = member.worker.update_params(values)
         if errors:
@@ -344,6 +372,8 @@ class RosSwarm:
     def shutdown(self) -> None:
         if self.stream is not None:
             self.stream.stop()
+        if self._first_fixes is not None:
+            self._first_fixes.shutdown(wait=False)
         for s in self._sources:
             try:
                 s.stop()
@@ -367,7 +397,7 @@ def start_swarm(server) -> Optional[RosSwarm]:
                                                     "vrpn_server", "world_frame", "position_only", "stale_after",
                                                     "stale_hold", "stale_land_duration", "broadcast_repeats",
                                                     "broadcast_interval", "enable_logging", "pose_period_ms",
-                                                    "dongle_wait") if rospy.has_param("~" + k)}
+                                                    "dongle_wait", "mocap_rate") if rospy.has_param("~" + k)}
     if not params.get("swarm_file"):
         return None
     options = options_from_params(params)

@@ -1,8 +1,16 @@
-"""A first-in first-out lock, so that links sharing one Crazyradio get equal shares of its round trips."""
+"""A first-in first-out lock, so that links sharing one Crazyradio get equal shares of its round trips,
+with a guaranteed share of the dongle's time for plain turns when urgent bursts would take it all."""
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections import deque
+from typing import Callable
+
+#: Time constant (s) of the decaying average that measures the capped turns' share of the dongle:
+#: about ten motion-capture bursts at 100 Hz, short enough to react within a few frames.
+SHARE_WINDOW_S = 0.2
 
 
 class FairLock:
@@ -12,46 +20,99 @@ class FairLock:
     ``acquire(urgent=True)`` queues ahead of the plain waiters (behind earlier urgent ones): a
     setpoint then waits for the round trip in progress and the setpoints before it, not for
     every other Crazyflie's poll.
+
+    ``acquire(urgent=True, capped=True)`` (broadcast bursts) is urgent only while the capped turns
+    have held the lock for less than ``capped_share`` of the recent time (a decaying average over
+    ``SHARE_WINDOW_S``): past it, a waiting plain turn goes first, so unicast round trips (requests,
+    keep-alives) keep at least ``1 - capped_share`` of the dongle however many bursts queue up.
+    With no plain turn waiting the capped one goes at once: no dongle time is left unused.
     """
 
-    __slots__ = ("_mutex", "_held", "_waiters", "_urgent")
+    __slots__ = ("_mutex", "_held", "_waiters", "_urgent", "capped_share", "_clock", "_granted_at", "_holder_capped",
+                 "_capped_busy", "_busy_at", "capped_deferred")
 
-    def __init__(self) -> None:
+    def __init__(self, capped_share: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
+        if not 0.0 < capped_share <= 1.0:
+            raise ValueError("capped_share must be in (0, 1], got %r" % (capped_share,))
         self._mutex = threading.Lock()
         self._held = False
         self._waiters: deque = deque()
-        self._urgent: deque = deque()
+        self._urgent: deque = deque()          # (waiter, capped)
+        self.capped_share = capped_share
+        self._clock = clock
+        self._granted_at = 0.0
+        self._holder_capped = False
+        self._capped_busy = 0.0                # capped turns' held time, exponentially weighted, as of _busy_at
+        self._busy_at = clock()
+        self.capped_deferred = 0               # times a capped turn let a plain one go first
 
-    def acquire(self, blocking: bool = True, timeout: float = -1, urgent: bool = False) -> bool:
+    def acquire(self, blocking: bool = True, timeout: float = -1, urgent: bool = False, capped: bool = False) -> bool:
         with self._mutex:
             if not self._held:
-                self._held = True
+                self._grant(capped and urgent)
                 return True
             if not blocking:
                 return False
             waiter = threading.Lock()
             waiter.acquire()
-            queue = self._urgent if urgent else self._waiters
-            queue.append(waiter)
+            if urgent:
+                queue, entry = self._urgent, (waiter, capped)
+            else:
+                queue, entry = self._waiters, waiter
+            queue.append(entry)
         if waiter.acquire(True, timeout):
             return True
         with self._mutex:
             try:
-                queue.remove(waiter)
+                queue.remove(entry)
             except ValueError:
                 return True   # handed over to us while timing out
             return False
 
+    def _grant(self, capped: bool) -> None:
+        self._held = True
+        self._holder_capped = capped
+        self._granted_at = self._clock()
+
+    def capped_share_now(self) -> float:
+        """The capped turns' recent share of the dongle's time (0..1, decaying average)."""
+        with self._mutex:
+            return self._share(self._clock())
+
+    def _share(self, now: float) -> float:
+        return self._capped_busy * math.exp(-max(0.0, now - self._busy_at) / SHARE_WINDOW_S) / SHARE_WINDOW_S
+
     def release(self) -> None:
         with self._mutex:
-            if self._urgent:
-                self._urgent.popleft().release()    # ownership passes directly
-            elif self._waiters:
-                self._waiters.popleft().release()
-            elif self._held:
-                self._held = False
-            else:
+            if not self._held:
                 raise RuntimeError("release of an unlocked FairLock")
+            now = self._clock()
+            if self._holder_capped:
+                held = max(0.0, now - self._granted_at)
+                self._capped_busy = (self._share(now) + 1.0 - math.exp(-held / SHARE_WINDOW_S)) * SHARE_WINDOW_S
+                self._busy_at = now
+            entry = self._next_urgent(now)
+            if entry is not None:
+                self._urgent.remove(entry)
+                self._grant(entry[1])
+                entry[0].release()          # ownership passes directly
+            elif self._waiters:
+                self._grant(False)
+                self._waiters.popleft().release()
+            else:
+                self._held = False
+
+    def _next_urgent(self, now: float):
+        """The urgent waiter to go next: the first one, unless it is capped, over its share and a
+        plain turn waits (then the first uncapped urgent one, if any)."""
+        if not self._urgent:
+            return None
+        over = bool(self._waiters) and self._share(now) >= self.capped_share
+        for entry in self._urgent:
+            if not (entry[1] and over):
+                return entry
+        self.capped_deferred += 1
+        return None
 
     def locked(self) -> bool:
         return self._held

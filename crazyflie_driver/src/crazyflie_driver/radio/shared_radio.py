@@ -20,6 +20,11 @@ from crazyflie_driver.radio.fair_lock import FairLock
 _log = logging.getLogger(__name__)
 _T = TypeVar("_T")
 
+#: Share of a dongle's time that broadcast bursts leave to waiting unicast round trips however many
+#: bursts queue (requests such as parameter writes and trajectory uploads, keep-alives); the radio
+#: budget plans the motion-capture rate so that this share stays free (docs/diagnostics.md).
+UNICAST_RESERVE = 0.25
+
 
 class SharedRadio:
     """One Crazyradio shared by every link on it; ``round_trip`` and ``run`` are the only ways to use it.
@@ -33,7 +38,7 @@ class SharedRadio:
                  opener: Optional[Callable[[int], Crazyradio]] = None, reopen_interval: float = 0.5):
         self.index = index
         self.radio: Optional[Crazyradio] = radio
-        self.lock = FairLock()
+        self.lock = FairLock(capped_share=1.0 - UNICAST_RESERVE)
         self.users = 0
         self._opener = opener
         self._reopen_interval = reopen_interval
@@ -53,11 +58,12 @@ class SharedRadio:
             return radio.send_packet(data)
         return self.run(trip, urgent=is_motor_command(data))
 
-    def run(self, use: Callable[[Crazyradio], _T], urgent: bool = False) -> _T:
+    def run(self, use: Callable[[Crazyradio], _T], urgent: bool = False, capped: bool = False) -> _T:
         """``use(radio)`` holding the dongle for one turn of the FIFO (a broadcast burst), with the
-        unplug handling of ``round_trip``; ``urgent`` turns go before the plain ones (FairLock)."""
+        unplug handling of ``round_trip``; ``urgent`` turns go before the plain ones, ``capped`` urgent
+        ones only while they leave ``UNICAST_RESERVE`` of the dongle's time to waiting plain ones (FairLock)."""
         lock = self.lock
-        lock.acquire(urgent=urgent)
+        lock.acquire(urgent=urgent, capped=capped)
         try:
             radio = self.radio
             if radio is None:

@@ -42,13 +42,17 @@ def usable_quaternion(q: Optional[Sequence[float]]) -> Optional[Quaternion]:
 class MocapStream:
     """``send(poses, position_only)`` sends one frame (``poses``: by URI, (x, y, z, qx, qy, qz, qw) or
     (x, y, z)); ``uris``: the URI of each Crazyflie name the poses come under; ``radio_of(uri)``: the
-    key of the radio that reaches it (one sender thread each; default: one for all)."""
+    key of the radio that reaches it (one sender thread each; default: one for all); ``frame_periods``:
+    the shortest time between two bursts of a radio (s, by radio key; default none: every frame);
+    ``clock`` and ``sleep`` time the poses and pace the bursts."""
 
     def __init__(self, uris: Mapping[str, str], send: Callable[[Dict[str, tuple], bool], int],
                  position_only: bool = False, on_first_fix: Optional[Callable[[str, Position], None]] = None,
                  on_pose: Optional[Callable[[str, float], None]] = None, gather_s: float = DEFAULT_GATHER_S,
                  clock: Callable[[], float] = time.monotonic,
-                 radio_of: Optional[Callable[[str], Hashable]] = None) -> None:
+                 radio_of: Optional[Callable[[str], Hashable]] = None,
+                 frame_periods: Optional[Mapping[Hashable, float]] = None,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         self.uris = dict(uris)
         self._radio = {name: (radio_of(uri) if radio_of is not None else 0) for name, uri in self.uris.items()}
         self._send = send
@@ -56,7 +60,9 @@ class MocapStream:
         self._on_first_fix = on_first_fix
         self._on_pose = on_pose
         self.gather_s = gather_s
+        self.frame_periods: Dict[Hashable, float] = dict(frame_periods or {})
         self._clock = clock
+        self._sleep = sleep
         self._cond = threading.Condition()
         self._pending: Dict[Hashable, Dict[str, Tuple[float, Position, Optional[Quaternion]]]] = {
             radio: {} for radio in self._radio.values()}
@@ -119,14 +125,17 @@ class MocapStream:
             t.join(timeout)
 
     def _run(self, radio: Hashable) -> None:
+        last_burst = -1e9
         while True:
             with self._cond:
                 while not self._pending[radio] and not self._stopping:
                     self._cond.wait()
                 if self._stopping:
                     return
-            if self.gather_s > 0:
-                time.sleep(self.gather_s)
+            wait = max(self.gather_s, last_burst + self.frame_periods.get(radio, 0.0) - self._clock())
+            if wait > 0:
+                self._sleep(wait)
+            last_burst = self._clock()
             with self._cond:
                 frame, self._pending[radio] = self._pending[radio], {}
             if not self._paused:

@@ -24,14 +24,24 @@ class PollPacer:
       ``keepalive_period``.
 
     Without log blocks (``rate`` 0) this is a plain keep-alive every ``keepalive_period``.
+
+    ``margin`` below 1 (``SPARSE_MARGIN``, swarm mode: many Crazyflies on one dongle, a long
+    ``keepalive_period``) times polls a little after each packet is due instead of before, so a slow
+    log costs about one poll per packet (not an empty poll before each), at the price of its packets
+    waiting up to one period onboard; the backlog count drains them when two are queued, and a
+    standing backlog is cleared every ``SPARSE_DRAIN_INTERVAL``.
     """
 
     MARGIN = 1.3
+    SPARSE_MARGIN = 1.0 / 1.02
     DRAIN_INTERVAL = 0.05
+    SPARSE_DRAIN_INTERVAL = 1.0
     MAX_BURST = 8           # immediate polls in a row; a queued setpoint goes out in between anyway
 
-    def __init__(self, keepalive_period: float, rate: float = 0.0, now: float = 0.0) -> None:
+    def __init__(self, keepalive_period: float, rate: float = 0.0, now: float = 0.0, margin: float = MARGIN) -> None:
         self.keepalive_period = keepalive_period
+        self.margin = margin
+        self.drain_interval = self.DRAIN_INTERVAL if margin >= 1.0 else self.SPARSE_DRAIN_INTERVAL
         self.rate = max(0.0, float(rate))
         self.backlog = 0.0
         self._at = now
@@ -56,10 +66,10 @@ class PollPacer:
             self._empty_at = now
         self.backlog = min(self.backlog, 8.0)
         if packets > 0 and self._burst < self.MAX_BURST and (
-                self.backlog >= 1.0 or now - self._empty_at >= self.DRAIN_INTERVAL):
+                self.backlog >= 1.0 or now - self._empty_at >= self.drain_interval):
             self._burst += 1
             return 0.0
         self._burst = 0
         if self.rate <= 0.0 or packets == 0:
             return self.keepalive_period
-        return min(self.keepalive_period, max(0.0, (1.0 - self.backlog) / (self.rate * self.MARGIN)))
+        return min(self.keepalive_period, max(0.0, (1.0 - self.backlog) / (self.rate * self.margin)))

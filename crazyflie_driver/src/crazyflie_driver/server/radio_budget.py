@@ -20,6 +20,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
 from crazyflie_driver.protocol.localization import POSES_PER_PACKET, POSITIONS_PER_PACKET
+from crazyflie_driver.radio.shared_radio import UNICAST_RESERVE
 from crazyflie_driver.server import diagnostic_thresholds as T
 
 #: A Crazyradio PA over USB (the fake dongle's DongleTiming defaults are the same figures; a test holds them equal).
@@ -32,6 +33,9 @@ FIXED_LOG_PACKETS_HZ = 110.0
 #: Setpoints/s assumed for a Crazyflie when nobody says: the chapter's controller sends cmd_vel at 50 Hz.
 DEFAULT_SETPOINT_HZ = 50.0
 BROADCAST_SWITCHES = 4              # control transfers per broadcast burst on a dongle with unicast links
+#: Motion-capture frames/s a dongle broadcasts at least, whatever its budget: the onboard estimator still
+#: holds a hover within about 1 cm at 10 Hz (docs/diagnostics.md, "Radio budget").
+MOCAP_FLOOR_HZ = 10.0
 
 
 @dataclass(frozen=True)
@@ -105,6 +109,36 @@ def mocap_broadcast(dongle: int, crazyflies: int, rate_hz: float, full_pose: boo
     return BroadcastDemand(dongle, rate_hz, -(-crazyflies // per))
 
 
+def burst_s(packets: int, shared: bool = True) -> float:
+    """Dongle time of one broadcast burst of ``packets`` packets (s); ``shared``: unicast links use the
+    dongle too, so the burst switches to the broadcast address with acks off and back."""
+    return (BROADCAST_SWITCHES * CONTROL_TRANSFER_S if shared else 0.0) + packets * BULK_ROUND_TRIP_S
+
+
+def mocap_rate_hz(members: Sequence[CrazyflieDemand], wanted_hz: float, full_pose: bool = True) -> float:
+    """The motion-capture frames/s one dongle broadcasts to ``members`` (the Crazyflies it reaches):
+    ``wanted_hz`` (the motion-capture rate) if the dongle can carry it beside their unicast needs and
+    the ``UNICAST_RESERVE`` kept for requests (parameter writes, trajectory uploads), else what it can,
+    but never below ``MOCAP_FLOOR_HZ``."""
+    if not members or wanted_hz <= 0:
+        return max(0.0, wanted_hz)
+    uris = [m.uri for m in members]
+    unicast = sum(m.round_trips_hz for m in members) * round_trip_cost_s(uris)
+    burst = mocap_broadcast(0, len(members), 1.0, full_pose)
+    free = max(0.0, 1.0 - UNICAST_RESERVE - unicast)
+    return max(min(wanted_hz, MOCAP_FLOOR_HZ), min(wanted_hz, free / burst_s(burst.packets)))
+
+
+def mocap_plan(demands: Sequence[CrazyflieDemand], wanted_hz: float, full_pose: bool = True) -> List[BroadcastDemand]:
+    """The motion-capture bursts of a swarm, per dongle (in dongle order), each at the rate its dongle's
+    budget allows (``mocap_rate_hz``)."""
+    by_dongle: Dict[int, List[CrazyflieDemand]] = {}
+    for d in demands:
+        by_dongle.setdefault(d.uri.index, []).append(d)
+    return [mocap_broadcast(index, len(members), mocap_rate_hz(members, wanted_hz, full_pose), full_pose)
+            for index, members in sorted(by_dongle.items())]
+
+
 def check_budget(demands: Sequence[CrazyflieDemand], broadcasts: Sequence[BroadcastDemand] = ()) -> List[DongleBudget]:
     """The budget of every dongle used, in dongle order, with a level and what to change."""
     by_dongle: Dict[int, List[CrazyflieDemand]] = {}
@@ -121,8 +155,7 @@ def check_budget(demands: Sequence[CrazyflieDemand], broadcasts: Sequence[Broadc
         rt_hz = sum(m.round_trips_hz for m in members)
         bc = bursts.get(index, [])
         bc_packets = sum(b.frames_hz * b.packets for b in bc)
-        switch = BROADCAST_SWITCHES * CONTROL_TRANSFER_S if members else 0.0
-        load = rt_hz * cost + sum(b.frames_hz * (switch + b.packets * BULK_ROUND_TRIP_S) for b in bc)
+        load = rt_hz * cost + sum(b.frames_hz * burst_s(b.packets, bool(members)) for b in bc)
         level = 2 if load > T.RADIO_LOAD_ERROR else 1 if load > T.RADIO_LOAD_WARN else 0
         advice = _advice(members, bc, load) if level else ()
         out.append(DongleBudget(index, tuple(m.name for m in members), rt_hz, bc_packets, cost, 1.0 / cost, load,

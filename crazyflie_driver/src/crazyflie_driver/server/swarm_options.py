@@ -36,6 +36,7 @@ class SwarmOptions:
     enable_logging: bool = False
     pose_period_ms: int = 100
     dongle_wait: float = 30.0
+    mocap_rate: float = 100.0       # Hz, the motion capture's frame rate: the most the stream sends
 
 
 def _bool(name: str, v: Any) -> bool:
@@ -92,4 +93,5 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
         enable_logging=_bool("enable_logging", params.get("enable_logging", False)),
         pose_period_ms=int(period),
         dongle_wait=_number("dongle_wait", params.get("dongle_wait", 30.0), 0),
+        mocap_rate=_number("mocap_rate", params.get("mocap_rate", 100.0), 0, strict=True),
     )

@@ -65,6 +65,8 @@ class WorkerConfig:
     enable_logging: bool = True
     enable_parameters: bool = True
     log_blocks: Tuple[LogBlockSpec, ...] = ()
+    # s between polls when nothing is queued, with sparse pacing (swarm mode); 0: the server's, eager pacing
+    keepalive_period: float = 0.0
 
 
 class WorkerListener:
@@ -122,7 +124,7 @@ class CrazyflieWorker:
         self.config = config
         self.cf = crazyflie
         self.listener = listener or WorkerListener()
-        self.keepalive_period = keepalive_period
+        self.keepalive_period = config.keepalive_period or keepalive_period
         self.link_lost_timeout = link_lost_timeout
         self.lost_retry_period = lost_retry_period
         self.quality_warning_interval = quality_warning_interval
@@ -160,7 +162,8 @@ class CrazyflieWorker:
         self._rssi_sent_at = -1e9
         self._blocks: List[Any] = []
         self._downlink_packets = 0
-        self._pacer = PollPacer(keepalive_period, now=clock())
+        self._pacer = PollPacer(self.keepalive_period, now=clock(),
+                                margin=PollPacer.SPARSE_MARGIN if config.keepalive_period else PollPacer.MARGIN)
         self._log_plan: List[PlannedBlock] = []
         self._error_times: List[float] = []
         self._onboard_clock = OnboardClock()

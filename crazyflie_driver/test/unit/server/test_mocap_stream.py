@@ -86,3 +86,42 @@ def test_the_sender_thread_streams_and_reports_each_first_fix_once():
         stream.stop()
     assert fixed == [("cf1", (0.0, 0.0, 0.0)), ("cf4", (1.0, 0.0, 0.0))]
     assert stream.frames >= 1 and all(data[1] == 9 for _, data in sent(medium))
+
+
+def test_a_radio_s_bursts_keep_the_period_its_budget_allows_and_carry_the_newest_poses():
+    """Poses of one Crazyflie arrive faster than the radio's frame period: the bursts keep the period
+    (on the stream's clock) and each carries the newest pose that arrived while it waited."""
+    now = [0.0]
+    fed = [0]
+    lock = threading.Condition()
+    bursts = []
+
+    def sleep(seconds):          # the sender waits here until this frame's poses are all in
+        with lock:
+            assert lock.wait_for(lambda: fed[0] > len(bursts), 5.0)
+            now[0] += seconds
+
+    def send(poses, position_only):
+        with lock:
+            bursts.append((now[0], poses["radio://0/80/2M/E7E7E7E701"][2]))
+            lock.notify_all()
+        return 1
+
+    stream = MocapStream({"cf1": URIS["cf1"]}, send, gather_s=0.001, clock=lambda: now[0], sleep=sleep,
+                         frame_periods={0: 0.05}).start()
+    try:
+        for k in range(6):
+            stream.pose("cf1", (0.0, 0.0, 0.1 * k), Q)
+            stream.pose("cf1", (0.0, 0.0, 0.1 * k + 0.05), Q)       # replaces the one before, unsent
+            with lock:
+                fed[0] += 1
+                lock.notify_all()
+                assert lock.wait_for(lambda: len(bursts) > k, 5.0)
+    finally:
+        with lock:
+            fed[0] += 100
+            lock.notify_all()
+        stream.stop()
+    times = [t for t, _ in bursts]
+    assert times[0] == 0.001 and [round(b - a, 9) for a, b in zip(times, times[1:])] == [0.05] * 5
+    assert [round(z, 3) for _, z in bursts] == [round(0.1 * k + 0.05, 3) for k in range(6)]

@@ -65,3 +65,21 @@ def test_bursts_are_bounded():
     waits = [p.after_round_trip(1, 1.0) for _ in range(PollPacer.MAX_BURST + 1)]
     assert waits[:PollPacer.MAX_BURST] == [0.0] * PollPacer.MAX_BURST
     assert waits[-1] > 0.0
+
+
+def test_swarm_mode_polls_about_once_per_pose_packet():
+    """A swarm Crazyflie (keep-alive period 100 ms, the radio budget's floor; sparse pacing) with the
+    10 Hz onboard pose block: about one poll per packet, whatever the block's phase and the round trip,
+    against two with the eager pacing and about 80 polls/s with the 10 ms keep-alive."""
+    rate = log_packet_rate([PlannedBlock(100)])
+    for phase in (0.003, 0.05, 0.097):
+        for round_trip in (0.0023, 0.010):
+            polls, fetched, worst, left = fly(PollPacer(0.100, rate, margin=PollPacer.SPARSE_MARGIN), (0.100,), 10.0,
+                                              round_trip=round_trip, phase=phase)
+            assert fetched >= 98 and left <= 1
+            assert polls <= 1.15 * fetched
+            assert worst < 0.100 + 2 * round_trip      # a packet waits at most about one period
+    eager = fly(PollPacer(0.100, rate), (0.100,), 10.0, phase=0.003)
+    assert eager[0] >= 1.9 * eager[1]
+    assert fly(PollPacer(0.010, rate), (0.100,), 10.0, phase=0.003)[0] / 10.0 >= 80     # 10 ms + the round trip
+    assert fly(PollPacer(0.100, margin=PollPacer.SPARSE_MARGIN), (), 10.0)[0] / 10.0 <= 10.0   # nothing logged

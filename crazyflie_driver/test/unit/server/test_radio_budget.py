@@ -164,3 +164,39 @@ def test_log_estimate_before_connecting():
 def test_demands_for_refuses_a_bad_uri():
     with pytest.raises(ValueError):
         rb.demands_for([("x", "radio://0/80/9M/E7E7E7E701", 0, 0, 0)])
+
+
+def grid(n, log_hz=0.0):
+    return [demand("cf%d" % i, "radio://0/80/2M/E7E7E7E7%02X" % i, log_hz=log_hz) for i in range(1, n + 1)]
+
+
+def test_mocap_rate_is_the_wanted_one_where_the_dongle_carries_it():
+    assert rb.mocap_rate_hz(grid(1), 100.0) == 100.0
+    assert rb.mocap_rate_hz([], 100.0) == 100.0
+
+
+def test_mocap_rate_leaves_the_keepalives_and_the_unicast_reserve_free():
+    """17 Crazyflies on one dongle (49 on three): 9 pose packets a frame cost 13.2 ms, so 100 Hz would
+    need 132 % of the dongle; the rate is what remains beside 17 keep-alives at the floor rate (2.3 ms
+    each, address switches included) and the reserve kept for requests."""
+    members = grid(17)
+    rate = rb.mocap_rate_hz(members, 100.0)
+    burst = rb.burst_s(9)
+    assert burst == pytest.approx(0.0132)
+    keepalives = 17 * rb.KEEPALIVE_FLOOR_HZ * 0.0023
+    assert rate == pytest.approx((1.0 - rb.UNICAST_RESERVE - keepalives) / burst)
+    budget = rb.check_budget(members, [rb.mocap_broadcast(0, 17, rate)])[0]
+    assert budget.load == pytest.approx(1.0 - rb.UNICAST_RESERVE)
+    assert rb.mocap_rate_hz(members, 100.0, full_pose=False) > rate          # 5 position packets a frame
+
+
+def test_mocap_rate_never_below_its_floor():
+    assert rb.mocap_rate_hz(grid(40, log_hz=100.0), 100.0) == rb.MOCAP_FLOOR_HZ
+    assert rb.mocap_rate_hz(grid(40, log_hz=100.0), 5.0) == 5.0       # a slower motion capture stays as it is
+
+
+def test_mocap_plan_gives_each_dongle_its_own_rate():
+    members = grid(17) + [demand("far", "radio://1/90/2M/E7E7E7E701")]
+    plan = rb.mocap_plan(members, 100.0)
+    assert [(b.dongle, b.packets) for b in plan] == [(0, 9), (1, 1)]
+    assert plan[0].frames_hz == pytest.approx(rb.mocap_rate_hz(grid(17), 100.0)) and plan[1].frames_hz == 100.0
