@@ -33,6 +33,7 @@ from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
 from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_param_values
 from crazyflie_driver.server.swarm_config import SwarmConfig, SwarmCrazyflie, load_swarm_file
+from crazyflie_driver.server.swarm_heartbeat import Heartbeat
 from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
 from crazyflie_driver.server.swarm_watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
@@ -97,6 +98,7 @@ class RosSwarm:
         self._link_ok: Dict[str, bool] = {}
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self._first_fixes: Optional[ThreadPoolExecutor] = None
+        self.heartbeat: Optional[Heartbeat] = None
 
     # -- start-up ---------------------------------------------------------------------------------
     def start(self) -> None:
@@ -124,6 +126,8 @@ class RosSwarm:
                                             interval_s=self.options.broadcast_interval)
         self.broadcaster.open()
         self.commands = SwarmCommands(self.live_members, self.broadcaster)
+        if self.options.emergency_watchdog:
+            self.heartbeat = Heartbeat(self.broadcaster.watchdog).start()
         self._advertise()
         self._start_mocap({m.name: m.uri for m in self.members})
         threading.Thread(target=self._watch_loop, name="swarm watch", daemon=True).start()
@@ -202,6 +206,8 @@ class RosSwarm:
         self._emergency = True
         if self.stream is not None:
             self.stream.pause()
+        if self.heartbeat is not None:
+            self.heartbeat.stop()
         failures = self.commands.emergency()
         rospy.logwarn("swarm: EMERGENCY: e-stop broadcast on every radio and sent to each of %d Crazyflies%s",
                       len(self.members), "; failed: " + "; ".join(failures) if failures else "")
@@ -346,7 +352,10 @@ class RosSwarm:
         summary = DiagnosticStatus(name="crazyflie_server swarm", hardware_id=self.config.source)
         summary.level = DiagnosticStatus.ERROR if self._emergency or self.failed else DiagnosticStatus.OK
         summary.message = "emergency" if self._emergency else "%d Crazyflies" % len(self.members)
-        values = [("connect_s", "%.2f" % self.connect_s)]
+        values = [("connect_s", "%.2f" % self.connect_s),
+                  ("emergency watchdog", "keep-alive every %.2f s, %d sent, %d failed" % (
+                      self.heartbeat.period_s, self.heartbeat.sent, self.heartbeat.errors)
+                   if self.heartbeat is not None else "off")]
         if self.stream is not None:
             lat = list(self.stream.latencies)
             values += [("mocap frames", str(self.stream.frames)), ("mocap transfers", str(self.stream.transfers))]
@@ -374,6 +383,8 @@ class RosSwarm:
             self.stream.stop()
         if self._first_fixes is not None:
             self._first_fixes.shutdown(wait=False)
+        if self.heartbeat is not None:
+            self.heartbeat.stop()
         for s in self._sources:
             try:
                 s.stop()
@@ -397,7 +408,8 @@ def start_swarm(server) -> Optional[RosSwarm]:
                                                     "vrpn_server", "world_frame", "position_only", "stale_after",
                                                     "stale_hold", "stale_land_duration", "broadcast_repeats",
                                                     "broadcast_interval", "enable_logging", "pose_period_ms",
-                                                    "dongle_wait", "mocap_rate") if rospy.has_param("~" + k)}
+                                                    "dongle_wait", "mocap_rate", "emergency_watchdog")
+              if rospy.has_param("~" + k)}
     if not params.get("swarm_file"):
         return None
     options = options_from_params(params)

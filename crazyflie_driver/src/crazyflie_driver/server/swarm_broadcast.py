@@ -13,14 +13,16 @@ polling (they do) or the Crazyflies' transmit queues fill up.
 from __future__ import annotations
 
 from collections import OrderedDict
-from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
+from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.protocol import high_level
 from crazyflie_driver.protocol.commander import emergency_stop_packet
 from crazyflie_driver.protocol.localization import address_id, packed_pose_packets, packed_position_packets
 from crazyflie_driver.protocol.setpoints import notify_setpoints_stop_packet
+from crazyflie_driver.protocol.supervisor import watchdog_packet
 from crazyflie_driver.radio.broadcast import DEFAULT_REPEAT_INTERVAL_S, DEFAULT_REPEATS, BroadcastLink
 from crazyflie_driver.radio.shared_radio import RadioManager
 
@@ -74,8 +76,27 @@ class SwarmBroadcaster:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def _on_every_link(self, send: Callable[[BroadcastLink], int]) -> int:
+        """``send(link)`` on every link, even when one fails (an unplugged radio must not keep a command
+        from the others); then CrazyflieError naming each failed one, else the transfers made."""
+        taken, failed = 0, []
+        for key, link in self.links.items():
+            try:
+                taken += send(link)
+            except CrazyflieError as e:
+                failed.append("radio %d channel %d: %s" % (key[0], key[1], e))
+        if failed:
+            raise CrazyflieError("broadcast not sent on %d of %d radio links (the others took it): %s"
+                                 % (len(failed), len(self.links), "; ".join(failed)))
+        return taken
+
     def _everywhere(self, packet: CRTPPacket) -> int:
-        return sum(link.send_repeated(packet, self.repeats, self.interval_s) for link in self.links.values())
+        return self._on_every_link(lambda link: link.send_repeated(packet, self.repeats, self.interval_s))
+
+    def watchdog(self) -> int:
+        """One emergency-stop watchdog keep-alive on every link (not repeated: the next one follows soon)."""
+        packet = watchdog_packet(self.protocol_version)
+        return self._on_every_link(lambda link: link.send(packet))
 
     # -- commands (checked before anything is sent; return the USB transfers made) --------------
     def takeoff(self, height: float, duration_s: float, group_mask: int = 0) -> int:

@@ -37,6 +37,7 @@ class SwarmOptions:
     pose_period_ms: int = 100
     dongle_wait: float = 30.0
     mocap_rate: float = 100.0       # Hz, the motion capture's frame rate: the most the stream sends
+    emergency_watchdog: bool = True     # broadcast the emergency-stop watchdog keep-alive (swarm_heartbeat)
 
 
 def _bool(name: str, v: Any) -> bool:
@@ -94,4 +95,5 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
         pose_period_ms=int(period),
         dongle_wait=_number("dongle_wait", params.get("dongle_wait", 30.0), 0),
         mocap_rate=_number("mocap_rate", params.get("mocap_rate", 100.0), 0, strict=True),
+        emergency_watchdog=_bool("emergency_watchdog", params.get("emergency_watchdog", True)),
     )

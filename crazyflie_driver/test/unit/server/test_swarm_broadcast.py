@@ -3,14 +3,16 @@ from __future__ import annotations
 
 import math
 import struct
+import threading
 
 import pytest
 
 from crazyflie_driver.crtp.quaternion import compress_quaternion
-from crazyflie_driver.errors import CommandValueError, TrajectoryError
+from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster, group_by_link
+from crazyflie_driver.server.swarm_heartbeat import Heartbeat
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
@@ -99,3 +101,48 @@ def test_the_same_last_address_byte_twice_on_one_channel_is_refused():
     with pytest.raises(ValueError, match="ending 0x01"):
         group_by_link([parse_uri("radio://0/80/2M/E7E7E7E701"), parse_uri("radio://0/80/2M/E7E7E7AA01")])
     assert list(group_by_link([parse_uri("radio://0/80/2M/E7E7E7E701"), parse_uri("radio://1/90/2M/E7E7E7E701")]))
+
+
+def test_an_unplugged_radio_does_not_keep_a_command_from_the_others():
+    medium = ScriptedMedium(lambda tx: AirReply(False, retries=tx.arc, unplugged=tx.dongle == 0), dongles=2)
+    backend = FakeUsbBackend(medium, dongles=2, timing=DongleTiming.instant())
+    bc = SwarmBroadcaster(URIS, 12, RadioManager(backend), repeats=3, sleep=FakeClock().sleep)
+    bc.open()
+    with pytest.raises(CrazyflieError, match=r"not sent on 1 of 2 radio links .*radio 0 channel 80"):
+        bc.land(0.0, 2.0)
+    assert [t.dongle for t in broadcasts(medium) if t.data[1] in (2, 8)] == [0, 1, 1, 1]   # radio 1 took all 3
+    bc.close()
+
+
+def test_the_watchdog_keepalive_is_one_packet_per_radio():
+    bc, medium, _ = swarm(version=12)
+    assert bc.watchdog() == 2
+    assert [(t.dongle, t.data) for t in broadcasts(medium)] == [(0, bytes([0x9D, 4])), (1, bytes([0x9D, 4]))]
+    bc.close()
+    bc, medium, _ = swarm(version=4)
+    bc.watchdog()
+    assert {t.data for t in broadcasts(medium)} == {bytes([0x6D, 4])}     # localization (generic channel) type 4 before port 9
+    bc.close()
+
+
+def test_the_heartbeat_sends_until_stopped_and_survives_a_failing_radio():
+    sent = threading.Semaphore(0)
+    calls = []
+
+    def send():
+        calls.append(1)
+        sent.release()
+        if len(calls) == 2:
+            raise CrazyflieError("radio 1 channel 90: unplugged")
+        return 2
+
+    beat = Heartbeat(send, period_s=0.001).start()
+    for _ in range(4):
+        assert sent.acquire(timeout=5.0)
+    beat.stop()
+    n = len(calls)
+    assert not beat.running and beat.errors == 1 and beat.sent >= 3
+    threading.Event().wait(0.02)
+    assert len(calls) == n                     # nothing after stop() returned
+    with pytest.raises(ValueError, match="period_s"):
+        Heartbeat(send, period_s=0)
