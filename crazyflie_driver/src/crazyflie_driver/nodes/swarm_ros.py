@@ -299,8 +299,7 @@ class RosSwarm:
                 if self._link_ok.get(name, True) != ok:
                     self._link_ok[name] = ok
                     if not ok:
-                        rospy.logerr("swarm: %s: radio link lost; it lands if the link stays lost for %.1f s",
-                                     name, self.options.stale_hold)
+                        rospy.logerr("swarm: %s: radio link lost; %s", name, self._link_lost_outcome())
                     else:
                         rospy.logwarn("swarm: %s: radio link back", name)
                 self.watch.link(name, ok, now)
@@ -315,6 +314,13 @@ class RosSwarm:
                 rospy.logerr("swarm: %s: landing by itself: %s", ev.name, ev.reason)
                 threading.Thread(target=self._land_one, args=(members[ev.name], ev.reason),
                                  name="land %s" % ev.name, daemon=True).start()
+
+    def _link_lost_outcome(self) -> str:
+        if self.heartbeat is not None and self.heartbeat.running:
+            return ("its motors stop 1 s after the last emergency-stop watchdog keep-alive it heard (restart it "
+                    "before flying it again); it is told to land if the link comes back first")
+        return ("it is told to land once the link comes back (without ~emergency_watchdog nothing onboard stops "
+                "it meanwhile: it flies on)")
 
     def _land_one(self, member: SwarmMember, reason: str) -> None:
         """Unicast land (retried while its link is lost, until it is taken or refused)."""
@@ -340,11 +346,15 @@ class RosSwarm:
                 state = self.watch.state(m.name, now) if mocap else "no motion capture"
                 age = self.watch.age(m.name, now)
                 landed = self.watch.landed_for(m.name)
+                link_ok = self._link_ok.get(m.name, True)
                 status.level = {"ok": DiagnosticStatus.OK, "no motion capture": DiagnosticStatus.OK,
                                 "no pose yet": DiagnosticStatus.WARN}.get(state, DiagnosticStatus.ERROR)
                 status.message = "pose %s%s" % (state, " (landed: %s)" % landed if landed else "")
+                if not link_ok:
+                    status.level = DiagnosticStatus.ERROR
+                    status.message = "radio link lost: %s; %s" % (self._link_lost_outcome(), status.message)
                 status.values = [KeyValue("pose age_s", "%.3f" % age if math.isfinite(age) else "never"),
-                                 KeyValue("link", "ok" if self._link_ok.get(m.name, True) else "lost")]
+                                 KeyValue("link", "ok" if link_ok else "lost")]
                 arr.status.append(status)
             for name, error in self.failed.items():
                 arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, name="crazyflie_server swarm: %s"

@@ -121,7 +121,7 @@ def test_the_watchdog_keepalive_is_one_packet_per_radio():
     bc.close()
     bc, medium, _ = swarm(version=4)
     bc.watchdog()
-    assert {t.data for t in broadcasts(medium)} == {bytes([0x6D, 4])}     # localization (generic channel) type 4 before port 9
+    assert {t.data for t in broadcasts(medium)} == {bytes([0x6D, 4])}     # localization type 4 before port 9
     bc.close()
 
 
