@@ -4,8 +4,8 @@ Each Crazyflie listens on its own address and on the fixed broadcast address 0xF
 packet to the latter is never acknowledged, so nothing comes back and nothing is retried. A
 ``BroadcastLink`` shares its dongle with the unicast links on it: a burst (all packets of one
 ``send_all``) is one turn of the dongle's FIFO, the way one unicast round trip is, and by default it
-goes before the polls waiting there, as setpoints do, but only while bursts leave the unicast links
-their reserve of the dongle's time (``shared_radio.UNICAST_RESERVE``). Where the dongle takes two packets per USB
+goes before the polls waiting there, as setpoints do; a stream of bursts (motion capture) only while
+it leaves the unicast links their reserve of the dongle's time (``shared_radio.UNICAST_RESERVE``). Where the dongle takes two packets per USB
 transfer, consecutive packets of the same length go out in pairs.
 Idempotent commands are sent several times (``send_repeated``) because a broadcast can be lost.
 """
@@ -124,11 +124,12 @@ class BroadcastLink:
         """One packet to every Crazyflie on the channel; returns the USB transfers made (0 or 1)."""
         return self.send_all([packet], urgent)
 
-    def send_all(self, packets: Sequence[Packet], urgent: bool = True) -> int:
+    def send_all(self, packets: Sequence[Packet], urgent: bool = True, capped: bool = False) -> int:
         """All ``packets`` in one turn of the dongle, paired where it can; returns the USB transfers
         the dongle took. ``urgent`` (the default: commands and motion capture steer Crazyflies in
-        flight) goes before the unicast links' waiting polls, as setpoints do, within the share of the
-        dongle that bursts may take while unicast round trips wait (``shared_radio.UNICAST_RESERVE``)."""
+        flight) goes before the unicast links' waiting polls, as setpoints do; ``capped`` (a stream
+        such as motion capture) only within the share of the dongle that bursts may take while
+        unicast round trips wait (``shared_radio.UNICAST_RESERVE``)."""
         raw = [_raw(p) for p in packets]
         if not raw:
             return 0
@@ -148,7 +149,7 @@ class BroadcastLink:
                     self.stats.failed_transfers += 1
             return taken
 
-        taken = shared.run(burst, urgent=urgent, capped=True)
+        taken = shared.run(burst, urgent=urgent, capped=capped)
         self.stats.packets += len(raw)
         self.stats.transfers += taken
         return taken

@@ -3,7 +3,8 @@
 One ``BroadcastLink`` per (dongle, channel, data rate) that the swarm's Crazyflies use. Commands
 are built once (so a bad one is refused before anything goes out), then sent on every link, each
 repeated ``repeats`` times because a broadcast is never acknowledged. Motion capture goes out as
-packed poses (or positions), each link carrying only the Crazyflies it reaches, one burst per frame.
+packed poses (or positions), each link carrying only the Crazyflies it reaches, one burst per frame,
+within the share of each dongle that a stream of bursts may take (``radio.broadcast``).
 
 As swarm servers do, a broadcast go_to and start_trajectory are always relative: the same absolute
 goal for every Crazyflie would send them all to one point. Every high-level packet is answered by
@@ -12,6 +13,7 @@ polling (they do) or the Crazyflies' transmit queues fill up.
 """
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
@@ -77,14 +79,30 @@ class SwarmBroadcaster:
         self.close()
 
     def _on_every_link(self, send: Callable[[BroadcastLink], int]) -> int:
-        """``send(link)`` on every link, even when one fails (an unplugged radio must not keep a command
-        from the others); then CrazyflieError naming each failed one, else the transfers made."""
-        taken, failed = 0, []
-        for key, link in self.links.items():
+        """``send(link)`` on every link at once, one thread per further link (the radios work in parallel,
+        so a command reaches every radio's Crazyflies at the same time), each even when another fails (an
+        unplugged radio must not keep a command from the others); then CrazyflieError naming each failed
+        one, else the transfers made."""
+        items = list(self.links.items())
+        results: List[object] = [0] * len(items)
+
+        def one(i: int) -> None:
+            key, link = items[i]
             try:
-                taken += send(link)
+                results[i] = send(link)
             except CrazyflieError as e:
-                failed.append("radio %d channel %d: %s" % (key[0], key[1], e))
+                results[i] = "radio %d channel %d: %s" % (key[0], key[1], e)
+
+        threads = [threading.Thread(target=one, args=(i,), name="broadcast %d" % i, daemon=True)
+                   for i in range(1, len(items))]
+        for t in threads:
+            t.start()
+        if items:
+            one(0)
+        for t in threads:
+            t.join()
+        taken = sum(r for r in results if isinstance(r, int))
+        failed = [r for r in results if isinstance(r, str)]
         if failed:
             raise CrazyflieError("broadcast not sent on %d of %d radio links (the others took it): %s"
                                  % (len(failed), len(self.links), "; ".join(failed)))
@@ -146,5 +164,5 @@ class SwarmBroadcaster:
                 packets = packed_position_packets([item[:4] for item in here])
             else:
                 packets = packed_pose_packets(here)
-            transfers += link.send_all(packets)
+            transfers += link.send_all(packets, capped=True)
         return transfers
