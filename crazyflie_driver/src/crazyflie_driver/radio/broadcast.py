@@ -5,8 +5,8 @@ packet to the latter is never acknowledged, so nothing comes back and nothing is
 ``BroadcastLink`` shares its dongle with the unicast links on it: a burst (all packets of one
 ``send_all``) is one turn of the dongle's FIFO, the way one unicast round trip is, and by default it
 goes before the polls waiting there, as setpoints do; a stream of bursts (motion capture) only while
-it leaves the unicast links their reserve of the dongle's time (``shared_radio.UNICAST_RESERVE``). Where the dongle takes two packets per USB
-transfer, consecutive packets of the same length go out in pairs.
+it leaves the unicast links their reserve of the dongle's time (``shared_radio.UNICAST_RESERVE``).
+Where the dongle takes two packets per USB transfer, consecutive packets of the same length go out in pairs.
 Idempotent commands are sent several times (``send_repeated``) because a broadcast can be lost.
 """
 from __future__ import annotations
