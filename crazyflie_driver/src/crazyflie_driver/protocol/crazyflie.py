@@ -100,9 +100,10 @@ class Crazyflie:
         self.commander.send_emergency_stop()
         self.commander.send_stop_setpoint()
 
-    def send_keepalive(self) -> bool:
-        """A null packet: keeps the link alive and fetches downlink (console, log data)."""
-        return self.link.poll()
+    def send_keepalive(self, background: bool = False) -> bool:
+        """A null packet: keeps the link alive and fetches downlink (console, log data); ``background``:
+        behind every other round trip waiting for the dongle (``RadioLink.poll``)."""
+        return self.link.poll(background=True) if background else self.link.poll()
 
     def __repr__(self) -> str:
         return "<Crazyflie %s protocol %d>" % (self.uri, self.protocol_version)

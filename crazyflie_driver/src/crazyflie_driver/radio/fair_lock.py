@@ -11,6 +11,9 @@ from typing import Callable
 #: Time constant (s) of the decaying average that measures the capped turns' share of the dongle:
 #: about ten motion-capture bursts at 100 Hz, short enough to react within a few frames.
 SHARE_WINDOW_S = 0.2
+#: Longest wait (s) of a background turn while plain ones keep coming: a keep-alive nobody waits for
+#: still goes out at least this often, so the Crazyflie's transmit queue keeps draining.
+BACKGROUND_MAX_WAIT_S = 0.2
 
 
 class FairLock:
@@ -26,10 +29,14 @@ class FairLock:
     ``SHARE_WINDOW_S``): past it, a waiting plain turn goes first, so unicast round trips (requests,
     keep-alives) keep at least ``1 - capped_share`` of the dongle however many bursts queue up.
     With no plain turn waiting the capped one goes at once: no dongle time is left unused.
+
+    ``acquire(background=True)`` (keep-alive polls nobody waits for) goes after every plain waiter,
+    unless it has waited ``BACKGROUND_MAX_WAIT_S``: requests waiting for an answer then get the
+    unicast share instead of the Crazyflies' idle polls. It counts as unicast for the reserve.
     """
 
-    __slots__ = ("_mutex", "_held", "_waiters", "_urgent", "capped_share", "_clock", "_granted_at", "_holder_capped",
-                 "_capped_busy", "_busy_at", "capped_deferred")
+    __slots__ = ("_mutex", "_held", "_waiters", "_urgent", "_background", "capped_share", "_clock", "_granted_at",
+                 "_holder_capped", "_capped_busy", "_busy_at", "capped_deferred")
 
     def __init__(self, capped_share: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
         if not 0.0 < capped_share <= 1.0:
@@ -38,6 +45,7 @@ class FairLock:
         self._held = False
         self._waiters: deque = deque()
         self._urgent: deque = deque()          # (waiter, capped)
+        self._background: deque = deque()      # (waiter, queued at)
         self.capped_share = capped_share
         self._clock = clock
         self._granted_at = 0.0
@@ -46,7 +54,8 @@ class FairLock:
         self._busy_at = clock()
         self.capped_deferred = 0               # times a capped turn let a plain one go first
 
-    def acquire(self, blocking: bool = True, timeout: float = -1, urgent: bool = False, capped: bool = False) -> bool:
+    def acquire(self, blocking: bool = True, timeout: float = -1, urgent: bool = False, capped: bool = False,
+                background: bool = False) -> bool:
         with self._mutex:
             if not self._held:
                 self._grant(capped and urgent)
@@ -57,6 +66,8 @@ class FairLock:
             waiter.acquire()
             if urgent:
                 queue, entry = self._urgent, (waiter, capped)
+            elif background:
+                queue, entry = self._background, (waiter, self._clock())
             else:
                 queue, entry = self._waiters, waiter
             queue.append(entry)
@@ -96,6 +107,9 @@ class FairLock:
                 self._urgent.remove(entry)
                 self._grant(entry[1])
                 entry[0].release()          # ownership passes directly
+            elif self._background and (not self._waiters or now - self._background[0][1] >= BACKGROUND_MAX_WAIT_S):
+                self._grant(False)
+                self._background.popleft()[0].release()
             elif self._waiters:
                 self._grant(False)
                 self._waiters.popleft().release()
@@ -107,7 +121,7 @@ class FairLock:
         plain turn waits (then the first uncapped urgent one, if any)."""
         if not self._urgent:
             return None
-        over = bool(self._waiters) and self._share(now) >= self.capped_share
+        over = bool(self._waiters or self._background) and self._share(now) >= self.capped_share
         for entry in self._urgent:
             if not (entry[1] and over):
                 return entry

@@ -140,13 +140,13 @@ class RadioLink:
         self.close()
 
     # -- round trips ------------------------------------------------------------------------------
-    def _round_trip(self, data: bytes) -> RadioAck:
+    def _round_trip(self, data: bytes, background: bool = False) -> RadioAck:
         shared = self._shared
         if shared is None:
             raise CrazyflieError("%s: link is not open" % (self.uri,))
         uri = self.uri
         started = _now()
-        ack = shared.round_trip(uri.channel, uri.datarate, uri.address, data)
+        ack = shared.round_trip(uri.channel, uri.datarate, uri.address, data, background)
         self.stats.record(ack.ack, ack.retries, _now() - started)
         return ack
 
@@ -157,11 +157,12 @@ class RadioLink:
         """
         return self.send_bytes(packet.to_bytes())
 
-    def poll(self) -> bool:
-        """A null packet round trip: fetches downlink and keeps the link alive."""
-        return self.send_bytes(NULL_PACKET)
+    def poll(self, background: bool = False) -> bool:
+        """A null packet round trip: fetches downlink and keeps the link alive. ``background`` (an idle
+        keep-alive nobody waits for) lets every other round trip waiting for the dongle go first."""
+        return self.send_bytes(NULL_PACKET, background)
 
-    def send_bytes(self, data: bytes) -> bool:
+    def send_bytes(self, data: bytes, background: bool = False) -> bool:
         """``send`` for a raw packet (header byte + payload); safelink bits are set here."""
         if not 1 <= len(data) <= 1 + MAX_PAYLOAD:
             raise CommandValueError("%s: a CRTP packet is a header byte and 0..%d payload bytes, got %d bytes%s"
@@ -169,7 +170,7 @@ class RadioLink:
                                        " (a null packet is b'\\xff')" if not data else ""))
         with self._send_lock:
             if not self.safelink:
-                ack = self._round_trip(data)
+                ack = self._round_trip(data, background)
                 if ack.ack and ack.data:
                     self._dispatch(ack.data)
                 return ack.ack
@@ -178,7 +179,7 @@ class RadioLink:
             header = (data[0] & 0xF3) | (self._up << 3) | (self._down << 2)
             out = _ONE_BYTE[header] if len(data) == 1 else _ONE_BYTE[header] + data[1:]
             for _ in range(self.safelink_resends + 1):
-                ack = self._round_trip(out)
+                ack = self._round_trip(out, background)
                 if ack.ack:
                     self._up ^= 1
                     payload = ack.data

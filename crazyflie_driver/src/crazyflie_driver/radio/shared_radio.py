@@ -45,10 +45,12 @@ class SharedRadio:
         self._next_reopen = 0.0
         self._dropped_at = 0.0
 
-    def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
+    def round_trip(self, channel: int, datarate: int, address: bytes, data: bytes,
+                   background: bool = False) -> RadioAck:
         """Send one packet for the Crazyflie at (channel, datarate, address); returns its ack.
 
-        Setpoints and stops go before the other Crazyflies' waiting polls (see ``is_motor_command``).
+        Setpoints and stops go before the other Crazyflies' waiting polls (see ``is_motor_command``);
+        ``background`` ones (idle keep-alives) after every other waiting round trip (FairLock).
         """
         def trip(radio: Crazyradio) -> RadioAck:
             if channel != radio._channel or datarate != radio._datarate or address != radio._address:
@@ -56,14 +58,15 @@ class SharedRadio:
             if not radio.ack_enabled:
                 radio.set_ack_enable(True)   # a broadcast switched acks off
             return radio.send_packet(data)
-        return self.run(trip, urgent=is_motor_command(data))
+        return self.run(trip, urgent=is_motor_command(data), background=background)
 
-    def run(self, use: Callable[[Crazyradio], _T], urgent: bool = False, capped: bool = False) -> _T:
+    def run(self, use: Callable[[Crazyradio], _T], urgent: bool = False, capped: bool = False,
+            background: bool = False) -> _T:
         """``use(radio)`` holding the dongle for one turn of the FIFO (a broadcast burst), with the
         unplug handling of ``round_trip``; ``urgent`` turns go before the plain ones, ``capped`` urgent
         ones only while they leave ``UNICAST_RESERVE`` of the dongle's time to waiting plain ones (FairLock)."""
         lock = self.lock
-        lock.acquire(urgent=urgent, capped=capped)
+        lock.acquire(urgent=urgent, capped=capped, background=background)
         try:
             radio = self.radio
             if radio is None:

@@ -65,7 +65,8 @@ class WorkerConfig:
     enable_logging: bool = True
     enable_parameters: bool = True
     log_blocks: Tuple[LogBlockSpec, ...] = ()
-    # s between polls when nothing is queued, with sparse pacing (swarm mode); 0: the server's, eager pacing
+    # s between polls when nothing is queued, with sparse pacing, polls behind the other round trips waiting
+    # for the dongle (swarm mode); 0: the server's period, eager pacing
     keepalive_period: float = 0.0
 
 
@@ -587,7 +588,8 @@ class CrazyflieWorker:
                     self.setpoints_sent += 1
                     self.watchdog.sent(setpoint, self._clock())
                     return acked
-                acked = bool(self.cf.send_keepalive())
+                acked = bool(self.cf.send_keepalive(background=True) if self.config.keepalive_period
+                             else self.cf.send_keepalive())
                 self.keepalives_sent += 1
                 return acked
         except RadioUnplugged as e:

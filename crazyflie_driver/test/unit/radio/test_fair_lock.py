@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from crazyflie_driver.radio.fair_lock import SHARE_WINDOW_S, FairLock
+from crazyflie_driver.radio.fair_lock import BACKGROUND_MAX_WAIT_S, SHARE_WINDOW_S, FairLock
 
 
 class Clock:
@@ -26,7 +26,7 @@ def queue_up(lock: FairLock, turns, clock: Clock, log):
     threads = []
     for kind, seconds in turns:
         def turn(kind=kind, seconds=seconds):
-            lock.acquire(urgent=kind != "plain", capped=kind == "capped")
+            lock.acquire(urgent=kind in ("urgent", "capped"), capped=kind == "capped", background=kind == "idle")
             start = clock.t
             clock.t += seconds
             log.append((kind, start, clock.t))
@@ -103,3 +103,30 @@ def test_without_plain_waiters_a_capped_turn_never_waits():
 def test_a_share_out_of_range_is_refused():
     with pytest.raises(ValueError, match="capped_share"):
         FairLock(capped_share=0.0)
+
+
+def test_idle_polls_go_after_the_requests_unless_they_waited_too_long():
+    clock = Clock()
+    lock = FairLock(clock=clock)
+    log = run(lock, [("idle", 0.002), ("plain", 0.002), ("plain", 0.002), ("urgent", 0.001)], clock)
+    assert [k for k, _, _ in log] == ["urgent", "plain", "plain", "idle"]
+    # requests queued back to back for longer than an idle poll may wait: it goes once it has waited that long
+    clock = Clock()
+    lock = FairLock(clock=clock)
+    log = run(lock, [("idle", 0.002)] + [("plain", 0.05)] * 6, clock)
+    kinds = [k for k, _, _ in log]
+    idle_start = log[kinds.index("idle")][1]
+    assert 0 < kinds.index("idle") < 6 and idle_start - 0.0 <= BACKGROUND_MAX_WAIT_S + 0.05
+
+
+def test_idle_polls_count_as_unicast_for_the_reserve():
+    clock = Clock()
+    lock = FairLock(capped_share=0.75, clock=clock)
+    lock.acquire(urgent=True, capped=True)
+    clock.t += 2 * SHARE_WINDOW_S
+    log = []
+    threads = queue_up(lock, [("capped", 0.010), ("idle", 0.002)], clock, log)
+    lock.release()
+    for t in threads:
+        t.join(10.0)
+    assert [k for k, _, _ in log] == ["idle", "capped"]
