@@ -6,7 +6,7 @@ the one guard: once a Crazyflie has heard a keep-alive, one second without anoth
 until it is restarted. ``Heartbeat`` sends that keep-alive on every radio of the swarm, one packet per
 radio per ``PERIOD_S`` whatever the number of Crazyflies (a unicast keep-alive each would cost a round
 trip per Crazyflie), so a Crazyflie whose radio is unplugged or out of range stops within about a
-second. Figures and the consequences: docs/safety.md, "Radio link lost".
+second. What it costs and the consequences: the driver README, "Swarm mode".
 """
 from __future__ import annotations
 
