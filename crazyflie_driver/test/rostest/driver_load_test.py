@@ -17,8 +17,8 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (TopicRecorder, rates_per_world_second, wait_served, wait_until,  # noqa: E402
-                                     world)
+from support.rostest_support import (TopicRecorder, rates_per_world_second, start_test_node,  # noqa: E402
+                                     wait_served, wait_until)
 
 NAMES = ["cf%d" % i for i in range(1, 13)]
 
@@ -44,8 +44,7 @@ class AddResults:
 class DriverLoad(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_load_test")
-        cls.world = world(rospy.get_param("~sim_address"))
+        cls.world = start_test_node("driver_load_test")
         cls.adds = AddResults()
         cls.imu = {n: TopicRecorder("/%s/imu" % n, Imu) for n in NAMES}
         cls.battery = {n: TopicRecorder("/%s/battery" % n, Float32) for n in NAMES}

@@ -19,8 +19,8 @@ from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (TopicRecorder, rates_per_world_second, wait_for_crazyflie, wait_until,
-                                     world, world_window)  # noqa: E402
+from support.rostest_support import (TopicRecorder, rates_per_world_second, start_test_node, wait_until,  # noqa: E402
+                                     world_window)
 
 NS = "/crazyflie1"
 
@@ -34,10 +34,8 @@ def twist(x=0.0, y=0.0, z=0.0, yaw=0.0) -> Twist:
 class DriverSingle(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_single_test")
+        cls.world = start_test_node("driver_single_test", ["crazyflie1"])
         cls.uri = rospy.get_param("~uri")
-        cls.world = world(rospy.get_param("~sim_address"))
-        wait_for_crazyflie("crazyflie1", 60.0)
         cls.imu = TopicRecorder(NS + "/imu", Imu)
         cls.battery = TopicRecorder(NS + "/battery", Float32)
         cls.log1 = TopicRecorder(NS + "/log1", GenericLogData)

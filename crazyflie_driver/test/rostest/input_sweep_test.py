@@ -36,7 +36,7 @@ from crazyflie_driver.sim.world_clock import WorldClock
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import (RosoutRecorder, TopicRecorder, add_crazyflies, registered_services,  # noqa: E402
-                                     wait_until, world)
+                                     start_test_node, wait_connected, wait_until)
 
 SEED = 16
 URI = "radio://0/80/2M/E7E7E7E701"
@@ -130,8 +130,7 @@ TOPICS: Sequence[Tuple[str, Callable[[], Any], Sequence[Tuple[str, bool, str, Ca
 class InputSweep(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("input_sweep_test")
-        cls.world = world(rospy.get_param("~sim_address"))
+        cls.world = start_test_node("input_sweep_test")
         cls.clock = WorldClock(cls.world.ping)
         cls.rosout = RosoutRecorder("/crazyflie_server")
         cls.status = TopicRecorder(NS + "/status", DiagnosticStatus)
@@ -141,8 +140,7 @@ class InputSweep(unittest.TestCase):
         cls.pubs = {topic: rospy.Publisher(NS + "/" + topic, factory().__class__, queue_size=100)
                     for topic, factory, _ in TOPICS}
         cls.stop_pub = rospy.Publisher(NS + "/cmd_stop", EmptyMsg, queue_size=10)
-        everything = list(cls.pubs.values()) + [cls.stop_pub]
-        assert wait_until(lambda: all(p.get_num_connections() > 0 for p in everything), 10.0)
+        assert wait_connected(list(cls.pubs.values()) + [cls.stop_pub], 10.0)
         cls.refused_calls: List[str] = []       # service answers to bad values
         cls.accepted_bad: List[str] = []        # a bad value a service said OK to (must stay empty)
 

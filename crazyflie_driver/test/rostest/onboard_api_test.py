@@ -20,7 +20,7 @@ from crazyflie_driver.msg import FullState, GenericLogData, Hover, Position, Tra
 from crazyflie_driver.srv import GoTo, StartTrajectory, UpdateParams, UploadTrajectory
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import TopicRecorder, start_test_node, wait_until  # noqa: E402
 
 NS = "/crazyflie1"
 SERVICES = {"takeoff": "Takeoff", "land": "Land", "stop": "Stop", "go_to": "GoTo",
@@ -31,10 +31,8 @@ SERVICES = {"takeoff": "Takeoff", "land": "Land", "stop": "Stop", "go_to": "GoTo
 class OnboardApi(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("onboard_api_test")
+        cls.world = start_test_node("onboard_api_test", ["crazyflie1"])
         cls.uri = rospy.get_param("~uri")
-        cls.world = world(rospy.get_param("~sim_address"))
-        wait_for_crazyflie("crazyflie1", 60.0)
         for s in SERVICES:
             rospy.wait_for_service(NS + "/" + s, 10.0)
         cls.locsrv = TopicRecorder(NS + "/locsrv", GenericLogData)

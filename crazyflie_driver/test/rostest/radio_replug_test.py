@@ -26,7 +26,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import RosoutRecorder, TopicRecorder, start_test_node, wait_until  # noqa: E402
 
 from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
 
@@ -38,10 +38,8 @@ BACK_WITHIN_S = 1.0       # world seconds from the re-plug to the first imu and 
 class RadioReplug(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("radio_replug_test")
-        cls.world = world(rospy.get_param("~sim_address"))
+        cls.world = start_test_node("radio_replug_test", ["crazyflie1"])
         cls.clock = WorldClock(cls.world.ping)
-        wait_for_crazyflie("crazyflie1", 60.0)
         cls.rosout = RosoutRecorder("/crazyflie_server")
         cls.imu = TopicRecorder("/crazyflie1/imu", Imu)
         cls.battery = TopicRecorder("/crazyflie1/battery", Float32)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
 import unittest
 
 import rospy
@@ -22,7 +21,8 @@ from geometry_msgs.msg import Twist
 from rosgraph_msgs.msg import Log
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import (Repeating, RosoutRecorder, TopicRecorder, start_test_node,  # noqa: E402
+                                     wait_connected, wait_until)
 
 from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
 
@@ -37,31 +37,24 @@ class Stick:
     def __init__(self, name: str) -> None:
         self.pub = rospy.Publisher("/%s/cmd_vel" % name, Twist, queue_size=1)
         self.thrust = None
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self.run, daemon=True)
-        self.thread.start()
+        self.stream = Repeating(self.send, 0.02)
 
-    def run(self) -> None:
-        while not self.stop.is_set():
-            if self.thrust is not None:
-                msg = Twist()
-                msg.linear.z = self.thrust
-                self.pub.publish(msg)
-            self.stop.wait(0.02)
+    def send(self) -> None:
+        if self.thrust is not None:
+            msg = Twist()
+            msg.linear.z = self.thrust
+            self.pub.publish(msg)
 
 
 class WatchdogNotice(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("watchdog_notice_test")
-        cls.world = world(rospy.get_param("~sim_address"))
+        cls.world = start_test_node("watchdog_notice_test", URIS)
         cls.clock = WorldClock(cls.world.ping)
-        for name in URIS:
-            wait_for_crazyflie(name, 60.0)
         cls.rosout = RosoutRecorder("/crazyflie_server")
         cls.status = {n: TopicRecorder("/%s/status" % n, DiagnosticStatus) for n in URIS}
         cls.sticks = {n: Stick(n) for n in URIS}
-        rospy.sleep(1.0)      # the cmd_vel subscriptions connect
+        assert wait_connected([s.pub for s in cls.sticks.values()], 10.0)
 
     @classmethod
     def tearDownClass(cls):
@@ -69,7 +62,7 @@ class WatchdogNotice(unittest.TestCase):
             s.thrust = 0.0
         rospy.sleep(0.2)
         for s in cls.sticks.values():
-            s.stop.set()
+            s.stream.stop()
 
     def state(self, name):
         return self.world.control("vehicle_state", uri=URIS[name])
