@@ -30,10 +30,13 @@ def server():
         yield server_address
 
 
-def run_tool(server, tmp_path, name, *args):
-    env = dict(os.environ)
-    env.update(CRAZYFLIE_BACKEND="sim", CRAZYFLIE_SIM_ADDRESS=server,
-               CRAZYFLIE_TOC_CACHE=str(tmp_path / "toc"),
+def run_tool(sim_address, tmp_path, name, *args, sim_backend=True):
+    """The tool ``name`` as a process against the world at ``sim_address``; ``sim_backend=False``: as the
+    chapter types it, without CRAZYFLIE_BACKEND, so it looks for a real Crazyradio."""
+    env = {k: v for k, v in os.environ.items() if k != "CRAZYFLIE_BACKEND"}
+    if sim_backend:
+        env["CRAZYFLIE_BACKEND"] = "sim"
+    env.update(CRAZYFLIE_SIM_ADDRESS=sim_address, CRAZYFLIE_TOC_CACHE=str(tmp_path / "toc"),
                PYTHONPATH=os.pathsep.join([os.path.join(REPO, "crazyflie_driver", "src"),
                                            os.path.join(REPO, "crazyflie_tools", "src")]))
     return subprocess.run([sys.executable, os.path.join(SCRIPTS, name)] + list(args), env=env,
@@ -56,19 +59,8 @@ def test_scan_default_address_prints_the_chapter_s_uri(tmp_path):
     assert (r.returncode, r.stdout) == (0, "Configured Dongle with version 0.53\nradio://0/100/2M\n"), r.stderr
 
 
-def run_without_sim_backend(tmp_path, name, sim_address, *args):
-    """A tool as the chapter types it: no CRAZYFLIE_BACKEND, so it looks for a real Crazyradio."""
-    env = {k: v for k, v in os.environ.items() if k != "CRAZYFLIE_BACKEND"}
-    env.update(CRAZYFLIE_SIM_ADDRESS=sim_address, CRAZYFLIE_TOC_CACHE=str(tmp_path / "toc"),
-               PYTHONPATH=os.pathsep.join([os.path.join(REPO, "crazyflie_driver", "src"),
-                                           os.path.join(REPO, "crazyflie_tools", "src")]))
-    return subprocess.run([sys.executable, os.path.join(SCRIPTS, name)] + list(args), env=env,
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
-                          timeout=60)
-
-
 def test_scan_without_dongle_points_at_running_world(server, tmp_path):
-    r = run_without_sim_backend(tmp_path, "scan", server)
+    r = run_tool(server, tmp_path, "scan", sim_backend=False)
     assert r.returncode == 1 and "Traceback" not in r.stderr
     lines = r.stderr.splitlines()
     assert lines[0].startswith("scan: error: no Crazyradio found")
@@ -77,7 +69,7 @@ def test_scan_without_dongle_points_at_running_world(server, tmp_path):
 
 
 def test_scan_without_dongle_or_world_says_only_that(tmp_path):
-    r = run_without_sim_backend(tmp_path, "scan", "127.0.0.1:%d" % free_port())
+    r = run_tool("127.0.0.1:%d" % free_port(), tmp_path, "scan", sim_backend=False)
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert r.stderr.startswith("scan: error: no Crazyradio found") and r.stderr.count("\n") == 1
 

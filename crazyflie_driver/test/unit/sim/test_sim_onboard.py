@@ -34,22 +34,16 @@ def yaw_deg(v):
 
 
 @pytest.mark.parametrize("firmware", GENERATIONS)
-def test_positive_roll_moves_toward_minus_y(firmware):
+@pytest.mark.parametrize("angle, toward, across", [
+    pytest.param("roll", 1, 0, id="positive roll moves toward -y"),
+    pytest.param("pitch", 0, 1, id="positive pitch moves toward -x"),    # logged pitch: legacy nose-up-positive
+])
+def test_a_positive_angle_moves_toward_minus_its_axis_and_logs_as_given(firmware, angle, toward, across):
     w, v = airborne(firmware)
-    fly(w, v, 1.0, roll=5.0)
+    fly(w, v, 1.0, **{angle: 5.0})
     p = v.pose()[0]
-    assert p[1] < -0.1 and abs(p[0]) < 0.03
-    assert v.read("stabilizer.roll") == pytest.approx(5.0, abs=1.5)
-
-
-@pytest.mark.parametrize("firmware", GENERATIONS)
-def test_positive_pitch_moves_toward_minus_x(firmware):
-    w, v = airborne(firmware)
-    fly(w, v, 1.0, pitch=5.0)
-    p = v.pose()[0]
-    assert p[0] < -0.1 and abs(p[1]) < 0.03
-    # logged pitch is the legacy nose-up-positive angle
-    assert v.read("stabilizer.pitch") == pytest.approx(5.0, abs=1.5)
+    assert p[toward] < -0.1 and abs(p[across]) < 0.03
+    assert v.read("stabilizer." + angle) == pytest.approx(5.0, abs=1.5)
 
 
 @pytest.mark.parametrize("firmware", GENERATIONS)
