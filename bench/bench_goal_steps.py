@@ -38,6 +38,8 @@ sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
 sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "test"))   # controller_support.world_flight
 
+import bench_support as bs  # noqa: E402
+
 from chapter_gains import chapter_gains  # noqa: E402
 from crazyflie_controller.position_controller import ControllerConfig, PositionController, State  # noqa: E402
 
@@ -178,9 +180,7 @@ def main() -> int:
             "command: /usr/bin/python3 bench/bench_goal_steps.py"]
     print("\n".join(tail))
     if args.out:
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as fh:
-            fh.write("\n".join(lines + tail) + "\n")
+        bs.write_lines(args.out, lines + tail)
     return 0
 
 
