@@ -10,7 +10,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Mapping, Optional
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from crazyflie_driver.mocap import vrpn_protocol as vp
 from crazyflie_driver.mocap.frames import (quaternion_to_rotation_vector, y_up_to_z_up_quaternion, y_up_to_z_up_vector)
@@ -150,6 +150,12 @@ class VrpnBridge:
                 self._log(logging.INFO, "VRPN tracker %r published as %r" % (tracker, clean))
             return clean
 
+    def _z_up(self, vector: vp.Vec3, quaternion: vp.Quat) -> Tuple[vp.Vec3, vp.Quat]:
+        """A vector and a rotation in ROS's frame (z up): converted when the motion capture sends y up."""
+        if self.config.y_up:
+            return y_up_to_z_up_vector(vector), y_up_to_z_up_quaternion(quaternion)
+        return vector, quaternion
+
     def _key(self, clean: str, sensor: int) -> str:
         return "%s/%d" % (clean, sensor) if self.config.process_sensor_id else clean
 
@@ -157,9 +163,7 @@ class VrpnBridge:
         clean = self.ros_name(report.tracker)
         if clean is None:
             return None
-        pos, quat = report.position, report.orientation
-        if self.config.y_up:
-            pos, quat = y_up_to_z_up_vector(pos), y_up_to_z_up_quaternion(quat)
+        pos, quat = self._z_up(report.position, report.orientation)
         key = self._key(clean, report.sensor)
         self.staleness.seen(key, report.receive_time)
         return PoseOut(key, frame_name(key), pos, quat, report)
@@ -168,9 +172,7 @@ class VrpnBridge:
         clean = self.ros_name(report.tracker)
         if clean is None:
             return None
-        lin, rot = report.linear, report.rotation
-        if self.config.y_up:
-            lin, rot = y_up_to_z_up_vector(lin), y_up_to_z_up_quaternion(rot)
+        lin, rot = self._z_up(report.linear, report.rotation)
         if report.dt > 0:
             rv = quaternion_to_rotation_vector(rot)
             ang = (rv[0] / report.dt, rv[1] / report.dt, rv[2] / report.dt)
