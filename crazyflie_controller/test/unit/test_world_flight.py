@@ -53,15 +53,12 @@ def test_takeoff_overshoot_original_vs_fixed_hover_and_landing():
     assert math.hypot(x, y) < 0.05
 
 
-def test_hover_thrust_fit_after_the_takeoff_glide_removes_the_slow_dip():
-    """The take-off glide's integrator run-down and the lift-off estimate's error used to excite the
-    chapter's slow Z mode: ≈ 3 cm low ≈ 2 s after the glide arrived, 15-20 s to settle. With the
-    integral put back to the lift-off estimate and the hover-thrust fit, the height stays within
-    1 cm from 3 s after arrival (seed 1, 32 g: within 7 mm from arrival)."""
+def taking_off_side_by_side(configs):
+    """One Crazyflie (32 g) per named ControllerConfig in one world (they do not interact), each told to
+    take off to (0, 0, 0.5); returns the flights by name, 0.2 s after the take-off began."""
     flights = {}
-    for name, refine in (("before", 0.0), ("fixed", 1.5)):
-        world = flights["before"].world if flights else None
-        config = ControllerConfig(X, Y, Z, YAW, hover_refine_time=refine)
+    for name, config in configs.items():
+        world = next(iter(flights.values())).world if flights else None
         flights[name] = world_flight.WorldFlight(PositionController(config), world=world, name=name, mass=0.032)
     both = list(flights.values())
     both[0].wait_for_pose()
@@ -69,6 +66,17 @@ def test_hover_thrust_fit_after_the_takeoff_glide_removes_the_slow_dip():
         f.controller.set_goal(0.0, 0.0, 0.5, 0.0)
     world_flight.run_together(both, 0.2)
     assert all(f.takeoff() for f in both)
+    return flights
+
+
+def test_hover_thrust_fit_after_the_takeoff_glide_removes_the_slow_dip():
+    """The take-off glide's integrator run-down and the lift-off estimate's error used to excite the
+    chapter's slow Z mode: ≈ 3 cm low ≈ 2 s after the glide arrived, 15-20 s to settle. With the
+    integral put back to the lift-off estimate and the hover-thrust fit, the height stays within
+    1 cm from 3 s after arrival (seed 1, 32 g: within 7 mm from arrival)."""
+    flights = taking_off_side_by_side({name: ControllerConfig(X, Y, Z, YAW, hover_refine_time=refine)
+                                       for name, refine in (("before", 0.0), ("fixed", 1.5))})
+    both = list(flights.values())
     arrived = {}
     while len(arrived) < 2:
         world_flight.run_together(both, 0.02)
@@ -95,17 +103,9 @@ def hovering_side_by_side(settle=12.0):
     """"before" and "fixed" controllers on two Crazyflies of one world (they do not interact),
     taken off to (0, 0, 0.5) and hovered ``settle`` s after lift-off, past the take-off's slow
     z transient (the chapter's Z gains: ≈ 3 cm low 5 s after lift-off, within 1 cm after 11 s)."""
-    flights = {}
-    for name, kw in (("before", BEFORE), ("fixed", {})):
-        world = flights["before"].world if flights else None
-        flights[name] = world_flight.WorldFlight(PositionController(ControllerConfig(X, Y, Z, YAW, **kw)),
-                                                 world=world, name=name, mass=0.032)
+    flights = taking_off_side_by_side({name: ControllerConfig(X, Y, Z, YAW, **kw)
+                                       for name, kw in (("before", BEFORE), ("fixed", {}))})
     both = list(flights.values())
-    both[0].wait_for_pose()
-    for f in both:
-        f.controller.set_goal(0.0, 0.0, 0.5, 0.0)
-    world_flight.run_together(both, 0.2)
-    assert all(f.takeoff() for f in both)
     while any(f.controller.state == State.TAKING_OFF for f in both):
         world_flight.run_together(both, 0.02)
     world_flight.run_together(both, settle)
