@@ -50,12 +50,24 @@ FIRST_FIX_WRITERS = 8
 SWARM_KEEPALIVE_S = 1.0 / radio_budget.KEEPALIVE_FLOOR_HZ
 
 
-def worker_config(cf: SwarmCrazyflie, options: SwarmOptions) -> WorkerConfig:
+def pose_periods(config: SwarmConfig, options: SwarmOptions) -> Dict[str, int]:
+    """Each Crazyflie's onboard pose topic period (ms, 0: none): ``~pose_period_ms``, or where it is
+    ``auto`` what its radio's budget allows (``radio_budget.pose_log_period_ms``)."""
+    if options.pose_period_ms is not None:
+        return {cf.tf_prefix: options.pose_period_ms for cf in config.crazyflies}
+    by_dongle: Dict[int, List] = {}
+    for cf in config.crazyflies:
+        by_dongle.setdefault(parse_uri(cf.uri).index, []).append(parse_uri(cf.uri))
+    return {cf.tf_prefix: radio_budget.pose_log_period_ms(by_dongle[parse_uri(cf.uri).index])
+            for cf in config.crazyflies}
+
+
+def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0) -> WorkerConfig:
     """No parameter read-back at connect: reading every parameter of 49 Crazyflies one by one takes
     ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types.
     Polls at the keep-alive floor: nothing streams setpoints, and 17 Crazyflies polling every 10 ms
     would fill their radio."""
-    blocks = (pose_block(options.pose_period_ms),) if options.pose_period_ms else ()
+    blocks = (pose_block(pose_period_ms),) if pose_period_ms else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
                         enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S)
 
@@ -99,6 +111,7 @@ class RosSwarm:
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self._first_fixes: Optional[ThreadPoolExecutor] = None
         self.heartbeat: Optional[Heartbeat] = None
+        self._pose_periods: Dict[str, int] = {}
 
     # -- start-up ---------------------------------------------------------------------------------
     def start(self) -> None:
@@ -106,6 +119,11 @@ class RosSwarm:
             self.server.budget_setpoint_rate = 0.0     # nothing streams setpoints in swarm mode
         t0 = time.monotonic()
         by_name = {cf.tf_prefix: cf for cf in self.config.crazyflies}
+        self._pose_periods = pose_periods(self.config, self.options)
+        for period in sorted(set(self._pose_periods.values())):
+            rospy.loginfo("swarm: onboard pose topic %s for %d Crazyflies%s", "every %d ms" % period if period
+                          else "off", sum(p == period for p in self._pose_periods.values()),
+                          " (radio budget)" if self.options.pose_period_ms is None else "")
         with ThreadPoolExecutor(max_workers=max(1, min(64, len(by_name)))) as pool:
             results = list(pool.map(self._add, self.config.crazyflies))
         self.connect_s = time.monotonic() - t0
@@ -138,7 +156,7 @@ class RosSwarm:
     def _add(self, cf: SwarmCrazyflie):
         """Connect one Crazyflie and configure it: (member, None) or (None, reason)."""
         try:
-            ros = self.server.add(worker_config(cf, self.options))
+            ros = self.server.add(worker_config(cf, self.options, self._pose_periods.get(cf.tf_prefix, 0)))
         except (rospy.ServiceException, CrazyflieError, ValueError) as e:
             return None, str(e)
         member = SwarmMember(cf.tf_prefix, str(ros.config.uri), ros.worker, ros.onboard_commands)

@@ -15,6 +15,7 @@ fetches a log packet; at least ``KEEPALIVE_FLOOR_HZ``.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
@@ -36,6 +37,10 @@ BROADCAST_SWITCHES = 4              # control transfers per broadcast burst on a
 #: Motion-capture frames/s a dongle broadcasts at least, whatever its budget: the onboard estimator still
 #: holds a hover within about 1 cm at 10 Hz (docs/diagnostics.md, "Radio budget").
 MOCAP_FLOOR_HZ = 10.0
+#: Share of a dongle's time a swarm's onboard pose topics take at most when the server chooses their period.
+POSE_LOG_SHARE = 0.1
+#: Shortest period of a chosen pose topic (ms): HEAD's 10 Hz.
+POSE_LOG_MIN_PERIOD_MS = 100
 
 
 @dataclass(frozen=True)
@@ -127,6 +132,15 @@ def mocap_rate_hz(members: Sequence[CrazyflieDemand], wanted_hz: float, full_pos
     burst = mocap_broadcast(0, len(members), 1.0, full_pose)
     free = max(0.0, 1.0 - UNICAST_RESERVE - unicast)
     return max(min(wanted_hz, MOCAP_FLOOR_HZ), min(wanted_hz, free / burst_s(burst.packets)))
+
+
+def pose_log_period_ms(uris: Sequence[RadioUri]) -> int:
+    """The onboard pose topic's log period (ms, a multiple of 100) for Crazyflies sharing one dongle, so
+    that their log packets (one round trip each) take at most ``POSE_LOG_SHARE`` of it: 100 ms for up to
+    four, 400 ms for 16 or 17."""
+    need_ms = 1000.0 * len(uris) * round_trip_cost_s(uris) / POSE_LOG_SHARE
+    steps = max(1, -(-int(math.ceil(need_ms - 1e-9)) // POSE_LOG_MIN_PERIOD_MS))
+    return steps * POSE_LOG_MIN_PERIOD_MS
 
 
 def mocap_plan(demands: Sequence[CrazyflieDemand], wanted_hz: float, full_pose: bool = True) -> List[BroadcastDemand]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, Optional
 
 from crazyflie_driver.errors import SwarmConfigError
 from crazyflie_driver.radio.broadcast import DEFAULT_REPEAT_INTERVAL_S, DEFAULT_REPEATS
@@ -34,7 +34,7 @@ class SwarmOptions:
     broadcast_repeats: int = DEFAULT_REPEATS
     broadcast_interval: float = DEFAULT_REPEAT_INTERVAL_S
     enable_logging: bool = False
-    pose_period_ms: int = 100
+    pose_period_ms: Optional[int] = None     # None ("auto"): the radio budget chooses (radio_budget.pose_log_period_ms)
     dongle_wait: float = 30.0
     mocap_rate: float = 100.0       # Hz, the motion capture's frame rate: the most the stream sends
     emergency_watchdog: bool = True     # broadcast the emergency-stop watchdog keep-alive (swarm_heartbeat)
@@ -73,10 +73,15 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
     repeats = _number("broadcast_repeats", params.get("broadcast_repeats", DEFAULT_REPEATS), 1)
     if repeats != int(repeats):
         raise SwarmConfigError("parameter ~broadcast_repeats must be a whole number, got %r" % (repeats,))
-    period = _number("pose_period_ms", params.get("pose_period_ms", 100), 0)
-    if period != int(period) or 0 < period < 10 or period > 2550:
-        raise SwarmConfigError("parameter ~pose_period_ms must be 0 (no pose topic) or 10..2550 ms in whole "
-                               "milliseconds, got %r" % (period,))
+    period = params.get("pose_period_ms", "auto")
+    if isinstance(period, str) and period.strip().lower() == "auto":
+        period = None
+    else:
+        period = _number("pose_period_ms", period, 0)
+        if period != int(period) or 0 < period < 10 or period > 2550:
+            raise SwarmConfigError("parameter ~pose_period_ms must be auto (the radio budget chooses), 0 (no pose "
+                                   "topic) or 10..2550 ms in whole milliseconds, got %r" % (period,))
+        period = int(period)
     return SwarmOptions(
         swarm_file=str(params.get("swarm_file", "")),
         swarm_types_file=str(params.get("swarm_types_file", "") or ""),
@@ -92,7 +97,7 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
         broadcast_interval=_number("broadcast_interval", params.get("broadcast_interval",
                                                                    DEFAULT_REPEAT_INTERVAL_S), 0),
         enable_logging=_bool("enable_logging", params.get("enable_logging", False)),
-        pose_period_ms=int(period),
+        pose_period_ms=period,
         dongle_wait=_number("dongle_wait", params.get("dongle_wait", 30.0), 0),
         mocap_rate=_number("mocap_rate", params.get("mocap_rate", 100.0), 0, strict=True),
         emergency_watchdog=_bool("emergency_watchdog", params.get("emergency_watchdog", True)),

@@ -200,3 +200,11 @@ def test_mocap_plan_gives_each_dongle_its_own_rate():
     plan = rb.mocap_plan(members, 100.0)
     assert [(b.dongle, b.packets) for b in plan] == [(0, 9), (1, 1)]
     assert plan[0].frames_hz == pytest.approx(rb.mocap_rate_hz(grid(17), 100.0)) and plan[1].frames_hz == 100.0
+
+
+def test_the_pose_topic_period_keeps_its_log_within_its_share():
+    uris = lambda n: [parse_uri("radio://0/80/2M/E7E7E7E7%02X" % i) for i in range(1, n + 1)]   # noqa: E731
+    assert [rb.pose_log_period_ms(uris(n)) for n in (1, 3, 4, 5, 16, 17)] == [100, 100, 100, 200, 400, 400]
+    for n in (1, 4, 9, 17, 40):
+        period = rb.pose_log_period_ms(uris(n))
+        assert n * (1000.0 / period) * rb.round_trip_cost_s(uris(n)) <= rb.POSE_LOG_SHARE + 1e-9

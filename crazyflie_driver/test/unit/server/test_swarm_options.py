@@ -10,7 +10,10 @@ from crazyflie_driver.server.swarm_options import options_from_params
 def test_defaults_and_patterns_by_source():
     o = options_from_params({"swarm_file": "s.yaml"})
     assert (o.mocap, o.stale_after, o.stale_hold, o.broadcast_repeats, o.enable_logging, o.pose_period_ms) == \
-        ("none", 0.2, 0.5, 15, False, 100)
+        ("none", 0.2, 0.5, 15, False, None)
+    assert options_from_params({"pose_period_ms": "auto"}).pose_period_ms is None
+    assert options_from_params({"pose_period_ms": 500}).pose_period_ms == 500
+    assert options_from_params({"pose_period_ms": 0}).pose_period_ms == 0
     assert options_from_params({"mocap": "topic"}).mocap_pattern == "/vrpn_client_node/{name}/pose"
     assert options_from_params({"mocap": "TF", "mocap_pattern": "vicon/{name}/{name}"}).mocap_pattern == \
         "vicon/{name}/{name}"
@@ -23,7 +26,8 @@ def test_defaults_and_patterns_by_source():
     ({"stale_hold": "soon"}, "~stale_hold must be a number >= 0"),
     ({"broadcast_repeats": 0}, "~broadcast_repeats must be a number >= 1"),
     ({"broadcast_repeats": 2.5}, "whole number"),
-    ({"pose_period_ms": 5}, "~pose_period_ms must be 0"),
+    ({"pose_period_ms": 5}, "~pose_period_ms must be auto"),
+    ({"pose_period_ms": "often"}, "~pose_period_ms must be a number"),
     ({"position_only": "maybe"}, "~position_only must be true or false"),
 ])
 def test_faults_named(params, words):
