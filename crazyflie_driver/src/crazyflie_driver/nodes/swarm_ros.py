@@ -52,14 +52,10 @@ SWARM_KEEPALIVE_S = 1.0 / radio_budget.KEEPALIVE_FLOOR_HZ
 
 def pose_periods(config: SwarmConfig, options: SwarmOptions) -> Dict[str, int]:
     """Each Crazyflie's onboard pose topic period (ms, 0: none): ``~pose_period_ms``, or where it is
-    ``auto`` what its radio's budget allows (``radio_budget.pose_log_period_ms``)."""
+    ``auto`` what its radio's budget allows."""
     if options.pose_period_ms is not None:
         return {cf.tf_prefix: options.pose_period_ms for cf in config.crazyflies}
-    by_dongle: Dict[int, List] = {}
-    for cf in config.crazyflies:
-        by_dongle.setdefault(parse_uri(cf.uri).index, []).append(parse_uri(cf.uri))
-    return {cf.tf_prefix: radio_budget.pose_log_period_ms(by_dongle[parse_uri(cf.uri).index])
-            for cf in config.crazyflies}
+    return radio_budget.pose_log_periods({cf.tf_prefix: cf.uri for cf in config.crazyflies})
 
 
 def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0) -> WorkerConfig:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
 from crazyflie_driver.protocol.localization import POSES_PER_PACKET, POSITIONS_PER_PACKET
@@ -141,6 +141,15 @@ def pose_log_period_ms(uris: Sequence[RadioUri]) -> int:
     need_ms = 1000.0 * len(uris) * round_trip_cost_s(uris) / POSE_LOG_SHARE
     steps = max(1, -(-int(math.ceil(need_ms - 1e-9)) // POSE_LOG_MIN_PERIOD_MS))
     return steps * POSE_LOG_MIN_PERIOD_MS
+
+
+def pose_log_periods(uris: Mapping[str, str]) -> Dict[str, int]:
+    """``pose_log_period_ms`` for each Crazyflie (by name, its URI), from the Crazyflies sharing its dongle."""
+    parsed = {name: parse_uri(uri) for name, uri in uris.items()}
+    by_dongle: Dict[int, List[RadioUri]] = {}
+    for u in parsed.values():
+        by_dongle.setdefault(u.index, []).append(u)
+    return {name: pose_log_period_ms(by_dongle[u.index]) for name, u in parsed.items()}
 
 
 def mocap_plan(demands: Sequence[CrazyflieDemand], wanted_hz: float, full_pose: bool = True) -> List[BroadcastDemand]:

@@ -208,3 +208,8 @@ def test_the_pose_topic_period_keeps_its_log_within_its_share():
     for n in (1, 4, 9, 17, 40):
         period = rb.pose_log_period_ms(uris(n))
         assert n * (1000.0 / period) * rb.round_trip_cost_s(uris(n)) <= rb.POSE_LOG_SHARE + 1e-9
+    periods = rb.pose_log_periods({"a": "radio://0/80/2M/E7E7E7E701", "b": "radio://0/80/2M/E7E7E7E702",
+                                   "c": "radio://1/90/2M/E7E7E7E703"})
+    assert periods == {"a": 100, "b": 100, "c": 100}
+    many = {"cf%d" % i: "radio://%d/80/2M/E7E7E7E7%02X" % (0 if i <= 17 else 1, i) for i in range(1, 21)}
+    assert set(rb.pose_log_periods(many).items()) == {("cf%d" % i, 400 if i <= 17 else 100) for i in range(1, 21)}
