@@ -52,6 +52,8 @@ from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
+from crazyflie_driver.server.safety import SafetyConfig
+from crazyflie_driver.server.safety_actions import ObservedOnboardCommands
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -137,8 +139,8 @@ class RosCrazyflie(WorkerListener):
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
-        self._onboard = RosOnboardCommands(self.ns, config.uri, OnboardCommands(
-            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri,
+        self._onboard = RosOnboardCommands(self.ns, config.uri, ObservedOnboardCommands(
+            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri, worker.safety,
             on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent))
         self.publish_status()
 
@@ -306,6 +308,9 @@ class RosCrazyflie(WorkerListener):
     def on_emergency(self) -> None:
         self.publish_status()
 
+    def on_safety(self, event: str) -> None:
+        self.publish_status()
+
     def on_worker_error(self, message: str, gave_up: bool) -> None:
         self.publish_status(force=True)
         if gave_up and self._on_gave_up is not None:
@@ -357,6 +362,8 @@ class CrazyflieServer:
         self._radio_windows: Dict[int, CounterWindow] = {}
         self.budget_setpoint_rate = float(rospy.get_param("~budget_setpoint_rate", radio_budget.DEFAULT_SETPOINT_HZ))
         self.budget_pose_rate = float(rospy.get_param("~budget_pose_rate", 0.0))
+        self._landing_lock = threading.Lock()
+        self._landed = False
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         rospy.Service("/add_crazyflie", AddCrazyflie, self._on_add)
         rospy.Service("/remove_crazyflie", RemoveCrazyflie, self._on_remove)
@@ -480,8 +487,15 @@ class CrazyflieServer:
         rospy.loginfo("adding %s as %r", key, config.tf_prefix)
         ros = None
         try:
+            safety = SafetyConfig.from_params(lambda name, default: rospy.get_param(
+                namespace(config.tf_prefix) + "/" + name, rospy.get_param("~" + name, default)))
+        except ValueError as e:
+            rospy.logerr("add_crazyflie: %s", e)
+            raise rospy.ServiceException(str(e))
+        try:
             ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key))
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
+            worker.safety.configure(safety)
         except Exception as e:
             if ros is not None:
                 ros.detach()
@@ -525,7 +539,31 @@ class CrazyflieServer:
         self._replan_quietly()
         return RemoveCrazyflieResponse()
 
+    def land_all(self, reason: str = "") -> None:
+        """Land or descend every Crazyflie in the air, within ``~safety/shutdown_timeout_s`` (the
+        server's shutdown; runs before the links close). Once: a second caller waits for the first."""
+        with self._landing_lock:
+            if not self._landed:
+                self._landed = True
+                self._land_all(reason)
+
+    def _land_all(self, reason: str) -> None:
+        workers = self.registry.workers()
+        budget = max([w.safety.config.shutdown_timeout_s for w in workers] or [0.0])
+        flying = [w for w in workers if w.begin_safe_shutdown(budget)]
+        if not flying:
+            return
+        rospy.logwarn("crazyflie_server shutting down (%s): bringing down %s within %.1f s"
+                      % (reason or "shutdown", ", ".join(w.uri for w in flying), budget))
+        deadline = time.monotonic() + budget
+        while time.monotonic() < deadline and not all(w.safe_to_close() for w in flying):
+            time.sleep(0.02)
+        left = [w.uri for w in flying if not w.safe_to_close()]
+        if left:
+            rospy.logerr("crazyflie_server: %s still descending when the shutdown budget ran out" % ", ".join(left))
+
     def shutdown(self) -> None:
+        self.land_all("shutdown")
         self.registry.shutdown()
 
 
@@ -555,6 +593,8 @@ def start_server(timeout: float, add_timeout: float) -> CrazyflieServer:
     """The services and the diagnostics of a server in this (already initialised) node."""
     forward_library_log()
     server = CrazyflieServer(CrazyflieRegistry(make_factory(timeout)), add_timeout)
+    # before rospy's shutdown flag rises: rospy.spin() keeps the process alive while they land
+    rospy.core.add_preshutdown_hook(server.land_all)
     rospy.on_shutdown(server.shutdown)
     return server
 
@@ -571,6 +611,7 @@ def main() -> None:
         raise SystemExit(1)
     rospy.loginfo("crazyflie_server ready (backend: %s)", os.environ.get("CRAZYFLIE_BACKEND", "usb"))
     rospy.spin()
+    server.land_all("shutdown")     # the process ends after this: never while a Crazyflie comes down
 
 
 if __name__ == "__main__":

@@ -2,8 +2,8 @@
 
 One :class:`SafetyMonitor` per Crazyflie is told what the server sends and receives (setpoints and
 their thrust, poses, high-level commands, battery voltage) and, when polled, says what to do
-instead of the user's stream (:class:`Action`); whoever streams to the Crazyflie carries the actions
-out. The reactions:
+instead of the user's stream (:class:`Action`); the worker only carries the actions out. The
+reactions (docs/safety.md has the figures and why):
 
 * setpoint source silent while flying (``setpoint_silence_s``): with onboard control (a firmware
   with the high-level commander and a position estimate: streaming port-7 setpoints, the

@@ -48,6 +48,9 @@ def worker_status(worker: Any) -> CrazyflieStatus:
             worker.restarts, worker.last_unexpected_error)
     else:
         level, message = OK, "running"
+    safety_level, safety_message, safety_values = worker.safety.report()
+    if safety_level > level:
+        level, message = safety_level, safety_message
     values = (
         ("uri", worker.uri),
         ("state", state),
@@ -59,7 +62,7 @@ def worker_status(worker: Any) -> CrazyflieStatus:
         ("last_error", worker.last_unexpected_error),
         ("listener_errors", str(worker.listener_errors)),
         ("log_packets_lost", str(worker.lost_log_packets())),
-    )
+    ) + safety_values
     for topic, t in sorted(worker.topic_timing.items()):
         values += (("%s age_s" % topic, "%.3f" % t.age), ("%s rate_hz" % topic, "%.1f" % t.rate),
                    ("%s lost" % topic, str(t.lost)))

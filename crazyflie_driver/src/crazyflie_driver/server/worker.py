@@ -35,8 +35,8 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.diagnostics import CrazyflieHealth, Reports
-from crazyflie_driver.server.log_plan import (DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS, RADIO_RSSI_TOPIC,
-                                              RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock, check_log_limits,
+from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
+                                              RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock, check_log_limits,
                                               log_packet_rate, plan_log_blocks)
 from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
 from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
@@ -46,6 +46,8 @@ from crazyflie_driver.server.poll_pacer import PollPacer
 from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
 from crazyflie_driver.protocol.toc import toc_types
 from crazyflie_driver.server import watchdog_notice
+from crazyflie_driver.server import safety_actions
+from crazyflie_driver.server.safety import SafetyConfig, SafetyMonitor
 
 LOG = logging.getLogger("crazyflie_driver.server")
 
@@ -104,6 +106,9 @@ class WorkerListener:
     def on_worker_error(self, message: str, gave_up: bool) -> None:
         """An unexpected error stopped the loop: it restarts, or (``gave_up``) the link is closed."""
 
+    def on_safety(self, event: str) -> None:
+        """A safety reaction started, ended or warned (``server.safety``); already logged."""
+
 
 class WorkerState:
     CONNECTING = "connecting"
@@ -121,7 +126,7 @@ class CrazyflieWorker:
                  keepalive_period: float = 0.010, link_lost_timeout: float = 1.0,
                  lost_retry_period: float = 0.25, quality_warning_interval: float = 5.0,
                  rssi_period: float = 0.1, device_retry_window: float = 10.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, safety: Optional[SafetyConfig] = None) -> None:
         self.config = config
         self.cf = crazyflie
         self.listener = listener or WorkerListener()
@@ -174,6 +179,10 @@ class CrazyflieWorker:
         self._lost_at = 0.0
         # what the firmware's setpoint watchdog makes of the stream sent (said once per cut)
         self.watchdog = watchdog_notice.WatchdogNotice(self._protocol_version)
+        self.safety = SafetyMonitor(safety or SafetyConfig.off(), config.uri,
+                                    lambda: getattr(self.cf, "protocol_version", -1), lambda: self.param_values)
+        self._safety_events = 0
+        self._watchdog_due = 0.0
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -230,6 +239,8 @@ class CrazyflieWorker:
         if self._emergency:
             return False
         self.health.setpoint_given()
+        if not self.safety.note_setpoint(self._clock(), *safety_actions.setpoint_thrust(setpoint)):
+            return True     # a safety reaction flies it (said once by the monitor)
         with self._cond:
             self._pending = setpoint
             self._cond.notify_all()
@@ -241,6 +252,7 @@ class CrazyflieWorker:
             with self._cond:
                 self._pending = None
             self.watchdog.handed_over()
+            self.safety.note_stream_released(self._clock())
             return True
         return self.set_setpoint(packet)
 
@@ -467,6 +479,8 @@ class CrazyflieWorker:
                 if timing is not None:
                     timing.record(onboard_s, age, arrived)
                 self.health.on_log(topic, part, arrived)
+                if topic == BATTERY_TOPIC:
+                    self.safety.note_battery(arrived, float(part[0]))
                 try:
                     if topic == RADIO_RSSI_TOPIC:
                         listener.on_rssi(float(part[0]))
@@ -557,6 +571,7 @@ class CrazyflieWorker:
                     return
                 setpoint = self._pending
                 self._pending = None
+            setpoint = self._safety_step(setpoint)
             downlink_before = self._downlink_packets
             acked = self._round_trip(setpoint)
             now = self._clock()
@@ -570,6 +585,37 @@ class CrazyflieWorker:
                     self._onboard_clock.drained()
             if not self._emergency and self.watchdog.due(now) is not None:
                 self._say_watchdog_cut(now)
+            if self.safety.config.emergency_watchdog and now >= self._watchdog_due:
+                self._watchdog_due = now + safety_actions.WATCHDOG_KEEPALIVE_PERIOD_S
+                safety_actions.send_watchdog_keepalive(self.cf)
+
+    def _safety_step(self, setpoint: Optional[Setpoint]) -> Optional[Setpoint]:
+        """The setpoint to send this round trip: the user's, or a safety reaction's (see server.safety)."""
+        if self._emergency:
+            return setpoint
+        action = self.safety.poll(self._clock())
+        if self.safety.in_control or action is not None:
+            setpoint = safety_actions.carry_out(action, self.cf) if action is not None else None
+            if action is not None and action.kind == "land":
+                self.watchdog.handed_over()     # the high-level commander flies it now
+        if len(self.safety.events) != self._safety_events:
+            self._safety_events = len(self.safety.events)
+            try:
+                self.listener.on_safety(self.safety.events[-1])
+            except Exception:
+                LOG.exception("%s: safety listener failed", self.uri)
+        return setpoint
+
+    def begin_safe_shutdown(self, budget_s: Optional[float] = None) -> bool:
+        """Land or descend before the link closes (server shutdown); True when a reaction runs.
+        Any thread; :meth:`safe_to_close` says when it is over."""
+        started = self.safety.begin_shutdown(self._clock(), budget_s)
+        with self._cond:
+            self._cond.notify_all()
+        return started
+
+    def safe_to_close(self) -> bool:
+        return self._emergency or self.state != WorkerState.RUNNING or self.safety.finished(self._clock())
 
     def _round_trip(self, setpoint: Optional[Setpoint]) -> Optional[bool]:
         """One packet to the Crazyflie. Returns acked, or None when the dongle failed."""

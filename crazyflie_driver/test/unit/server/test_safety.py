@@ -1,12 +1,22 @@
-"""The safety policy (server.safety) from figures and time alone."""
+"""The safety policy (server.safety) from figures and time alone, and its hooks in the worker."""
 from __future__ import annotations
 
 import logging
+import time
 
 import pytest
 
-from crazyflie_driver.server.safety import (ERROR, WARN, Action, BatteryWatch, DescentPlan, Reaction,
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.protocol import setpoints
+from crazyflie_driver.protocol.high_level import CMD_LAND_2, CMD_STOP
+from crazyflie_driver.protocol.supervisor import CMD_WATCHDOG
+from crazyflie_driver.server.safety import (ERROR, OK, WARN, Action, BatteryWatch, DescentPlan, Reaction,
                                             SafetyConfig, SafetyMonitor, thrust_change_for)
+from crazyflie_driver.server.safety_actions import setpoint_thrust
+from crazyflie_driver.server.setpoint import Setpoint
+from crazyflie_driver.server.status import worker_status
+
+from support.worker_doubles import FakeCrazyflie, Recorder, started, wait_for
 
 HOVER = 36344
 CURRENT_FW = 12
@@ -228,3 +238,102 @@ def test_shutdown_lands_or_descends_only_what_flies_within_the_budget():
     m = monitor(SafetyConfig(land_on_shutdown=False))
     hover_for(m, 0.0, 1.0)
     assert not m.begin_shutdown(1.0)
+
+
+def test_setpoint_thrust_of_worker_setpoints():
+    assert setpoint_thrust(Setpoint(0, 0, 0, 30000)) == (30000, False)
+    assert setpoint_thrust(setpoints.position_packet(0, 0, 1, 0)) == (None, False)
+    assert setpoint_thrust(CRTPPacket(7, 0, bytes([setpoints.TYPE_STOP]))) == (None, True)
+
+
+# ---------------------------------------------------------------- the worker carries it out
+
+class SafetyLink:
+    """The link's send/stats for the worker's safety packets."""
+
+    def __init__(self, cf):
+        self.cf, self.stats, self.sent = cf, cf.link.stats, []
+
+    def send(self, packet):
+        return self.cf._packet("raw", packet.port, packet.channel, bytes(packet.data))
+
+
+def test_worker_descends_after_cmd_vel_stops_and_the_status_says_why():
+    cf = FakeCrazyflie()
+    cf.link = SafetyLink(cf)
+    cf.protocol_version = 2
+    rec = Recorder()
+    events = []
+    rec.on_safety = events.append
+    w, cf, _ = started(cf=cf, listener=rec, safety=SafetyConfig(descent_max_height=0.3))
+    try:
+        for _ in range(30):
+            w.cmd_vel(0.0, 0.0, float(HOVER), 0.0)
+            time.sleep(0.02)
+        t0 = time.monotonic()
+        assert wait_for(lambda: w.safety.reaction == Reaction.DOWN, 5.0)
+        sent = [p for p in cf.of_kind("setpoint") if p[0] > t0]
+        thrusts = [p[2][3] for p in sent]
+        assert thrusts[0] == HOVER and min(thrusts[:-1]) < HOVER - 2000 and thrusts[-1] == 0
+        assert sent[0][0] - t0 < 0.35
+        assert any("no setpoint for" in e for e in events)
+        status = worker_status(w)
+        assert status.level == WARN and "motors off" in status.message
+        assert dict(status.values)["safety_reaction"] == "down"
+    finally:
+        w.stop()
+
+
+def test_worker_without_safety_config_does_what_it_is_told():
+    w, cf, _ = started()
+    try:
+        w.cmd_vel(0.0, 0.0, float(HOVER), 0.0)
+        time.sleep(0.5)
+        assert [p[2][3] for p in cf.of_kind("setpoint")][-1] == HOVER
+        assert w.safety.reaction == Reaction.NONE and worker_status(w).level == OK
+    finally:
+        w.stop()
+
+
+def test_worker_sends_the_watchdog_keepalive_only_when_asked():
+    for on in (True, False):
+        cf = FakeCrazyflie()
+        cf.link = SafetyLink(cf)
+        cf.protocol_version = CURRENT_FW
+        w, cf, _ = started(cf=cf, safety=SafetyConfig(emergency_watchdog=on))
+        try:
+            time.sleep(0.6)
+            keepalives = [p for p in cf.of_kind("raw") if p[2][0] == 9 and p[2][2] == bytes([CMD_WATCHDOG])]
+            assert (2 <= len(keepalives) <= 4) if on else not keepalives
+        finally:
+            w.stop()
+
+
+class HighLevelDouble:
+    def __init__(self, cf):
+        self.cf = cf
+
+    def command(self, packet, idempotent=True):
+        self.cf._packet("hl", bytes(packet.data))
+
+
+def test_worker_lands_onboard_on_shutdown():
+    cf = FakeCrazyflie()
+    cf.link = SafetyLink(cf)
+    cf.high_level = HighLevelDouble(cf)
+    cf.protocol_version = CURRENT_FW
+    w, cf, _ = started(cf=cf, safety=SafetyConfig())
+    try:
+        w.set_packet_setpoint(setpoints.position_packet(0.0, 0.0, 0.5, 0.0))
+        time.sleep(0.05)
+        assert w.begin_safe_shutdown(3.0)
+        assert wait_for(w.safe_to_close, 5.0)
+        hl = [p[2][0][0] for p in cf.of_kind("hl")]
+        assert hl == [CMD_LAND_2, CMD_STOP]
+        assert [p[2][3] for p in cf.of_kind("setpoint")][-3:] == [0, 0, 0]      # then motors off, for sure
+        notify = setpoints.notify_setpoints_stop_packet(0)
+        raw = [p for p in cf.of_kind("raw") if p[2] == (notify.port, notify.channel, bytes(notify.data))]
+        land_at = cf.of_kind("hl")[0][0]
+        assert raw and raw[0][0] >= land_at      # planned first, then handed over: no idle planner in between
+    finally:
+        w.stop()
