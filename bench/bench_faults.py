@@ -63,14 +63,22 @@ FALL_SPEED_MS = 1.0            # touching down faster than this is a fall, not a
 
 
 # --- the graph -----------------------------------------------------------------------------------
+def world_launch_text() -> str:
+    """The simulated world alone: it stands for the physical one, so it outlives the stack's nodes (the
+    server is a required node: when it dies, roslaunch takes the stack's other nodes down, not the world)."""
+    return "\n".join([
+        "<launch>",
+        '  <node pkg="crazyflie_driver" type="crazyflie_sim_node" name="crazyflie_sim" output="log">',
+        '    <param name="address" value="%s" /><param name="mocap" value="vicon" />' % SIM_ADDRESS,
+        '    <param name="mocap_rate" value="100.0" /><param name="mocap_noise" value="0.0005" />',
+        '    <param name="mocap_latency" value="0.008" /><param name="seed" value="1" />',
+        '    <param name="vehicles" type="str" value="[{uri: \'%s\', name: %s}]" />' % (URI, NAME),
+        "  </node>",
+        "</launch>"]) + "\n"
+
+
 def launch_text(path: str) -> str:
     rows = ["<launch>",
-            '  <node pkg="crazyflie_driver" type="crazyflie_sim_node" name="crazyflie_sim" output="log">',
-            '    <param name="address" value="%s" /><param name="mocap" value="vicon" />' % SIM_ADDRESS,
-            '    <param name="mocap_rate" value="100.0" /><param name="mocap_noise" value="0.0005" />',
-            '    <param name="mocap_latency" value="0.008" /><param name="seed" value="1" />',
-            '    <param name="vehicles" type="str" value="[{uri: \'%s\', name: %s}]" />' % (URI, NAME),
-            "  </node>",
             '  <include file="$(find crazyflie_driver)/launch/crazyflie_server.launch">',
             '    <arg name="sim" value="true" /><arg name="sim_address" value="%s" />' % SIM_ADDRESS,
             "  </include>",
@@ -193,32 +201,37 @@ class Graph:
         self.path = path
         self.work = work
         self.extra: List[subprocess.Popen] = []      # a sim node started again by a row
-        launch = os.path.join(work, "graph_%s.launch" % path)
-        with open(launch, "w") as f:
-            f.write(launch_text(path))
-        self.proc = subprocess.Popen(["roslaunch", "--wait", launch], stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, start_new_session=True)
+        self.world = roslaunch(os.path.join(work, "world.launch"), world_launch_text())
+        self.proc = roslaunch(os.path.join(work, "graph_%s.launch" % path), launch_text(path))
         self.mocap_forward = None
 
     def alive(self) -> bool:
-        return self.proc.poll() is None
+        return self.proc.poll() is None and self.world.poll() is None
 
     def stop(self) -> None:
         if self.mocap_forward is not None:
             self.mocap_forward.unregister()
             self.mocap_forward = None
-        for p in [self.proc] + self.extra:
+        processes = [self.proc, self.world] + self.extra
+        for p in processes:
             if p.poll() is None:
                 try:
                     os.killpg(p.pid, signal.SIGINT)
                 except OSError:
                     pass
-        for p in [self.proc] + self.extra:
+        for p in processes:
             try:
                 p.wait(15)
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait(5)
+
+
+def roslaunch(path: str, text: str) -> subprocess.Popen:
+    with open(path, "w") as f:
+        f.write(text)
+    return subprocess.Popen(["roslaunch", "--wait", path], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
 
 
 @dataclass
@@ -496,6 +509,26 @@ def emergency(bench: Bench) -> None:
     bench.rospy.ServiceProxy("/%s/emergency" % NAME, Empty)()
 
 
+def remove(bench: Bench) -> None:
+    """``/remove_crazyflie`` while it flies (the controller keeps publishing its setpoints)."""
+    from crazyflie_driver.srv import RemoveCrazyflie
+    bench.rospy.ServiceProxy("/remove_crazyflie", RemoveCrazyflie)(uri=URI)
+
+
+def streamed_then_silent(bench: Bench) -> None:
+    """Position setpoints streamed at the goal for 1 s (50 Hz), then none: a setpoint source gone silent."""
+    from crazyflie_driver.msg import Position
+    pub = bench.rospy.Publisher("/%s/cmd_position" % NAME, Position, queue_size=1, tcp_nodelay=True)
+    deadline = time.monotonic() + 5.0
+    while pub.get_num_connections() == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        pub.publish(Position(x=GOAL[0], y=GOAL[1], z=GOAL[2], yaw=0.0))
+        time.sleep(0.02)
+    pub.unregister()
+
+
 def clear(bench: Bench) -> None:
     fault("clear")
 
@@ -546,12 +579,18 @@ def rows() -> List[Row]:
         Row("unplug_onboard", "dongle unplugged for good", "onboard", inject("unplug 0"), 8.0, clear),
         Row("poweroff", "Crazyflie switched off", "chapter", inject("power %s off" % NAME), 4.0,
             lambda b: fault("power %s on" % NAME)),
-        Row("controller", "controller killed (SIGKILL)", "chapter",
+        Row("controller", "controller killed (SIGKILL): setpoint source silent", "chapter",
             lambda b: kill_node(b, "/%s/controller" % NAME), 6.0),
         Row("server", "server killed (SIGKILL)", "chapter", lambda b: kill_node(b, "/crazyflie_server"), 6.0),
         Row("server_int", "server stopped (Ctrl-C)", "chapter",
             lambda b: kill_node(b, "/crazyflie_server", signal.SIGINT), 6.0),
         Row("server_onboard", "server killed (SIGKILL)", "onboard", lambda b: kill_node(b, "/crazyflie_server"), 8.0),
+        Row("server_int_onboard", "server stopped (Ctrl-C)", "onboard",
+            lambda b: kill_node(b, "/crazyflie_server", signal.SIGINT), 8.0),
+        Row("silent_onboard", "setpoints streamed for 1 s, then silent (times from the stream start)", "onboard",
+            streamed_then_silent, 8.0),
+        Row("remove", "/remove_crazyflie while flying", "chapter", remove, 10.0),
+        Row("remove_onboard", "/remove_crazyflie while flying", "onboard", remove, 8.0),
         Row("freeze02", "mocap frozen 0.2 s", "chapter", inject("mocap %s --freeze 0.2" % NAME), 5.0, clear),
         Row("freeze2", "mocap frozen 2 s", "chapter", inject("mocap %s --freeze 2" % NAME), 8.0, clear),
         Row("freeze", "mocap frozen for good", "chapter", inject("mocap %s --freeze" % NAME), 10.0, clear),
@@ -565,6 +604,7 @@ def rows() -> List[Row]:
         Row("battery_empty", "battery below the firmware's cut-off (%.2f V)" % empty_v, "chapter",
             inject("battery %s %.2f" % (NAME, empty_v)), 10.0, full),
         Row("emergency", "emergency while flying", "chapter", emergency, 3.0),
+        Row("emergency_onboard", "emergency while flying", "onboard", emergency, 3.0),
         Row("world", "world restarted", "chapter", restart_world, 10.0),
     ]
 

@@ -133,15 +133,25 @@ class SafetyChapter(unittest.TestCase):
         server = node_pid("/crazyflie_server")
         os.kill(server, signal.SIGINT)
         ok, _ = self.probe.clock.wait_until(lambda: all(self.motors_off(n) for n in self.vehicles), PLAN_S + 3.0)
-        self.stop_track(track, list(self.vehicles), t0)
         self.assertTrue(ok, "motors still on after the server's Ctrl-C: %s"
                         % {n: self.probe.state(n)["motors"] for n in self.vehicles})
+        # the controllers keep streaming (wound up by the descent): nothing may send them up again
+        self.probe.sleep(3.0)
+        track.stop()
+        t1 = time.monotonic()
         for name in self.vehicles:
-            fastest, top, z_off, off_s = self.descent(track, name, t0, time.monotonic())
-            print("SAFETY_SHUTDOWN %s fastest descent %.2f m/s, motors off at z %.3f m after %.1f s"
-                  % (name, fastest, z_off, off_s))
+            flight = track.between(name, t0, t1)
+            print("SAFETY_SHUTDOWN_TRUTH %s (world s, z m, motors on): %s" % (name, " ".join(
+                "%.2f/%.3f/%d" % (s["time"], s["position"][2], max(s["motors"]) > 0) for s in flight[::5])))
+            fastest, top, z_off, off_s = self.descent(track, name, t0, t1)
+            print("SAFETY_SHUTDOWN %s fastest descent %.2f m/s, highest %.3f m, motors off at z %.3f m after %.1f s"
+                  % (name, fastest, top, z_off, off_s))
             self.assertLess(fastest, MAX_DESCENT_SPEED, "%s fell" % name)
+            self.assertLess(top, self.vehicles[name][2] + 0.1, "%s climbed after the server's Ctrl-C" % name)
             self.assertLess(z_off, 0.02, "%s: motors stopped above the floor" % name)
+            first_off = next(i for i, s in enumerate(flight) if max(s["motors"]) == 0)
+            again = [s for s in flight[first_off:] if max(s["motors"]) > 0]
+            self.assertFalse(again, "%s: motors on again after they stopped: %s" % (name, again[:1]))
         self.assertTrue(wait_until(lambda: not _alive(server), 15.0), "the server did not exit")
 
 

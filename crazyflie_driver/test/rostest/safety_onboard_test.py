@@ -9,7 +9,9 @@ Each Crazyflie flies by streamed ``cmd_position`` setpoints with the Kalman esti
   setpoints keep coming; motors off on the floor);
 * both Crazyradios are unplugged while crazyflie1 (emergency-stop watchdog keep-alive on) and
   crazyflie2 (off, the default) hover: crazyflie1's motors stop within 1 s of world time (the
-  firmware's watchdog), crazyflie2's after the firmware's 2 s setpoint watchdog, as before.
+  firmware's watchdog), crazyflie2's after the firmware's 2 s setpoint watchdog, as before;
+* crazyflie4 is removed by ``/remove_crazyflie`` while it hovers (its setpoints keep coming): the
+  server lands it first, the service answers once it rests with its motors off.
 """
 from __future__ import annotations
 
@@ -26,13 +28,13 @@ from geometry_msgs.msg import PointStamped
 
 from crazyflie_driver.msg import Position
 from crazyflie_driver.sim.world_clock import WorldClock
-from crazyflie_driver.srv import UpdateParams
+from crazyflie_driver.srv import RemoveCrazyflie, UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
 
 URIS = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://1/90/2M/E7E7E7E702",
-        "crazyflie3": "radio://1/90/2M/E7E7E7E703"}
+        "crazyflie3": "radio://1/90/2M/E7E7E7E703", "crazyflie4": "radio://0/80/2M/E7E7E7E704"}
 HEIGHT = 0.5
 PERIOD_S = 0.02
 WARNING_V, CRITICAL_V = 3.40, 3.25      # below the server's defaults, 3.45 and 3.30 V
@@ -111,6 +113,17 @@ class SafetyOnboard(unittest.TestCase):
     def motors_on(self, name):
         return max(self.flyers[name].truth()["motors"]) > 0
 
+    def track(self, name, until, seconds):
+        """The truth of ``name`` until ``until()`` or ``seconds`` of world time: [(world s, z, vz, motors on)]."""
+        rows = []
+
+        def sample():
+            s = self.flyers[name].truth()
+            rows.append((s["time"], s["position"][2], s["velocity"][2], max(s["motors"]) > 0))
+            return until()
+        self.clock.wait_until(sample, seconds)
+        return rows
+
     def test_a_battery_warning_then_critical_lands(self):
         name = "crazyflie3"
         self.take_off(name)
@@ -124,8 +137,11 @@ class SafetyOnboard(unittest.TestCase):
         self.clock.sleep(1.0)
         self.assertLess(abs(self.flyers[name].truth()["position"][2] - HEIGHT), 0.05, "a warning is not a landing")
         self.world.control("set_battery", uri=URIS[name], voltage=CRITICAL_V)
-        ok, _ = self.clock.wait_until(lambda: not self.motors_on(name), 15.0)
+        rows = self.track(name, lambda: not self.motors_on(name), 15.0)
+        ok = not self.motors_on(name)
         state = self.flyers[name].truth()
+        print("SAFETY_BATTERY truth (world s, z m, motors on): %s; off at z %.3f m"
+              % (" ".join("%.2f/%.3f/%d" % (t, z, m) for t, z, _, m in rows[::10]), state["position"][2]))
         self.assertTrue(ok, "still flying on a critical battery: %s" % state)
         self.assertLess(state["position"][2], 0.03, "motors stopped above the floor")
         self.assertEqual(len(self.rosout.find("below the critical level")), 1)
@@ -135,7 +151,29 @@ class SafetyOnboard(unittest.TestCase):
         self.assertEqual(len(self.rosout.find("warning level")), 1)
         self.flyers[name].goal = None
 
-    def test_b_radio_lost_watchdog_keepalive_on_and_off(self):
+    def test_b_removed_while_flying_is_landed_first(self):
+        name = "crazyflie4"
+        self.take_off(name)
+        answered = threading.Event()
+
+        def remove():
+            rospy.ServiceProxy("/remove_crazyflie", RemoveCrazyflie)(uri=URIS[name])
+            answered.set()
+        threading.Thread(target=remove, daemon=True).start()
+        rows = self.track(name, answered.is_set, 15.0)
+        self.assertTrue(answered.is_set(), "/remove_crazyflie did not answer within 15 s of world time")
+        on = [r for r in rows if r[3]]
+        print("SAFETY_REMOVE truth (world s, z m, motors on): %s"
+              % " ".join("%.2f/%.3f/%d" % (t, z, m) for t, z, _, m in rows[::10]))
+        self.assertFalse(self.motors_on(name), "motors still on after the removal")
+        off = next(r for r in rows if not r[3])
+        self.assertLess(off[1], 0.03, "motors stopped above the floor: %s" % (off,))
+        self.assertGreater(off[0] - rows[0][0], 1.0, "motors stopped at once: a drop, not a landing")
+        self.assertLess(-min(vz for _, _, vz, _ in on), 0.8, "fell instead of landing")
+        self.assertTrue(self.rosout.find("removed by /remove_crazyflie"), self.rosout.lines[-5:])
+        self.flyers[name].goal = None
+
+    def test_c_radio_lost_watchdog_keepalive_on_and_off(self):
         for name in ("crazyflie1", "crazyflie2"):
             self.take_off(name)
         try:

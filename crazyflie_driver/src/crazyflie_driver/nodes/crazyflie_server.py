@@ -526,6 +526,7 @@ class CrazyflieServer:
     def _on_remove(self, req) -> RemoveCrazyflieResponse:
         try:
             key = self.registry.canonical_uri(req.uri)
+            self.bring_down([self.registry.get(key)], "removed by /remove_crazyflie")   # never left flying
             self.registry.remove(key)
         except (ValueError, KeyError) as e:
             msg = "could not remove %s: %s" % (req.uri, str(e).strip("'\""))
@@ -548,13 +549,17 @@ class CrazyflieServer:
                 self._land_all(reason)
 
     def _land_all(self, reason: str) -> None:
-        workers = self.registry.workers()
+        self.bring_down(self.registry.workers(), "server shutting down (%s)" % (reason or "shutdown"))
+
+    def bring_down(self, workers: List[CrazyflieWorker], why: str) -> None:
+        """Land or descend those of ``workers`` in the air (the shutdown reaction), waiting up to their
+        ``~safety/shutdown_timeout_s`` for it to end; their setpoints are refused from now on."""
         budget = max([w.safety.config.shutdown_timeout_s for w in workers] or [0.0])
-        flying = [w for w in workers if w.begin_safe_shutdown(budget)]
+        flying = [w for w in workers if w.begin_safe_shutdown(budget, why)]
         if not flying:
             return
-        rospy.logwarn("crazyflie_server shutting down (%s): bringing down %s within %.1f s"
-                      % (reason or "shutdown", ", ".join(w.uri for w in flying), budget))
+        rospy.logwarn("crazyflie_server: %s: bringing down %s within %.1f s"
+                      % (why, ", ".join(w.uri for w in flying), budget))
         deadline = time.monotonic() + budget
         while time.monotonic() < deadline and not all(w.safe_to_close() for w in flying):
             time.sleep(0.02)

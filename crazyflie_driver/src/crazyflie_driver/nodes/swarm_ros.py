@@ -139,7 +139,7 @@ class RosSwarm:
                                             repeats=self.options.broadcast_repeats,
                                             interval_s=self.options.broadcast_interval)
         self.broadcaster.open()
-        self.commands = SwarmCommands(self.live_members, self.broadcaster)
+        self.commands = SwarmCommands(self.live_members, self.broadcaster, observe=observe_in_safety)
         if self.options.emergency_watchdog:
             self.heartbeat = Heartbeat(self.broadcaster.watchdog).start()
         self._advertise()
@@ -268,7 +268,15 @@ class RosSwarm:
                                   radio_of=lambda uri: parse_uri(uri).index,
                                   frame_periods={b.dongle: 1.0 / b.frames_hz for b in plan}).start()
         names = {self.options.mocap_pattern.format(name=name): name for name in uris}
-        self._sources.append(swarm_mocap_sources.start(self.options, names, self.stream.pose))
+        monitors = {m.name: m.worker.safety for m in self.members}
+        stream = self.stream
+
+        def pose(name, position, orientation=None, received=None):
+            monitor = monitors.get(name)
+            if monitor is not None:     # the height a safety landing starts from
+                monitor.note_pose(time.monotonic(), position[2])
+            return stream.pose(name, position, orientation, received)
+        self._sources.append(swarm_mocap_sources.start(self.options, names, pose))
 
     def _pose_seen(self, name: str, now: float) -> None:
         with self._watch_lock:
@@ -416,6 +424,14 @@ class RosSwarm:
                 pass
         if self.broadcaster is not None:
             self.broadcaster.close()
+
+
+def observe_in_safety(targets, what: str, duration: float) -> None:
+    """Each addressed Crazyflie's safety monitor learns of a swarm command (it flies, or lands by itself),
+    so that a reaction (battery, shutdown) knows it is in the air and never lands it twice."""
+    now = time.monotonic()
+    for m in targets:
+        m.worker.safety.note_high_level(now, what, duration)
 
 
 def initial_position_params(position) -> Dict[str, Any]:

@@ -43,7 +43,18 @@ ACCEL_PHASE_MS2 = 1.0           # m/s², downward acceleration that starts a des
 ESTIMATOR_KALMAN = 2            # ``stabilizer.estimator`` value of the Kalman estimator
 POSE_FRESH_S = 1.0              # s: a pose sent more recently than this feeds the onboard estimator
 MIN_LAND_S = 1.0                # s: shortest onboard landing
-HL_STOP_AFTER_S = 0.5           # s after a landing's end before the high-level stop (motors off)
+#: s after the planned end of a land command (the user's or the swarm's) before it counts as over: the
+#: firmware's planner ends such a landing itself (motors off at the plan's end).
+LAND_OVER_AFTER_S = 0.5
+#: The reaction's own landing flies down with the high-level commander (a go_to to the floor, which the
+#: planner holds) and stops the motors only once the Crazyflie rests: when the pose sent to its estimator
+#: is this low (m) ...
+LANDED_Z_M = 0.02
+#: ... or, without a fresh pose, this long (s) after the plan's end (about 4 time constants of the
+#: firmware's z position loop, 0.5 s) ...
+LAND_SETTLE_S = 2.0
+#: ... and at the latest this long (s) after the plan's end (a floor above z = 0, a pose offset).
+LAND_GIVE_UP_S = 4.0
 OFF_REPEATS = 3                 # zero-thrust setpoints that end a reaction (one may be lost)
 
 OK, WARN, ERROR = 0, 1, 2       # same numbers as server.status and diagnostic_msgs
@@ -164,14 +175,15 @@ class BatteryWatch:
 class Action(NamedTuple):
     """What the worker sends instead of the user's stream this round trip.
 
-    ``kind``: ``"thrust"`` (RPYT level at ``thrust``), ``"land"`` (notify-setpoints-stop, then the
-    high-level land to the floor in ``duration`` s), ``"hl_stop"`` (high-level stop), ``"off"``
-    (motors off by a zero-thrust RPYT).
+    ``kind``: ``"thrust"`` (RPYT level at ``thrust``), ``"land"`` (the high-level commander down by
+    ``distance`` m in ``duration`` s, then notify-setpoints-stop), ``"hl_stop"`` (high-level stop: motors
+    off), ``"off"`` (motors off by a zero-thrust RPYT).
     """
 
     kind: str
     thrust: int = 0
     duration: float = 0.0
+    distance: float = 0.0
 
 
 class Reaction:
@@ -217,6 +229,8 @@ class SafetyMonitor:
         self._land_until = 0.0
         self._deadline = math.inf               # shutdown: motors off by then
         self._pending_land: Optional[float] = None
+        self._land_distance = 0.0
+        self._own_landing = False               # the reaction's go_to (it stops the motors) or a land command
         self._battery_critical_pending = False
         self._shutdown = False
         self._said_ignored = False
@@ -249,10 +263,24 @@ class SafetyMonitor:
                     LOG.warning("%s: setpoints ignored until the safety %s is over (%s)",
                                 self.label, self.reaction, self.reason)
                 return False
+            if self._shutdown:
+                # the server is going away: nothing may send a Crazyflie up again, e.g. a controller
+                # whose integrator wound up while the reaction brought its Crazyflie down
+                self.ignored_setpoints += 1
+                return False
             if self.reaction == Reaction.DOWN:
                 if self.battery.level == ERROR and (thrust is None or thrust >= MIN_FLYING_THRUST) and not stop:
                     self.ignored_setpoints += 1
                     return False        # no new take-off on a critical battery
+                if thrust is not None and thrust >= MIN_FLYING_THRUST:
+                    # as the firmware's thrust lock: a new RPYT flight starts from zero thrust, so a
+                    # controller wound up while its setpoints were ignored cannot send it up at once
+                    self.ignored_setpoints += 1
+                    if not self._said_ignored:
+                        self._said_ignored = True
+                        LOG.warning("%s: thrust setpoints ignored after the safety reaction until one with zero "
+                                    "thrust (a controller that kept running is wound up)", self.label)
+                    return False
                 self.reaction = Reaction.NONE
                 self._offs_left, self._offs_sent = 0, True
             self._last_setpoint_at = now
@@ -319,7 +347,7 @@ class SafetyMonitor:
     def _in_air(self, now: float) -> bool:
         if self.reaction in (Reaction.HOLD, Reaction.DESCENT, Reaction.LANDING):
             return True
-        if self._hl_flying and not (self._land_until and now > self._land_until + HL_STOP_AFTER_S):
+        if self._hl_flying and not (self._land_until and now > self._land_until + LAND_OVER_AFTER_S):
             return True
         return self._flying and self._stream != ""
 
@@ -350,8 +378,10 @@ class SafetyMonitor:
                                 % (now - self._last_setpoint_at, cfg.setpoint_silence_s), hold=True)
             return self._act(now)
 
-    def begin_shutdown(self, now: float, budget_s: Optional[float] = None) -> bool:
-        """The server is shutting down: land or descend if in the air. True when a reaction runs."""
+    def begin_shutdown(self, now: float, budget_s: Optional[float] = None,
+                       reason: str = "server shutting down") -> bool:
+        """The server is shutting down (or lets this Crazyflie go): land or descend if in the air, and
+        send no setpoint of the user's again. True when a reaction runs."""
         with self._lock:
             self._shutdown = True
             budget = self.config.shutdown_timeout_s if budget_s is None else budget_s
@@ -363,7 +393,7 @@ class SafetyMonitor:
             if not self._in_air(now):
                 return False
             self.reaction = Reaction.NONE
-            self._start(now, "server shutting down", hold=False)
+            self._start(now, reason, hold=False)
             return True
 
     @property
@@ -387,12 +417,22 @@ class SafetyMonitor:
         self.reason = reason
         self._started_at = now
         self._said_ignored = False
+        if self.onboard_control(now) and self._land_until > now:
+            # a landing is already under way (the user's, or the swarm's stale-pose landing): it is
+            # not sent twice; the reaction waits for its end
+            self.reaction = Reaction.LANDING
+            self._pending_land = None
+            self._own_landing = False
+            self._event(LOG.error, "%s: already landing, %.1f s to go" % (reason, self._land_until - now))
+            return
         if self.onboard_control(now):
             height = self._pose_z if self._pose_z is not None else self.config.descent_max_height
             duration = max(MIN_LAND_S, max(height, 0.0) / self.config.descent_rate)
-            duration = min(duration, max(MIN_LAND_S, self._deadline - now - HL_STOP_AFTER_S))
+            duration = min(duration, max(MIN_LAND_S, self._deadline - now - LAND_SETTLE_S))
             self.reaction = Reaction.LANDING
             self._pending_land = duration
+            self._land_distance = max(height, 0.0)
+            self._own_landing = True
             self._land_until = now + duration
             self._event(LOG.error, "%s: landing by the onboard high-level commander from %s in %.1f s"
                         % (reason, "%.2f m" % height if self._pose_z is not None else "its height", duration))
@@ -420,9 +460,13 @@ class SafetyMonitor:
         if self.reaction == Reaction.LANDING:
             if self._pending_land is not None:
                 duration, self._pending_land = self._pending_land, None
-                return Action("land", duration=duration)
-            if now >= self._land_until + HL_STOP_AFTER_S:
-                self._down(now, "landed")
+                return Action("land", duration=duration, distance=self._land_distance)
+            if not self._own_landing:
+                if now >= self._land_until + LAND_OVER_AFTER_S:
+                    self._down(now, "landing over", offs=0)      # the firmware's planner stopped the motors
+                return None
+            if now >= self._deadline or self._landed(now):
+                self._down(now, "landed" if now < self._deadline else "shutdown budget spent")
                 return Action("hl_stop")
             return None
         if self.reaction == Reaction.DOWN:
@@ -445,9 +489,19 @@ class SafetyMonitor:
             return Action("thrust", thrust=thrust)
         return None
 
-    def _down(self, now: float, how: str) -> None:
+    def _landed(self, now: float) -> bool:
+        """The reaction's own landing is over: its plan ended and the Crazyflie rests on the floor."""
+        after = now - self._land_until
+        if after < 0.0:
+            return False
+        if now - self._pose_at < POSE_FRESH_S and self._pose_z is not None:
+            return self._pose_z <= LANDED_Z_M or after >= LAND_GIVE_UP_S
+        return after >= LAND_SETTLE_S
+
+    def _down(self, now: float, how: str, offs: int = OFF_REPEATS) -> None:
         self.reaction = Reaction.DOWN
-        self._offs_left, self._offs_sent = OFF_REPEATS, False
+        self._said_ignored = False
+        self._offs_left, self._offs_sent = offs, offs == 0
         self._flying = self._hl_flying = False
         self._stream = ""
         self._last_setpoint_at = None

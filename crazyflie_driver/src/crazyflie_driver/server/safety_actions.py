@@ -42,10 +42,14 @@ def carry_out(action: Action, cf: Any) -> Optional[Setpoint]:
         return Setpoint(0.0, 0.0, 0.0, 0)
     try:
         if action.kind == "land":
+            # Down to the floor by a relative go_to, which the planner then holds: a land command ends
+            # with the motors off at the plan's end wherever the Crazyflie is, and the position loop
+            # trails the plan by centimetres (a drop). The monitor stops the motors once it rests.
             # Planned first (the commander accepts it while low-level setpoints hold the priority), then
             # handed over: after notify-setpoints-stop an idle planner's null setpoint would stop the
             # motors at its next tick (10 ms) unless a plan is already there.
-            cf.high_level.command(high_level.land_packet(0.0, action.duration, cf.protocol_version))
+            cf.high_level.command(high_level.go_to_packet(0.0, 0.0, -action.distance, 0.0, action.duration,
+                                                          cf.protocol_version, relative=True), idempotent=False)
             notify = setpoints.notify_setpoints_stop_packet(0)
             if not cf.link.send(notify):
                 cf.link.send(notify)

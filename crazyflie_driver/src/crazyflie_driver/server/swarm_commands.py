@@ -51,9 +51,11 @@ class SwarmCommands:
     ``/stop``, ``/emergency``. ``members()`` gives the Crazyflies served now; ``broadcaster`` is a
     ``SwarmBroadcaster`` reaching all of them."""
 
-    def __init__(self, members: Callable[[], Sequence[SwarmMember]], broadcaster: Any) -> None:
+    def __init__(self, members: Callable[[], Sequence[SwarmMember]], broadcaster: Any,
+                 observe: Optional[Callable[[Sequence[SwarmMember], str, float], None]] = None) -> None:
         self._members = members
         self.broadcaster = broadcaster
+        self._observe = observe     # (targets, command, duration s) after a command went out: the safety monitors
         self._lock = threading.Lock()
 
     def targets(self, group_mask: int) -> List[SwarmMember]:
@@ -70,31 +72,35 @@ class SwarmCommands:
                 except CrazyflieError as e:
                     LOG.warning("%s: %s (the broadcast goes out anyway)", m.name, e)
 
-    def _send(self, targets: Sequence[SwarmMember], broadcast: Callable[[], int]) -> int:
+    def _send(self, targets: Sequence[SwarmMember], broadcast: Callable[[], int], what: str = "",
+              duration: float = 0.0) -> int:
         with self._lock:
             self._hand_over(targets)
-            return broadcast()
+            sent = broadcast()
+        if self._observe is not None and what:
+            self._observe(targets, what, duration)
+        return sent
 
     def takeoff(self, group_mask: int, height: float, duration_s: float) -> int:
         targets = self.targets(group_mask)
         height, duration = finite("height", height), positive_duration(duration_s)
-        return self._send(targets, lambda: self.broadcaster.takeoff(height, duration, group_mask))
+        return self._send(targets, lambda: self.broadcaster.takeoff(height, duration, group_mask), "takeoff", duration)
 
     def land(self, group_mask: int, height: float, duration_s: float) -> int:
         targets = self.targets(group_mask)
         height, duration = finite("height", height), positive_duration(duration_s)
-        return self._send(targets, lambda: self.broadcaster.land(height, duration, group_mask))
+        return self._send(targets, lambda: self.broadcaster.land(height, duration, group_mask), "land", duration)
 
     def stop(self, group_mask: int) -> int:
         targets = self.targets(group_mask)
-        return self._send(targets, lambda: self.broadcaster.stop(group_mask))
+        return self._send(targets, lambda: self.broadcaster.stop(group_mask), "stop", 0.0)
 
     def go_to(self, group_mask: int, offset: Sequence[float], yaw: float, duration_s: float) -> int:
         """Every addressed Crazyflie moves by ``offset`` (m) and turns by ``yaw`` (rad)."""
         targets = self.targets(group_mask)
         goal = [finite("goal " + axis, v) for axis, v in zip("xyz", offset)]
         yaw, duration = finite("yaw", yaw), positive_duration(duration_s)
-        return self._send(targets, lambda: self.broadcaster.go_to(goal, yaw, duration, group_mask))
+        return self._send(targets, lambda: self.broadcaster.go_to(goal, yaw, duration, group_mask), "go_to", duration)
 
     def start_trajectory(self, group_mask: int, trajectory_id: int, timescale: float, reversed_: bool) -> int:
         """Every addressed Crazyflie flies its own uploaded trajectory from where it is."""
@@ -108,7 +114,7 @@ class SwarmCommands:
             raise TrajectoryError("trajectory %r was not uploaded to %s; call their upload_trajectory first"
                                   % (trajectory_id, ", ".join(missing)))
         return self._send(targets, lambda: self.broadcaster.start_trajectory(trajectory_id, timescale, reversed_,
-                                                                             group_mask))
+                                                                             group_mask), "start_trajectory")
 
     def emergency(self) -> List[str]:
         """Motors off for every Crazyflie: broadcast e-stop on every radio and each worker's unicast

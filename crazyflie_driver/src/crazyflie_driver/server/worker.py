@@ -36,8 +36,8 @@ from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFoun
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.diagnostics import CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
-                                              RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock, check_log_limits,
-                                              log_packet_rate, plan_log_blocks)
+                                              RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock,
+                                              check_log_limits, log_packet_rate, plan_log_blocks)
 from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
 from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
 from crazyflie_driver.protocol.param import param_value
@@ -606,10 +606,10 @@ class CrazyflieWorker:
                 LOG.exception("%s: safety listener failed", self.uri)
         return setpoint
 
-    def begin_safe_shutdown(self, budget_s: Optional[float] = None) -> bool:
-        """Land or descend before the link closes (server shutdown); True when a reaction runs.
+    def begin_safe_shutdown(self, budget_s: Optional[float] = None, reason: str = "server shutting down") -> bool:
+        """Land or descend before the link closes (server shutdown, removal); True when a reaction runs.
         Any thread; :meth:`safe_to_close` says when it is over."""
-        started = self.safety.begin_shutdown(self._clock(), budget_s)
+        started = self.safety.begin_shutdown(self._clock(), budget_s, reason)
         with self._cond:
             self._cond.notify_all()
         return started
@@ -704,6 +704,8 @@ class CrazyflieWorker:
 
     def _restore(self) -> None:
         LOG.warning("%s: link restored after %.1f s", self.uri, self._clock() - self._lost_at)
+        if self._clock() - self._lost_at >= SETPOINT_WATCHDOG_CUT_S:
+            self.safety.note_stream_released(self._clock())     # the firmware's watchdog ended that stream
         if self.watchdog.locked_until_restart and self._protocol_version() >= SUPERVISOR_FROM:
             try:     # restarted meanwhile?
                 self.watchdog.restarted(self.cf.supervisor.state().flags["locked"])

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import logging
+import struct
 import time
 
 import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.protocol import setpoints
-from crazyflie_driver.protocol.high_level import CMD_LAND_2, CMD_STOP
+from crazyflie_driver.protocol.high_level import CMD_GO_TO_2, CMD_STOP
 from crazyflie_driver.protocol.supervisor import CMD_WATCHDOG
 from crazyflie_driver.server.safety import (ERROR, OK, WARN, Action, BatteryWatch, DescentPlan, Reaction,
                                             SafetyConfig, SafetyMonitor, thrust_change_for)
@@ -195,12 +196,28 @@ def test_silence_with_onboard_control_lands_by_the_high_level_commander():
         m.note_setpoint(t, HOVER)
         t += 0.02
     m.note_pose(t + 0.3, 0.8)
-    acts = run(m, t, t + 5.0)
-    assert acts[0][1] == Action("land", duration=pytest.approx(0.8 / 0.3))
-    stop_at = next(at for at, a in acts if a.kind == "hl_stop")
-    assert [a.kind for _, a in acts][1:] == ["hl_stop", "off", "off", "off"]
-    assert stop_at - acts[0][0] == pytest.approx(0.8 / 0.3 + 0.5, abs=0.02)
-    assert m.reaction == Reaction.DOWN
+    acts = run(m, t, t + 0.5)
+    assert acts[0][1] == Action("land", duration=pytest.approx(0.8 / 0.3), distance=0.8)
+    plan_end = acts[0][0] + 0.8 / 0.3
+    # the poses say it still flies after the plan's end (its clock or its position loop runs behind):
+    # the motors stay on until it rests on the floor
+    for k in range(100):
+        m.note_pose(t + 0.5 + k * 0.03, max(0.8 - k * 0.01, 0.05))
+    assert run(m, t + 0.51, plan_end + 0.4) == [] and not m.finished(plan_end + 0.4)
+    m.note_pose(plan_end + 0.5, 0.01)
+    acts = run(m, plan_end + 0.5, plan_end + 1.0)
+    assert [a.kind for _, a in acts] == ["hl_stop", "off", "off", "off"]
+    assert acts[0][0] == pytest.approx(plan_end + 0.5, abs=0.015)
+    assert m.finished(plan_end + 1.0) and m.reaction == Reaction.DOWN
+
+
+def test_an_onboard_landing_without_poses_stops_after_its_settling_time():
+    m = monitor(protocol=CURRENT_FW)
+    m.note_high_level(0.0, "takeoff")
+    assert m.begin_shutdown(1.0, 10.0)
+    acts = run(m, 1.0, 12.0)
+    assert acts[0][1] == Action("land", duration=pytest.approx(2.0 / 0.3), distance=2.0)
+    assert acts[1] == (pytest.approx(1.0 + 2.0 / 0.3 + 2.0, abs=0.015), Action("hl_stop"))
 
 
 def test_streamed_port7_setpoints_land_onboard_and_a_released_stream_is_not_silence():
@@ -227,8 +244,8 @@ def test_finished_only_once_the_last_zero_thrust_went_out():
 
 
 def test_shutdown_lands_or_descends_only_what_flies_within_the_budget():
+    assert not monitor().begin_shutdown(0.0) and monitor().finished(0.0)
     m = monitor()
-    assert not m.begin_shutdown(0.0) and m.finished(0.0)
     t = hover_for(m, 0.0, 1.0)
     assert m.begin_shutdown(t, 3.0)
     acts = run(m, t, t + 5.0)
@@ -238,6 +255,42 @@ def test_shutdown_lands_or_descends_only_what_flies_within_the_budget():
     m = monitor(SafetyConfig(land_on_shutdown=False))
     hover_for(m, 0.0, 1.0)
     assert not m.begin_shutdown(1.0)
+
+
+def test_after_shutdown_began_no_setpoint_goes_out_again():
+    m = monitor()
+    t = hover_for(m, 0.0, 1.0)
+    assert m.begin_shutdown(t, 10.0)
+    acts = run(m, t, t + 9.0)
+    assert acts[-1][1] == Action("off") and m.finished(t + 9.0)
+    # a controller still running, wound up by the descent: its full thrust must not take off again
+    assert not m.note_setpoint(t + 9.1, 60000)
+    assert m.poll(t + 9.2) is None and not m.flying and m.finished(t + 9.2)
+    m = monitor()
+    m.note_setpoint(0.0, 0)
+    assert not m.begin_shutdown(0.1) and not m.note_setpoint(0.2, HOVER)    # on the ground: no take-off either
+
+
+def test_after_a_descent_a_new_flight_starts_from_zero_thrust():
+    m = monitor()
+    t = hover_for(m, 0.0, 1.0)
+    run(m, t, t + 10.0)
+    assert m.reaction == Reaction.DOWN
+    assert not m.note_setpoint(t + 10.1, 60000)     # a wound-up controller's thrust
+    assert m.note_setpoint(t + 10.2, 0)             # the thrust lock's zero
+    assert m.note_setpoint(t + 10.3, HOVER) and m.flying
+
+
+def test_a_landing_under_way_is_not_sent_twice():
+    m = monitor(protocol=CURRENT_FW)
+    m.note_high_level(0.0, "takeoff")
+    m.note_high_level(3.0, "land", 2.0)          # the user's (or the swarm's stale-pose) landing
+    assert m.begin_shutdown(3.5, 10.0)           # still in the air: the reaction waits for that landing
+    assert run(m, 3.5, 6.0) == [] and m.reaction == Reaction.DOWN and m.finished(6.0)
+    m = monitor(protocol=CURRENT_FW)
+    m.note_high_level(0.0, "takeoff")
+    assert m.begin_shutdown(1.0, 10.0)
+    assert [a.kind for _, a in run(m, 1.0, 11.0)][:2] == ["land", "hl_stop"]
 
 
 def test_setpoint_thrust_of_worker_setpoints():
@@ -328,8 +381,10 @@ def test_worker_lands_onboard_on_shutdown():
         time.sleep(0.05)
         assert w.begin_safe_shutdown(3.0)
         assert wait_for(w.safe_to_close, 5.0)
-        hl = [p[2][0][0] for p in cf.of_kind("hl")]
-        assert hl == [CMD_LAND_2, CMD_STOP]
+        hl = [p[2][0] for p in cf.of_kind("hl")]
+        assert [h[0] for h in hl] == [CMD_GO_TO_2, CMD_STOP]
+        _, _, relative, _, x, y, z, yaw, duration = struct.unpack("<BBBB5f", hl[0])
+        assert relative and (x, y, yaw) == (0.0, 0.0, 0.0) and z == pytest.approx(-2.0) and duration == 1.0
         assert [p[2][3] for p in cf.of_kind("setpoint")][-3:] == [0, 0, 0]      # then motors off, for sure
         notify = setpoints.notify_setpoints_stop_packet(0)
         raw = [p for p in cf.of_kind("raw") if p[2] == (notify.port, notify.channel, bytes(notify.data))]
