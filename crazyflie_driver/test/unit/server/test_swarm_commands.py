@@ -135,3 +135,16 @@ def test_update_params_reads_allcfs_first_then_the_crazyflies_own_and_names_what
                                          "cf1", ros.get)
     assert values == {"stabilizer.controller": 2, "locSrv.extPosStdDev": 0.001}
     assert errors == ["cf1: neither /allcfs/ring/effect nor /cf1/ring/effect is set", "bad: not of the form group/name"]
+
+
+def test_commands_that_went_out_are_observed_for_the_safety_reactions_refused_ones_are_not():
+    seen = []
+    commands, members, medium = swarm()
+    commands = SwarmCommands(lambda: members, commands.broadcaster,
+                             observe=lambda targets, what, d: seen.append(([m.name for m in targets], what, d)))
+    commands.takeoff(1, 0.5, 2.0)
+    commands.land(0, 0.0, 3.0)
+    commands.stop(2)
+    with pytest.raises(CommandValueError):
+        commands.go_to(0, (math.nan, 0.0, 0.0), 0.0, 1.0)
+    assert seen == [(["cf2"], "takeoff", 2.0), (["cf1", "cf2", "cf3"], "land", 3.0), (["cf3"], "stop", 0.0)]
