@@ -60,6 +60,7 @@ HOVER_TOLERANCE_M = 0.15       # "hovering under control": this close to the goa
 HOVER_SPEED_MS = 0.3           # ... and slower than this
 FLOOR_Z_M = 0.03
 FALL_SPEED_MS = 1.0            # touching down faster than this is a fall, not a landing
+KEEPALIVE = "onboard+keep-alive"
 
 
 # --- the graph -----------------------------------------------------------------------------------
@@ -78,9 +79,11 @@ def world_launch_text() -> str:
 
 
 def launch_text(path: str) -> str:
+    """The stack's nodes; path "onboard+keep-alive" is "onboard" with the emergency-stop watchdog keep-alive on."""
     rows = ["<launch>",
             '  <include file="$(find crazyflie_driver)/launch/crazyflie_server.launch">',
             '    <arg name="sim" value="true" /><arg name="sim_address" value="%s" />' % SIM_ADDRESS,
+            '    <arg name="emergency_watchdog" value="%s" />' % ("true" if path == KEEPALIVE else "false"),
             "  </include>",
             '  <group ns="%s">' % NAME,
             '    <include file="$(find crazyflie_driver)/launch/crazyflie_add.launch">',
@@ -238,7 +241,7 @@ def roslaunch(path: str, text: str) -> subprocess.Popen:
 class Row:
     key: str
     title: str
-    path: str                              # "chapter" or "onboard"
+    path: str                              # "chapter", "onboard" or KEEPALIVE
     inject: Callable[["Bench"], None]
     observe_s: float
     cleanup: Callable[["Bench"], None] = lambda b: None
@@ -585,6 +588,9 @@ def rows() -> List[Row]:
         Row("server_int", "server stopped (Ctrl-C)", "chapter",
             lambda b: kill_node(b, "/crazyflie_server", signal.SIGINT), 10.0),
         Row("server_onboard", "server killed (SIGKILL)", "onboard", lambda b: kill_node(b, "/crazyflie_server"), 8.0),
+        Row("server_keepalive", "server killed (SIGKILL)", KEEPALIVE, lambda b: kill_node(b, "/crazyflie_server"),
+            8.0),
+        Row("unplug_keepalive", "dongle unplugged for good", KEEPALIVE, inject("unplug 0"), 8.0, clear),
         Row("server_int_onboard", "server stopped (Ctrl-C)", "onboard",
             lambda b: kill_node(b, "/crazyflie_server", signal.SIGINT), 8.0),
         Row("silent_onboard", "setpoints streamed for 1 s, then silent (times from the stream start)", "onboard",
@@ -655,7 +661,8 @@ def write(args: argparse.Namespace, results: List[Tuple[Row, Dict[str, Any]]], c
     results = sorted(results, key=lambda rr: [r.key for r in rows()].index(rr[0].key))
     head = ["fault table: one Crazyflie hovering at (0, 0, 0.5) in the full ROS stack (crazyflie_sim_node with "
             "Vicon-style mocap at 100 Hz, crazyflie_server over the fake Crazyradio; path chapter: the chapter's "
-            "controller node; path onboard: the high-level commander with the mocap as external_position)",
+            "controller node; path onboard: the high-level commander with the mocap as external_position; "
+            "path onboard+keep-alive: the same with the server's emergency-stop watchdog keep-alive on)",
             "safe = on the floor with the motors off, or within %.2f m of the goal and slower than %.1f m/s until "
             "the row ends; times from the fault; truth sampled at %.0f Hz" % (HOVER_TOLERANCE_M, HOVER_SPEED_MS,
                                                                              SAMPLE_HZ),
