@@ -55,18 +55,20 @@ class PollPacer:
         self._at = self._empty_at = now
         self._burst = 0
 
-    def after_round_trip(self, packets: int, now: float) -> float:
-        """Seconds until the next poll, after a round trip that fetched ``packets`` log packets."""
+    def after_round_trip(self, packets: int, now: float, others: int = 0) -> float:
+        """Seconds until the next poll, after a round trip that fetched ``packets`` log packets and
+        ``others`` other packets (parameter, memory, high-level replies: not foreseen by ``rate``, so
+        more may be queued behind them: the next poll follows at once, within ``MAX_BURST``)."""
         self.backlog += self.rate * max(0.0, now - self._at)
         self._at = now
         if packets > 0:
             self.backlog = max(-1.0, self.backlog - packets)
-        else:
+        elif others == 0:
             self.backlog = 0.0
             self._empty_at = now
         self.backlog = min(self.backlog, 8.0)
-        if packets > 0 and self._burst < self.MAX_BURST and (
-                self.backlog >= 1.0 or now - self._empty_at >= self.drain_interval):
+        if (packets > 0 or others > 0) and self._burst < self.MAX_BURST and (
+                others > 0 or self.backlog >= 1.0 or now - self._empty_at >= self.drain_interval):
             self._burst += 1
             return 0.0
         self._burst = 0

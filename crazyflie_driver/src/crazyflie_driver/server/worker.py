@@ -573,12 +573,15 @@ class CrazyflieWorker:
                 self._pending = None
             setpoint = self._safety_step(setpoint)
             downlink_before = self._downlink_packets
+            fetched_before = self._fetched_packets()
             acked = self._round_trip(setpoint)
             now = self._clock()
             if self.state == WorkerState.LOST:
                 next_due = now + self.lost_retry_period
             else:
-                next_due = now + self._pacer.after_round_trip(self._downlink_packets - downlink_before, now)
+                logged = self._downlink_packets - downlink_before
+                next_due = now + self._pacer.after_round_trip(
+                    logged, now, max(0, self._fetched_packets() - fetched_before - logged))
             if acked is not None:
                 self._after_round_trip(acked, now)
                 if acked and self._downlink_packets == downlink_before:
@@ -588,6 +591,11 @@ class CrazyflieWorker:
             if self.safety.config.emergency_watchdog and now >= self._watchdog_due:
                 self._watchdog_due = now + safety_actions.WATCHDOG_KEEPALIVE_PERIOD_S
                 safety_actions.send_watchdog_keepalive(self.cf)
+
+    def _fetched_packets(self) -> int:
+        """Packets the Crazyflie's queue gave up so far: log data and every other answer (parameter,
+        memory and high-level replies, console text) that shares the queue with it."""
+        return getattr(self.cf.link, "downlink_packets", self._downlink_packets)
 
     def _safety_step(self, setpoint: Optional[Setpoint]) -> Optional[Setpoint]:
         """The setpoint to send this round trip: the user's, or a safety reaction's (see server.safety)."""

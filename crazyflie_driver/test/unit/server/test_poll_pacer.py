@@ -83,3 +83,35 @@ def test_swarm_mode_polls_about_once_per_pose_packet():
     assert eager[0] >= 1.9 * eager[1]
     assert fly(PollPacer(0.010, rate), (0.100,), 10.0, phase=0.003)[0] / 10.0 >= 80     # 10 ms + the round trip
     assert fly(PollPacer(0.100, margin=PollPacer.SPARSE_MARGIN), (), 10.0)[0] / 10.0 <= 10.0   # nothing logged
+
+
+def test_replies_queued_ahead_of_the_log_are_drained_at_once():
+    """A broadcast high-level command repeated 15 times leaves 15 replies in each Crazyflie's downlink
+    queue, ahead of its log packets. Polls that fetch them are not empty: the pacer polls again at once,
+    so the pose packets behind them come out a round trip or so late, not after a second of sparse
+    keep-alives (each reply taken for an empty ack)."""
+    rate = log_packet_rate([PlannedBlock(100)])
+    pacer = PollPacer(0.100, rate, margin=PollPacer.SPARSE_MARGIN)
+    produced = [0.003 + 0.1 * k for k in range(1, 60)]
+    queue, now, worst, polls = [], 0.0, 0.0, 0
+    replies_at, replies = 2.0, 15
+    while now < 6.0:
+        now += 0.0023
+        if replies and now >= replies_at:
+            queue[:0] = ["reply"] * replies        # the firmware's replies go out before later log data
+            replies = 0
+        while produced and produced[0] <= now:
+            queue.append(produced.pop(0))
+        polls += 1
+        logged = others = 0
+        if queue:
+            item = queue.pop(0)
+            if item == "reply":
+                others = 1
+            else:
+                logged = 1
+                worst = max(worst, now - item)
+        now += pacer.after_round_trip(logged, now, others)
+    assert not queue
+    assert worst < 0.100 + 0.05                     # a period and the few polls the replies took
+    assert polls <= 1.2 * 59 + 15 + 10
