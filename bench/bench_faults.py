@@ -281,20 +281,24 @@ class Bench:
             return 0.0
         if self.graph is not None:
             self.graph.stop()
+        # only what the new graph says counts: the stopped graph's status and controller state (its
+        # "running", its "Idle: ok") arrive up to its end, and a take-off sent on them reaches the new
+        # controller before it has a pose, which refuses it
+        t_graph = time.monotonic()
         self.graph = Graph(path, self.work)
         rospy = self.rospy
         from std_srvs.srv import Empty
         rospy.wait_for_service("/%s/update_params" % NAME, 90.0)
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
-            status = self.recorder.since("status", t0)
+            status = self.recorder.since("status", t_graph)
             if status and status[-1][1].message == "running":
                 break
             time.sleep(0.1)
         if path == "chapter":
             rospy.wait_for_service("/%s/takeoff" % NAME, 30.0)
             deadline = time.monotonic() + 30.0
-            while time.monotonic() < deadline and not [s for _, s in self.recorder.since("state", t0)
+            while time.monotonic() < deadline and not [s for _, s in self.recorder.since("state", t_graph)
                                                        if s == "Idle: ok"]:       # a pose, take-off allowed
                 time.sleep(0.1)
             rospy.ServiceProxy("/%s/takeoff" % NAME, Empty)()

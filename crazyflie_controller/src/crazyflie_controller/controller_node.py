@@ -46,6 +46,7 @@ EXTRA_PARAMS = {
     "takeoffHandover": "takeoff_handover",
     "derivative": "derivative",
     "poseTimeout": "pose_timeout",
+    "frozenPoseTimeout": "frozen_pose_timeout",
     "lostPoseLandTimeout": "lost_pose_land_timeout",
     "lostPoseThrustDrop": "lost_pose_thrust_drop",
     "lostPoseDescentTime": "lost_pose_descent_time",

@@ -13,6 +13,10 @@ Differences from the original, each a fix:
   ``lost_pose_land_timeout`` the vehicle sinks open loop (``lost_pose_thrust_drop`` below the hover
   thrust) for ``lost_pose_descent_time`` and the motors stop; a pose that comes back during that
   descent turns it into a closed-loop landing;
+* a pose whose values stay bit-identical for longer than ``frozen_pose_timeout`` while airborne
+  (Automatic or Landing) is stale too, however fresh its stamps: real motion capture always
+  carries noise, so such a pose comes from a frozen tracker that repeats its last solution; the
+  same hold → blind descent → motors off follows, and values that change again end it;
 * a goal jump does not kick the D term (derivative on the measured velocity);
 * errors are rotated by the yaw only (the original used the full 3-D rotation, so tilt leaked in);
 * ``takeoff_handover="smooth"``: at lift-off the setpoint starts at the vehicle's position and
@@ -141,6 +145,7 @@ class ControllerConfig:
     takeoff_max_thrust: float = 50000.0    # the ramp also ends above this thrust
     landing_height: float = 0.05           # m above the start height where landing ends
     pose_timeout: float = 0.1              # s: an older pose is stale
+    frozen_pose_timeout: float = 0.1       # s of bit-identical pose values while airborne: frozen, stale (0: off)
     lost_pose_land_timeout: float = 0.5    # s of stale pose before the blind descent starts
     lost_pose_thrust_drop: float = 1500.0  # counts below the hover thrust during the blind descent
     lost_pose_descent_time: float = 2.0    # s of blind descent before the motors stop
@@ -177,6 +182,8 @@ class ControllerConfig:
             raise ValueError("liftoff_lag must be in [0, 1) s, got %r" % (self.liftoff_lag,))
         if not (isinstance(self.hover_refine_time, (int, float)) and 0 <= self.hover_refine_time < 60):
             raise ValueError("hover_refine_time must be in [0, 60) s, got %r" % (self.hover_refine_time,))
+        if not (isinstance(self.frozen_pose_timeout, (int, float)) and 0 <= self.frozen_pose_timeout < float("inf")):
+            raise ValueError("frozen_pose_timeout must be >= 0 s (0: off), got %r" % (self.frozen_pose_timeout,))
         if not self.lost_pose_thrust_drop >= 0:
             raise ValueError("lost_pose_thrust_drop must be >= 0, got %r" % (self.lost_pose_thrust_drop,))
 
@@ -227,6 +234,7 @@ class PositionController:
         self._liftoff = LiftoffEstimator()
         self._pose: Optional[PoseSample] = None          # newest pose seen
         self._velocity: Optional[Tuple[float, float, float, float]] = None  # vx, vy, vz, yaw rate
+        self._values_since: Optional[float] = None      # stamp of the first pose with the newest pose's values
         self._stale_since: Optional[float] = None
         self._blind_since: Optional[float] = None
         self._hold_thrust = 0.0
@@ -306,7 +314,10 @@ class PositionController:
                 self.safety = Safety.OK if self._fresh(now) else Safety.NO_POSE
             return self._emit(ZERO)
         if not self._fresh(now):
-            return self._emit(self._stale_action(now))
+            return self._emit(self._stale_action(now, self._stale_reason(now)))
+        if self._frozen():
+            return self._emit(self._stale_action(now, "pose frozen: identical for %.2f s (limit %.2f s)" % (
+                self._pose.stamp - self._values_since, self.config.frozen_pose_timeout)))
         if self._stale_since is not None:
             self._recover(now)
             if self.state == State.IDLE:
@@ -348,6 +359,8 @@ class PositionController:
         if prev is not None and pose.stamp <= prev.stamp:
             return
         self._pose = pose
+        if prev is None or (pose.x, pose.y, pose.z, pose.yaw) != (prev.x, prev.y, prev.z, prev.yaw):
+            self._values_since = pose.stamp
         if self.state == State.TAKING_OFF:
             self._liftoff.record_climb(pose.stamp, pose.z - self.start_z)
         if self._hover_fit is not None:
@@ -363,6 +376,18 @@ class PositionController:
 
     def _fresh(self, now: float) -> bool:
         return self._pose is not None and now - self._pose.stamp <= self.config.pose_timeout
+
+    def _frozen(self) -> bool:
+        """Airborne and the pose values unchanged for longer than ``frozen_pose_timeout`` (stamps aside).
+        Not on the ground nor during the take-off ramp: a vehicle standing still may be seen without
+        noise (the simulator's mocap has none by default), and the ramp's lift-off is its own check."""
+        limit = self.config.frozen_pose_timeout
+        return (limit > 0 and self.state in (State.AUTOMATIC, State.LANDING) and self._pose is not None
+                and self._values_since is not None and self._pose.stamp - self._values_since > limit)
+
+    def _stale_reason(self, now: float) -> str:
+        age = float("inf") if self._pose is None else now - self._pose.stamp
+        return "pose is %.2f s old (limit %.2f s)" % (age, self.config.pose_timeout)
 
     def _lifted_off(self) -> bool:
         return (self._pose.z > self.start_z + self.config.takeoff_height
@@ -534,8 +559,9 @@ class PositionController:
         vertical = math.cos(math.radians(pitch_deg)) * math.cos(math.radians(roll_deg))
         return min(thrust / vertical, self.pids["z"].gains.max_output)
 
-    def _stale_action(self, now: float) -> Command:
-        """Never act on a stale pose: hold level at hover thrust, then sink blind, then stop."""
+    def _stale_action(self, now: float, reason: str) -> Command:
+        """Never act on a stale (old or frozen) pose: hold level at hover thrust, then sink blind, then stop;
+        ``reason`` is logged once, when the spell starts."""
         cfg = self.config
         self._hover_fit = None   # the fit needs every pose of its window
         if self._stale_since is None:
@@ -545,9 +571,7 @@ class PositionController:
             else:
                 z = self.pids["z"]
                 self._hold_thrust = clamp(z.i_term, z.gains.min_output, z.gains.max_output)
-            age = float("inf") if self._pose is None else now - self._pose.stamp
-            self._log("warn", "pose is %.2f s old (limit %.2f s): holding level at thrust %.0f"
-                      % (age, cfg.pose_timeout, self._hold_thrust))
+            self._log("warn", "%s: holding level at thrust %.0f" % (reason, self._hold_thrust))
             self.safety = Safety.HOLDING
         if now - self._stale_since < cfg.lost_pose_land_timeout:
             return Command(0.0, 0.0, self._hold_thrust, 0.0)

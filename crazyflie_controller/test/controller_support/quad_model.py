@@ -96,11 +96,19 @@ class Flight:
         self.ticks_per_cycle = int(round(1.0 / rate / 0.001))
         self.log = []   # (t, x, y, z, yaw, command, state)
         self.pose_blackout = None  # (start, end) world times during which no pose reaches the controller
+        self.pose_freeze = None    # (start, end) world times during which the mocap repeats one pose, stamped anew
+        self._frozen = None
 
     def pose(self):
         if self.pose_blackout and self.pose_blackout[0] <= self.model.t < self.pose_blackout[1]:
             return None
-        return self.model.latest_pose
+        latest = self.model.latest_pose
+        if latest is not None and self.pose_freeze and self.pose_freeze[0] <= self.model.t < self.pose_freeze[1]:
+            if self._frozen is None:
+                self._frozen = latest
+            return self._frozen._replace(stamp=latest.stamp)
+        self._frozen = None
+        return latest
 
     def run(self, seconds: float) -> None:
         cycles = int(round(seconds / (self.ticks_per_cycle * 0.001)))

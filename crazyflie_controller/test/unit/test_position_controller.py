@@ -19,7 +19,12 @@ YAW = PidGains(-200, -20, 0, -200, 200, 0, 0)
 DT = 0.02
 
 
+FROZEN_POSE_TIMEOUT = ControllerConfig(X, Y, Z, YAW).frozen_pose_timeout
+
+
 def make(original=False, **kw):
+    """The poses of ``pose()`` below are exact (no noise), so the frozen-pose check is off unless a test asks."""
+    kw.setdefault("frozen_pose_timeout", 0.0)
     cfg = ControllerConfig.original(X, Y, Z, YAW, **kw) if original else ControllerConfig(X, Y, Z, YAW, **kw)
     messages = []
     c = PositionController(cfg, log=lambda level, msg: messages.append((level, msg)))
@@ -51,6 +56,7 @@ def airborne(c, t=0.0, z=0.5, x=0.0, y=0.0, yaw=0.0, goal=(0.0, 0.0, 0.5, 0.0)):
 
 
 def fly_takeoff(original, seconds=20.0, mass=0.032, **kw):
+    kw.setdefault("frozen_pose_timeout", FROZEN_POSE_TIMEOUT)   # the model's mocap is noisy, as a real one
     c = make(original, **kw)
     f = Flight(c, QuadModel(mass=mass))
     f.settle_pose()
@@ -208,6 +214,65 @@ def test_pose_back_during_blind_descent_lands_closed_loop():
     assert c.state == State.LANDING and c.safety == Safety.OK
     f.run(8.0)
     assert c.state == State.IDLE and f.model.p[2] < 0.06
+
+
+def frozen_messages(c):
+    return [m for level, m in c.messages if level == "warn" and m.startswith("pose frozen: identical for")]
+
+
+def test_frozen_pose_while_flying_holds_then_descends_blind_then_stops():
+    c, f = fly_takeoff(original=False, seconds=10.0)
+    assert c.safety == Safety.OK and not frozen_messages(c)      # a noisy pose is never taken for frozen
+    f.pose_freeze = (f.model.t, 1e9)                              # the same values, stamped anew
+    f.run(0.3)
+    assert c.state == State.AUTOMATIC and c.safety == Safety.HOLDING
+    hover = c.pids["z"].i_term
+    assert f.log[-1][5] == Command(0.0, 0.0, pytest.approx(hover), 0.0)
+    f.run(0.5)                                                    # frozen > 0.1 + 0.5 s
+    assert c.safety == Safety.BLIND_DESCENT
+    assert f.log[-1][5].linear_z == pytest.approx(hover - c.config.lost_pose_thrust_drop)
+    f.run(2.5)
+    assert c.state == State.IDLE and c.safety == Safety.LANDED_BLIND
+    assert c.last_command == Command(0, 0, 0, 0) and f.model.p[2] == 0.0
+    assert len(frozen_messages(c)) == 1                           # logged once, with the reason
+
+
+def test_frozen_pose_for_a_moment_recovers_when_the_values_change():
+    c, f = fly_takeoff(original=False, seconds=10.0)
+    f.pose_freeze = (f.model.t, f.model.t + 0.3)
+    f.run(0.25)
+    assert c.safety == Safety.HOLDING
+    f.run(0.5)
+    assert c.state == State.AUTOMATIC and c.safety == Safety.OK
+    assert any("fresh again" in m for _, m in c.messages)
+    f.run(3.0)
+    assert abs(f.model.p[2] - 0.5) < 0.05 and c.safety == Safety.OK
+
+
+def test_frozen_pose_check_off_at_zero_and_refused_below():
+    c, f = fly_takeoff(original=False, seconds=10.0, frozen_pose_timeout=0.0)
+    f.pose_freeze = (f.model.t, 1e9)
+    f.run(1.0)
+    assert c.state == State.AUTOMATIC and c.safety == Safety.OK and not frozen_messages(c)
+    with pytest.raises(ValueError, match="frozen_pose_timeout"):
+        ControllerConfig(X, Y, Z, YAW, frozen_pose_timeout=-0.1)
+
+
+def test_identical_poses_on_the_ground_and_during_the_ramp_change_nothing():
+    c = make(frozen_pose_timeout=FROZEN_POSE_TIMEOUT)
+    c.set_goal(0.0, 0.0, 0.5)
+    t = 0.0
+    for _ in range(100):                                          # 2 s of one pose, fresh stamps, idle
+        t += DT
+        c.update(t, pose(t, z=0.0))
+    assert c.state == State.IDLE and c.safety == Safety.OK
+    assert c.takeoff(t)
+    for _ in range(50):                                           # 1 s of the take-off ramp, still on the floor
+        t += DT
+        out = c.update(t, pose(t, z=0.0))
+    assert c.state == State.TAKING_OFF and c.safety == Safety.OK
+    assert out.linear_z == pytest.approx(c.config.takeoff_thrust_rate * 1.0, rel=0.05)
+    assert not frozen_messages(c)
 
 
 # ------------------------------------------------------------------ goal jumps, frames, signs
