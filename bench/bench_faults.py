@@ -26,6 +26,7 @@ Usage (takes the ROS lock on a shared machine; about 5 minutes):
     source tools/env.sh
     flock /tmp/ros.lock bench/bench_faults.py --readme        # every row -> bench/results/faults.txt + README
     flock /tmp/ros.lock bench/bench_faults.py --rows loss30,emergency --out -
+    flock /tmp/ros.lock bench/bench_faults.py --rows freeze,hide --readme   # measured again, merged by row key
 """
 from __future__ import annotations
 
@@ -660,9 +661,41 @@ def markdown(results: List[Tuple[Row, Dict[str, Any]]]) -> List[str]:
 # rows that usually leave the vehicle hovering first, so the graph is reused; the table keeps rows()'s order
 RUN_FIRST = ("loss30", "loss80", "ackloss", "latency", "freeze02", "freeze2", "battery_warn", "unplug1")
 
+README_TABLE = "README table:"
+
+
+def previous_table(path: str) -> Tuple[List[str], Dict[str, Tuple[List[str], str]]]:
+    """An earlier table file's head lines and its rows by key: (detail lines, README line); empty if none.
+
+    Rows are found by their title and path, as :func:``table`` and :func:``markdown`` write them."""
+    try:
+        with open(path) as f:
+            text = f.read()
+    except OSError:
+        return [], {}
+    detail, _, short = text.partition("\n%s\n" % README_TABLE)
+    blocks = detail.split("\n\n")
+    head = blocks[0].split("\n") if blocks else []
+    found: Dict[str, Tuple[List[str], str]] = {}
+    for r in rows():
+        starts = ("%s (%s path)" % (r.title, r.path), "%s (%s): bench error" % (r.title, r.path))
+        block = next((b for b in blocks[1:] if b.strip("\n").split("\n")[0].startswith(starts)), None)
+        line = next((x for x in short.split("\n") if x.startswith("| %s | %s |" % (r.title, r.path))), None)
+        if block is not None and line is not None:
+            found[r.key] = (block.strip("\n").split("\n") + [""], line)
+    return head, found
+
+
 def write(args: argparse.Namespace, results: List[Tuple[Row, Dict[str, Any]]], commit: str, took: float,
           partial: bool) -> None:
+    """The table of ``results``; with ``--rows``, merged by row key into the table already in ``--out``
+    (the rows not run keep their earlier lines, the head says which rows were measured again)."""
     results = sorted(results, key=lambda rr: [r.key for r in rows()].index(rr[0].key))
+    if args.rows and args.out != "-":
+        previous_head, previous = previous_table(args.out)
+        if previous:
+            write_merged(args, results, commit, took, partial, previous_head, previous)
+            return
     head = ["fault table: one Crazyflie hovering at (0, 0, 0.5) in the full ROS stack (crazyflie_sim_node with "
             "Vicon-style mocap at 100 Hz, crazyflie_server over the fake Crazyradio; path chapter: the chapter's "
             "controller node; path onboard: the high-level commander with the mocap as external_position; "
@@ -677,7 +710,7 @@ def write(args: argparse.Namespace, results: List[Tuple[Row, Dict[str, Any]]], c
                 platform.machine(), platform.platform(terse=True), platform.python_version(), os.cpu_count() or 0,
                 " ".join("%.2f" % x for x in os.getloadavg())),
             ""]
-    text = "\n".join(head + table(results) + ["", "README table:", ""] + markdown(results)) + "\n"
+    text = "\n".join(head + table(results) + ["", README_TABLE, ""] + markdown(results)) + "\n"
     if args.out == "-":
         if not partial:
             print("\n".join(markdown(results)))
@@ -689,6 +722,30 @@ def write(args: argparse.Namespace, results: List[Tuple[Row, Dict[str, Any]]], c
         update_readme(markdown(results))
     if not partial:
         print("written to %s (%.0f s)" % (args.out, took))
+
+
+def write_merged(args: argparse.Namespace, results: List[Tuple[Row, Dict[str, Any]]], commit: str, took: float,
+                 partial: bool, previous_head: List[str], previous: Dict[str, Tuple[List[str], str]]) -> None:
+    new = {row.key: (row, r) for row, r in results}
+    detail, short = [], markdown([])
+    for row in rows():
+        if row.key in new:
+            detail += table([new[row.key]])
+            short += markdown([new[row.key]])[2:]
+        elif row.key in previous:
+            detail += previous[row.key][0]
+            short.append(previous[row.key][1])
+    tag = "re-measured (--rows %s):" % args.rows
+    head = [line for line in previous_head if line and not line.startswith(tag)]
+    head += ["%s stack at %s, %.0f s for %d rows%s, load average %s" % (
+        tag, commit, took, len(results), ", run still going" if partial else "",
+        " ".join("%.2f" % x for x in os.getloadavg())), ""]
+    with open(args.out, "w") as f:
+        f.write("\n".join(head + detail + ["", README_TABLE, ""] + short) + "\n")
+    if args.readme:
+        update_readme(short)
+    if not partial:
+        print("merged into %s (%.0f s)" % (args.out, took))
 
 
 README_MARKERS = ("<!-- fault table: bench/bench_faults.py --readme writes below -->", "<!-- fault table end -->")
