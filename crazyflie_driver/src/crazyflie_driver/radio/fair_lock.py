@@ -14,6 +14,11 @@ SHARE_WINDOW_S = 0.2
 #: Longest wait (s) of a background turn while plain ones keep coming: a keep-alive nobody waits for
 #: still goes out at least this often, so the Crazyflie's transmit queue keeps draining.
 BACKGROUND_MAX_WAIT_S = 0.2
+#: Longest wait (s) of a plain turn while urgent ones keep coming: 8 Crazyflies streaming setpoints at
+#: 100 Hz on one dongle ask for twice its round trips, and a worker whose poll waited behind them
+#: forever sent none of its own setpoints either (5 round trips of a shared dongle, 2.3 ms each, are
+#: about 12 ms; this is four times that).
+PLAIN_MAX_WAIT_S = 0.05
 
 
 class FairLock:
@@ -22,7 +27,9 @@ class FairLock:
 
     ``acquire(urgent=True)`` queues ahead of the plain waiters (behind earlier urgent ones): a
     setpoint then waits for the round trip in progress and the setpoints before it, not for
-    every other Crazyflie's poll.
+    every other Crazyflie's poll; a plain turn that has waited ``PLAIN_MAX_WAIT_S`` goes before the
+    uncapped urgent ones all the same, so setpoints that ask for more than the dongle has cannot
+    starve it.
 
     ``acquire(urgent=True, capped=True)`` (broadcast bursts) is urgent only while the capped turns
     have held the lock for less than ``capped_share`` of the recent time (a decaying average over
@@ -69,7 +76,7 @@ class FairLock:
             elif background:
                 queue, entry = self._background, (waiter, self._clock())
             else:
-                queue, entry = self._waiters, waiter
+                queue, entry = self._waiters, (waiter, self._clock())
             queue.append(entry)
         if waiter.acquire(True, timeout):
             return True
@@ -103,6 +110,8 @@ class FairLock:
                 self._capped_busy = (self._share(now) + 1.0 - math.exp(-held / SHARE_WINDOW_S)) * SHARE_WINDOW_S
                 self._busy_at = now
             entry = self._next_urgent(now)
+            if entry is not None and not entry[1] and self._plain_overdue(now):
+                entry = None                # capped turns have their share rule instead
             if entry is not None:
                 self._urgent.remove(entry)
                 self._grant(entry[1])
@@ -112,9 +121,12 @@ class FairLock:
                 self._background.popleft()[0].release()
             elif self._waiters:
                 self._grant(False)
-                self._waiters.popleft().release()
+                self._waiters.popleft()[0].release()
             else:
                 self._held = False
+
+    def _plain_overdue(self, now: float) -> bool:
+        return bool(self._waiters) and now - self._waiters[0][1] >= PLAIN_MAX_WAIT_S
 
     def _next_urgent(self, now: float):
         """The urgent waiter to go next: the first one, unless it is capped, over its share and a

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from crazyflie_driver.radio.fair_lock import BACKGROUND_MAX_WAIT_S, SHARE_WINDOW_S, FairLock
+from crazyflie_driver.radio.fair_lock import BACKGROUND_MAX_WAIT_S, PLAIN_MAX_WAIT_S, SHARE_WINDOW_S, FairLock
 
 
 class Clock:
@@ -130,3 +130,20 @@ def test_idle_polls_count_as_unicast_for_the_reserve():
     for t in threads:
         t.join(10.0)
     assert [k for k, _, _ in log] == ["idle", "capped"]
+
+
+def test_urgent_turns_cannot_starve_a_plain_one():
+    """More urgent turns than the dongle carries (8 Crazyflies streaming setpoints at 100 Hz on one
+    dongle): a waiting poll still goes once it has waited PLAIN_MAX_WAIT_S, not after all of them."""
+    clock = Clock()
+    lock = FairLock(clock=clock)
+    log = run(lock, [("plain", 0.002)] + [("urgent", 0.010)] * 10, clock)
+    kinds = [k for k, _, _ in log]
+    plain_start = log[kinds.index("plain")][1]
+    assert kinds.index("plain") < 10
+    assert PLAIN_MAX_WAIT_S <= plain_start <= PLAIN_MAX_WAIT_S + 0.010
+    # within the limit urgent turns still go first
+    clock = Clock()
+    lock = FairLock(clock=clock)
+    log = run(lock, [("plain", 0.002)] + [("urgent", 0.010)] * 3, clock)
+    assert [k for k, _, _ in log] == ["urgent"] * 3 + ["plain"]
