@@ -233,3 +233,20 @@ def test_shipped_example_vehicle_config_loads():
     assert [parse_uri(v["uri"]).index for v in vehicles] == [0, 0, 1]
     assert all(len(v["position"]) == 3 for v in vehicles)
     assert vehicles[2]["firmware"] == "2016.02"
+
+
+def test_plug_change_is_stamped_with_world_time(served):
+    """A tool that takes a while to start still lets a test time the reaction from the plug itself."""
+    world, server, medium = served
+    assert medium.control("dongle_faults", dongle=1)[0]["plug_changed_at"] is None
+    world.time = 3.25
+    assert medium.control("set_dongle_faults", dongle=1, unplugged=True)["plug_changed_at"] == 3.25
+    world.time = 4.5
+    medium.set_dongle_faults(1, packet_loss=10.0)            # not a change of plug: the stamp stays
+    medium.set_dongle_faults(1, unplugged=True)
+    assert medium.control("dongle_faults", dongle=1)[0]["plug_changed_at"] == 3.25
+    world.time = 5.0
+    medium.control("clear_faults", dongle=1)                  # plugs it back in
+    row = medium.control("dongle_faults", dongle=1)[0]
+    assert row["plug_changed_at"] == 5.0 and not row["unplugged"]
+    assert medium.control("dongle_faults", dongle=0)[0]["plug_changed_at"] is None

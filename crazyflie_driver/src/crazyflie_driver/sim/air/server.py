@@ -72,6 +72,7 @@ class WorldServer:
         self._udp_next = 0
         self.mocap = None        # the world's MocapModel where the process runs one (the sim node); faults reach it
         self._battery_set: Dict[str, float] = {}      # vehicle -> charge a fault set it to
+        self._plug_changed_at: Dict[int, float] = {}  # dongle -> world time [s] it was last unplugged or plugged in
         self._mocap_seed = seed
         self.mocap_feed = MocapEstimatorFeed(self._feed_estimator)
         world.add_tick_listener(self._tick, FIRMWARE_TICK_S)
@@ -205,15 +206,24 @@ class WorldServer:
 
     def _op_set_dongle_faults(self, a: ControlArgs) -> Dict[str, Any]:
         dongle = self._dongle(a)
-        self.medium.set_dongle_faults(dongle, a.number("packet_loss", None, 0.0, 100.0),
-                                      a.number("ack_loss", None, 0.0, 100.0),
-                                      a.number("latency_s", None, 0.0, MAX_RADIO_LATENCY_S), a.flag("unplugged", None))
+        self._set_dongle_faults(dongle, a.number("packet_loss", None, 0.0, 100.0),
+                                a.number("ack_loss", None, 0.0, 100.0),
+                                a.number("latency_s", None, 0.0, MAX_RADIO_LATENCY_S), a.flag("unplugged", None))
         return self._dongle_faults(dongle)
+
+    def _set_dongle_faults(self, dongle: int, packet_loss: Optional[float], ack_loss: Optional[float],
+                           latency_s: Optional[float], unplugged: Optional[bool]) -> None:
+        """Sets them; a change of plugged state is stamped with the world's time, so that a reaction to
+        it is timed from the moment it happened, not from when a slow-starting tool asked for it."""
+        was_unplugged = self.medium.dongle_faults(dongle).unplugged
+        self.medium.set_dongle_faults(dongle, packet_loss, ack_loss, latency_s, unplugged)
+        if unplugged is not None and bool(unplugged) != was_unplugged:
+            self._plug_changed_at[dongle] = float(self.world.time)
 
     def _dongle_faults(self, dongle: int) -> Dict[str, Any]:
         f = self.medium.dongle_faults(dongle)
         return {"dongle": dongle, "packet_loss": f.packet_loss, "ack_loss": f.ack_loss, "latency_s": f.latency_s,
-                "unplugged": f.unplugged}
+                "unplugged": f.unplugged, "plug_changed_at": self._plug_changed_at.get(dongle)}
 
     def _op_dongle_faults(self, a: ControlArgs) -> List[Dict[str, Any]]:
         dongles = [self._dongle(a)] if a.has("dongle") else range(self.medium.dongle_count())
@@ -351,7 +361,7 @@ class WorldServer:
         else:
             dongles, names = list(range(self.medium.dongle_count())), None
         for d in dongles:
-            self.medium.set_dongle_faults(d, 0.0, 0.0, 0.0, False)
+            self._set_dongle_faults(d, 0.0, 0.0, 0.0, False)
         if self.mocap is not None:
             if names is None:
                 self.mocap.clear_body_faults()
