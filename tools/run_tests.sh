@@ -7,6 +7,11 @@
 # pytest and the rostests run side by side, CRAZYFLIE_TEST_JOBS (default 3) at a time, the longest
 # first (expected seconds in tools/test_durations.txt), so the run ends on short tests. Most
 # rostests wait on simulated flight time rather than compute, so a two-core machine carries three.
+# A job beyond the first starts only while the machine has CRAZYFLIE_TEST_IDLE_CORES (default 0.6)
+# of its cores idle, measured over the last second: the simulated worlds step in real time, and a
+# world starved of CPU stalls its radio and motion capture while the host's clocks run on, which the
+# stack rightly reads as a lost link or a lost pose. On a machine that is busy with other work the
+# run takes longer instead (the summary says how long starts were held back).
 # The rostests are isolated from each other: each has its own master (rostest picks a free port)
 # and its own world address and ports (test_rostest_ports.py holds that). One line per test as it
 # ends: "PASS <pkg>/<file>.test (<wall> s, CPU <cpu> s)" or FAIL with the log's tail; logs, the
@@ -21,6 +26,9 @@ cd "$REPO"
 
 JOBS="${CRAZYFLIE_TEST_JOBS:-3}"
 case "$JOBS" in ''|*[!0-9]*|0) echo "CRAZYFLIE_TEST_JOBS must be a whole number >= 1, got '$JOBS'" >&2; exit 2 ;; esac
+IDLE_CORES="${CRAZYFLIE_TEST_IDLE_CORES:-0.6}"
+case "$IDLE_CORES" in ''|*[!0-9.]*|*.*.*|.) echo "CRAZYFLIE_TEST_IDLE_CORES must be a number of cores >= 0, got '$IDLE_CORES'" >&2
+  exit 2 ;; esac
 RESULTS="$REPO/.ws/test_results"
 rm -rf "$RESULTS"; mkdir -p "$RESULTS/jobs"
 export ROS_LOG_DIR="$RESULTS/ros_log"
@@ -107,15 +115,38 @@ finish_job() {
   fi
 }
 
+# Idle cores over the last second, from /proc/stat's jiffies ("idle iowait" and the total of all
+# fields of its first line), sampled every pass of the loop below; 0 until two samples exist.
+cpu_samples=()
+sample_cpu() {
+  cpu_samples+=("$(awk '/^cpu / { t = 0; for (i = 2; i <= NF; i++) t += $i; print $5 + $6, t; exit }' /proc/stat)")
+  [ "${#cpu_samples[@]}" -le 3 ] || cpu_samples=("${cpu_samples[@]:1}")
+}
+idle_cores() {
+  [ "${#cpu_samples[@]}" -ge 2 ] || { echo 0; return; }
+  awk -v a="${cpu_samples[0]}" -v b="${cpu_samples[${#cpu_samples[@]}-1]}" -v n="$(getconf _NPROCESSORS_ONLN)" \
+    'BEGIN { split(a, x, " "); split(b, y, " "); d = y[2] - x[2]; printf "%.2f", (d > 0 ? n * (y[1] - x[1]) / d : 0) }'
+}
+may_start() {     # the first job always; another while the machine has room for it
+  [ "${#running[@]}" -eq 0 ] && return 0
+  awk -v idle="$(idle_cores)" -v need="$IDLE_CORES" 'BEGIN { exit !(idle >= need) }'
+}
+
 PYTEST_ARGS=("$@")
-echo "== unit tests (pytest) and integration tests (rostest, simulated Crazyflies), $JOBS at a time =="
+echo "== unit tests (pytest) and integration tests (rostest, simulated Crazyflies), up to $JOBS at a time =="
 echo "load average at start: $(cut -d' ' -f1-3 /proc/loadavg)"
 t0=$(date +%s)
+held_passes=0; most_running=0
+sample_cpu
 while [ "${#queue[@]}" -gt 0 ] || [ "${#running[@]}" -gt 0 ]; do
   while [ "${#running[@]}" -lt "$JOBS" ] && [ "${#queue[@]}" -gt 0 ]; do
+    if ! may_start; then held_passes=$((held_passes + 1)); break; fi
     start_job "${queue[0]}"; queue=("${queue[@]:1}")
+    cpu_samples=("${cpu_samples[@]: -1}")     # what the new job's start costs shows before the next one
   done
+  [ "${#running[@]}" -le "$most_running" ] || most_running="${#running[@]}"
   sleep 0.5
+  sample_cpu
   still=()
   for id in "${running[@]}"; do
     if [ -f "$RESULTS/jobs/$(key_of "$id").rc" ]; then finish_job "$id"; else still+=("$id"); fi
@@ -138,7 +169,8 @@ PY
 if [ "$pytest_rc" -ne 0 ] && [ "$py_fail" -eq 0 ]; then py_fail=1; fi
 
 echo "== summary =="
-echo "tests took $(( $(date +%s) - t0 )) s ($JOBS at a time); load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "tests took $(( $(date +%s) - t0 )) s (up to $most_running at a time; starts held back $((held_passes / 2)) s" \
+     "for want of $IDLE_CORES idle cores); load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "lint: $( [ "$lint_fail" -eq 0 ] && echo clean || echo FAILED ); pytest: $py_pass passed, $py_fail failed;" \
      "rostest: $ros_pass passed, $ros_fail failed${failed:+ (failed:$failed)}"
 echo "$((lint_pass + py_pass + ros_pass)) passed, $((lint_fail + py_fail + ros_fail)) failed"
