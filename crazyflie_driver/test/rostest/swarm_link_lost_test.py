@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Swarm mode on the world's truth: the radio of one hovering Crazyflie is unplugged; it is named on
 /diagnostics and its motors stop one watchdog period after the last keep-alive it heard (the server's
-broadcast emergency-stop watchdog), while the Crazyflies on the other radio keep hovering."""
+broadcast emergency-stop watchdog), while the Crazyflies on the other radio keep hovering. Before that,
+a takeoff that addresses a Crazyflie whose estimator motion capture never placed is refused whole."""
 from __future__ import annotations
 
 import math
@@ -46,7 +47,17 @@ class SwarmLinkLost(unittest.TestCase):
 
     def test_unplugged_radio_stops_its_crazyflie_the_others_keep_hovering(self):
         every, others = ("cf1", "cf2", "cf3"), ("cf1", "cf2")
-        rospy.ServiceProxy("/takeoff", Takeoff)(groupMask=0, height=HEIGHT, duration=rospy.Duration(2.0))
+        takeoff = rospy.ServiceProxy("/takeoff", Takeoff)
+        # every Crazyflie, cf4 among them: cf4 would take off from where its estimator believes it is
+        with self.assertRaises(rospy.ServiceException) as refused:
+            takeoff(groupMask=0, height=HEIGHT, duration=rospy.Duration(2.0))
+        self.assertIn("/takeoff: cf4: no first motion-capture pose", str(refused.exception))
+        for n in every + ("unseen4",):      # nothing was sent: all still on the floor, motors off (cf4 is the
+            # world's unseen4)
+            s = self.state(n)
+            self.assertLess(s["position"][2], 0.02, (n, s))
+            self.assertFalse(any(s["motors"]), (n, s))
+        takeoff(groupMask=1, height=HEIGHT, duration=rospy.Duration(2.0))     # cf1, cf2, cf3
         self.assertTrue(wait_until(lambda: all(self.hover_error(n) < TOL for n in every), 20.0),
                         {n: self.state(n)["position"] for n in every})
         unplugged_at = self.state("cf3")["time"]

@@ -23,12 +23,12 @@ from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver import usb_choice
 from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CommandValueError, CrazyflieError
 from crazyflie_driver.nodes import swarm_mocap_sources
 from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
 from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.server.mocap_stream import MocapStream
-from crazyflie_driver.server import radio_budget
+from crazyflie_driver.server import estimator_placement, radio_budget
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
 from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_param_values
@@ -106,6 +106,7 @@ class RosSwarm:
         self._link_ok: Dict[str, bool] = {}
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self._first_fixes: Optional[ThreadPoolExecutor] = None
+        self.placement = estimator_placement.EstimatorPlacement()
         self.heartbeat: Optional[Heartbeat] = None
         self._pose_periods: Dict[str, int] = {}
 
@@ -211,6 +212,10 @@ class RosSwarm:
 
     def _takeoff(self, req) -> None:
         targets = self.commands.targets(req.groupMask)
+        if self.stream is not None:     # the server places the estimators: not before they are placed
+            missing = self.placement.missing([m.name for m in targets])
+            if missing:
+                raise CommandValueError(estimator_placement.refusal(missing))
         self.commands.takeoff(req.groupMask, req.height, req.duration.to_sec())
         with self._watch_lock:
             for m in targets:
@@ -302,6 +307,7 @@ class RosSwarm:
         if errors:
             rospy.logerr("swarm: %s: initial position from its first pose not written: %s", name, "; ".join(errors))
         else:
+            self.placement.placed(name)
             rospy.loginfo("swarm: %s first seen at (%.3f, %.3f, %.3f): estimator reset there", name, *position)
 
     # -- watching -----------------------------------------------------------------------------------
