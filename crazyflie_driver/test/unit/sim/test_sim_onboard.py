@@ -210,3 +210,21 @@ def test_current_firmware_clamping_keeps_the_torque_2016_clips_each_motor():
             assert m.max() == 65535 and m[2] - m[1] == pytest.approx(20000, abs=1)
         else:
             assert m[2] == 65535 and m[1] == 50000
+
+
+def test_the_state_says_when_the_supervisor_locked():
+    """A test times a cut from the lock's own world time, not from when it happened to look."""
+    w, v = airborne("current", z=3.0)
+    assert v.state()["locked_at"] is None
+    fly(w, v, 0.3, thrust=HOVER)
+    last_setpoint = w.time - 0.01                 # fly() steps 10 ms after its last setpoint
+    w.step(2500)
+    s = v.state()
+    assert s["locked"] == "setpoint watchdog"
+    assert s["locked_at"] == pytest.approx(last_setpoint + 2.0, abs=0.0015)    # the 2 s watchdog, to a tick
+    w.step(100)
+    assert v.state()["locked_at"] == s["locked_at"]      # stays the first lock's time
+    w2, v2 = airborne("current", z=3.0)
+    w2.step(37)
+    v2.emergency_stop()
+    assert v2.state()["locked"] == "emergency stop" and v2.state()["locked_at"] == pytest.approx(w2.time)

@@ -14,7 +14,7 @@ pitch positive nose up (the negated standard pitch), yaw counter-clockwise seen 
 from __future__ import annotations
 
 import math
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 
@@ -102,6 +102,7 @@ class OnboardStates(Rows):
         "sp_time": ((), float),
         "thrust_locked": ((), bool),        # waits for a zero-thrust setpoint
         "lock": ((), np.int8),              # LOCK_*: motors off until reboot (LOCK_TUMBLE: until crash recovery)
+        "lock_time": ((), float),           # world time the present lock was set [s]
         # controller state
         "yaw_sp": ((), float),
         "att_integ": ((3,), float),
@@ -148,6 +149,7 @@ class OnboardController:
         self.s = OnboardStates()
         self.dirty = True            # something changed the motors' inputs since the last update
         self._cut_soon = False       # a setpoint watchdog cut is due within the next ticks
+        self.time = 0.0              # world time of the latest tick [s]: stamps a lock set between ticks
 
     # --- commands (called under the world lock) ----------------------------------------------
     def set_rpyt(self, i: int, roll: float, pitch: float, yaw: float, thrust: float, now: float) -> None:
@@ -160,10 +162,12 @@ class OnboardController:
             s.thrust_locked[i] = False
         self.dirty = True
 
-    def lock(self, i: int, reason: int) -> None:
-        """Motors off until reboot; a lock replaces a crash (the firmware's Crashed state can still lock)."""
+    def lock(self, i: int, reason: int, now: Optional[float] = None) -> None:
+        """Motors off until reboot; a lock replaces a crash (the firmware's Crashed state can still lock).
+        ``now``: world time [s] (default: the latest tick's)."""
         if self.s.lock[i] == LOCK_NONE or (self.s.lock[i] == LOCK_TUMBLE and reason != LOCK_TUMBLE):
             self.s.lock[i] = reason
+            self.s.lock_time[i] = self.time if now is None else now
         self.dirty = True
 
     def set_param(self, i: int, name: str, value: float) -> bool:
@@ -213,6 +217,7 @@ class OnboardController:
         """
         s = self.s
         self.dirty = False
+        self.time = now
         if len(s) == 0:
             return s.motors
         # supervisor: watchdog and battery
@@ -287,6 +292,7 @@ class OnboardController:
     def _lock_rows(self, rows: np.ndarray, reason: int) -> None:
         s = self.s
         free = (s.lock == LOCK_NONE) | ((s.lock == LOCK_TUMBLE) & (reason != LOCK_TUMBLE))
+        s.lock_time = np.where(rows & free, self.time, s.lock_time)
         s.lock = np.where(rows & free, reason, s.lock).astype(np.int8)
 
     def _tumble(self, tilt_cos: np.ndarray, thrust: np.ndarray) -> bool:

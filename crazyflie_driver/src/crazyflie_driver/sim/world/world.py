@@ -98,7 +98,7 @@ class Vehicle:
         w = self._world
         with w._lock:
             if self._row >= 0:
-                w.onboard.lock(self._row, LOCK_EMERGENCY)
+                w.onboard.lock(self._row, LOCK_EMERGENCY, w.time)
 
     def pose(self) -> Tuple[np.ndarray, np.ndarray]:
         w = self._world
@@ -180,7 +180,7 @@ class Vehicle:
         with w._lock:
             if self._row >= 0:
                 w.flight.release(self._row)
-                w.onboard.lock(self._row, LOCK_ASSERT)
+                w.onboard.lock(self._row, LOCK_ASSERT, w.time)
 
     def supervisor_flags(self) -> Dict[str, bool]:
         """What the supervisor reports beyond the firmware's own records: locked (until reboot),
@@ -221,6 +221,8 @@ class Vehicle:
                     "on_ground": bool(b.on_ground[i]), "motors": o.motors[i].tolist(),
                     "thrust": float(o.thrust[i]), "thrust_locked": bool(o.thrust_locked[i]),
                     "locked": LOCK_NAMES[int(o.lock[i])], "vbat": float(w.battery.vbat[i]),
+                    # world time the supervisor locked it (None: not locked): when the motors were cut
+                    "locked_at": float(o.lock_time[i]) if o.lock[i] != LOCK_NONE else None,
                     "mass": self.params.mass,
                     # world time the high-level commander's current plan began (takeoff, go_to, trajectory...)
                     "plan_begin": float(w.flight.hl.plans[i].t_begin)}
