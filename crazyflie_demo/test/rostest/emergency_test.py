@@ -40,16 +40,20 @@ class EmergencyMidFlight(unittest.TestCase):
         before = self.probe.state(NAME)
         self.assertGreater(min(before["motors"]), 10000, "motors should be spinning while hovering: %s" % (before,))
         rospy.wait_for_service("/%s/emergency" % NAME, 5.0)
-        t0 = time.monotonic()
+        t0, w0 = time.monotonic(), self.probe.state(NAME)["time"]
         rospy.ServiceProxy("/%s/emergency" % NAME, Empty)()
-        stopped = wait_until(lambda: max(self.probe.state(NAME)["motors"]) == 0, 1.0, 0.01)
-        stop_s = time.monotonic() - t0
-        self.assertTrue(stopped, "motors still at %s 1 s after emergency" % (self.probe.state(NAME)["motors"],))
+        stopped = wait_until(lambda: max(self.probe.state(NAME)["motors"]) == 0, 5.0, 0.01)
+        self.assertTrue(stopped, "motors still at %s after emergency" % (self.probe.state(NAME)["motors"],))
+        # timed in the world from the call to the supervisor's lock (how often this test looks does not count)
+        locked_at = self.probe.state(NAME)["locked_at"]
+        self.assertIsNotNone(locked_at, self.probe.state(NAME))
+        stop_s = locked_at - w0
+        self.assertLess(stop_s, 1.0, "motors stopped %.2f world-s after the emergency call" % stop_s)
         self.assertTrue(self.probe.firmware(NAME)["emergency"])
         on_floor = wait_until(lambda: self.probe.state(NAME)["on_ground"], 3.0, 0.02)
         fall_s = time.monotonic() - t0
         self.assertTrue(on_floor, "not on the floor 3 s after emergency: %s" % (self.probe.position(NAME),))
-        print("EMERGENCY motors stopped within %.3f s, on the floor after %.2f s" % (stop_s, fall_s))
+        print("EMERGENCY motors stopped %.3f world-s after the call, on the floor after %.2f s" % (stop_s, fall_s))
         # the controller keeps publishing setpoints; none of them may spin the motors again
         count = self.cmd_vel_count
         end = time.monotonic() + 2.0

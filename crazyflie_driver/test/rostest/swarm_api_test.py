@@ -124,10 +124,15 @@ class SwarmApi(unittest.TestCase):
     def test_4_emergency_stops_every_crazyflie(self):
         flying = [n for n in self.names(*range(1, 9)) if self.z(n) > 0.3]
         self.assertEqual(len(flying), 7)
+        w0 = self.state("cf1")["time"]
         rospy.ServiceProxy("/emergency", Empty)()
         every = self.names(*range(1, 9))
-        self.assertTrue(wait_until(lambda: not any(any(self.state(n)["motors"]) for n in every), 2.0),
+        self.assertTrue(wait_until(lambda: not any(any(self.state(n)["motors"]) for n in every), 5.0),
                         {n: self.state(n)["motors"] for n in every})
+        for n in every:     # timed in the world from the call to each supervisor's lock, not by the polls
+            s = self.state(n)
+            self.assertIsNotNone(s["locked_at"], (n, s))
+            self.assertLess(s["locked_at"] - w0, 2.0, (n, s["locked_at"] - w0))
         with self.assertRaises(rospy.ServiceException):
             rospy.ServiceProxy("/land", Land)(groupMask=0, height=0.0, duration=rospy.Duration(2.0))
 

@@ -60,15 +60,17 @@ class SwarmLinkLost(unittest.TestCase):
         takeoff(groupMask=1, height=HEIGHT, duration=rospy.Duration(2.0))     # cf1, cf2, cf3
         self.assertTrue(wait_until(lambda: all(self.hover_error(n) < TOL for n in every), 20.0),
                         {n: self.state(n)["position"] for n in every})
-        unplugged_at = self.state("cf3")["time"]
         self.world.set_dongle_faults(1, unplugged=True)
         try:
+            # both ends are the world's stamps (how often this loop looks does not count)
+            unplugged_at = self.world.control("dongle_faults", dongle=1)[0]["plug_changed_at"]
             worst, stopped_at = 0.0, None
             t_end = time.monotonic() + 8.0
             while time.monotonic() < t_end:
                 s = self.state("cf3")
                 if stopped_at is None and not any(s["motors"]):
-                    stopped_at = s["time"]
+                    self.assertIsNotNone(s["locked_at"], s)     # stopped by its firmware, locked
+                    stopped_at = s["locked_at"]
                 worst = max(worst, max(self.hover_error(n) for n in others))
                 if stopped_at is not None and s["position"][2] < 0.03:
                     break
