@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from typing import Optional
 
 import rospy
@@ -15,6 +16,9 @@ from sensor_msgs.msg import Joy
 
 from crazyflie_demo.rosutil import make_goal
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
+
+#: The longest time one step integrates [s]: after a stall the goal moves on, it does not jump.
+MAX_STEP_S = 0.1
 
 
 class GoalTeleop:
@@ -58,11 +62,16 @@ def main() -> None:
     pub = rospy.Publisher(name, PoseStamped, queue_size=1)
     r = rospy.Rate(rate)
     seq = 0
+    stepped_at = time.monotonic()
     while not rospy.is_shutdown():
         with lock:
             axes: Optional[list] = last["axes"]
+        now = time.monotonic()
+        # the time that passed, so the goal moves at the stick's speed also when this loop runs late
+        # (one period per loop, as the original node did, slows the goal down on a busy machine)
+        dt, stepped_at = min(now - stepped_at, MAX_STEP_S), now
         if axes is not None:
-            teleop.step(axes, 1.0 / rate)
+            teleop.step(axes, dt)
         seq += 1
         x, y, z = teleop.position
         if not publish_unless_shutting_down(pub, make_goal(world_frame, x, y, z, teleop.yaw, seq)):

@@ -42,16 +42,22 @@ def raw_up(fraction: float) -> int:
 
 
 class Latest:
-    """The last message of a topic."""
+    """The last message of a topic (and all of them, in ``history``)."""
 
     def __init__(self, topic: str, msg_type) -> None:
         self.lock = threading.Lock()
         self.msg: Optional[object] = None
+        self.history: List[object] = []
         self.sub = rospy.Subscriber(topic, msg_type, self.on_msg, queue_size=10)
 
     def on_msg(self, msg) -> None:
         with self.lock:
             self.msg = msg
+            self.history.append(msg)
+
+    def since(self, index: int) -> List[object]:
+        with self.lock:
+            return self.history[index:]
 
     def get(self):
         with self.lock:
@@ -88,7 +94,10 @@ class TeleopVicon(unittest.TestCase):
         cls.pad.close()
 
     def stick(self, axis: int, fraction: float, seconds: float) -> Tuple[float, float]:
-        """Deflect a stick for ``seconds``; the joy node's reported value while it was held."""
+        """Deflect a stick for about ``seconds``; the joy node's reported value while it was held, and
+        for how long it reported it held (from the stamps of its messages: the interval the goal's
+        node integrated over, whatever this thread's own sleep came to)."""
+        first = len(self.joy.since(0))
         self.pad.move_axis(axis, raw_up(fraction))
         ok = wait_until(lambda: abs(self.joy.get().axes[axis]) > 0.0, 2.0, period=0.01)
         self.assertTrue(ok, "the joy node did not report axis %d" % axis)
@@ -96,7 +105,10 @@ class TeleopVicon(unittest.TestCase):
         time.sleep(seconds)
         self.pad.move_axis(axis, 0)
         self.assertTrue(wait_until(lambda: self.joy.get().axes[axis] == 0.0, 2.0, period=0.01))
-        return value, seconds
+        msgs = self.joy.since(first)
+        deflected = next(m for m in msgs if m.axes[axis] != 0.0)
+        centred = next(m for m in msgs if m.axes[axis] == 0.0 and m.header.stamp > deflected.header.stamp)
+        return value, (centred.header.stamp - deflected.header.stamp).to_sec()
 
     def steady_goal(self) -> Tuple[float, float, float]:
         """The goal once it has stopped moving (the stick is centred)."""
@@ -118,7 +130,7 @@ class TeleopVicon(unittest.TestCase):
         g1 = self.steady_goal()
         moved = [b - a for a, b in zip(g0, g1)]
         expected = SPEED[axis] * value * held
-        print("TELEOP_VICON %s: joy %.3f for %.1f s, goal moved %s (expected %+.3f along %s)"
+        print("TELEOP_VICON %s: joy %.3f for %.2f s, goal moved %s (expected %+.3f along %s)"
               % (label, value, held, ["%+.3f" % m for m in moved], expected, "xyz"[index]))
         self.assertAlmostEqual(value, self.scaled, delta=0.01, msg="joy value for %s" % label)
         # the goal integrates at the node's rate: allow one period's worth and the event latency
