@@ -7,11 +7,14 @@
 # pytest and the rostests run side by side, CRAZYFLIE_TEST_JOBS (default 3) at a time, the longest
 # first (expected seconds in tools/test_durations.txt), so the run ends on short tests. Most
 # rostests wait on simulated flight time rather than compute, so a two-core machine carries three.
-# A job beyond the first starts only while the machine has CRAZYFLIE_TEST_IDLE_CORES (default 0.6)
-# of its cores idle, measured over the last second: the simulated worlds step in real time, and a
+# A job beyond the first starts only while the machine has room for it: CRAZYFLIE_TEST_IDLE_CORES
+# (default 0.6) of its cores idle over the last second, and at least the cores the job is expected to
+# use (its CPU over its wall seconds in tools/test_durations.txt); and the cores the running jobs are
+# expected to use, with it, leave that margin free. The simulated worlds step in real time, and a
 # world starved of CPU stalls its radio and motion capture while the host's clocks run on, which the
-# stack rightly reads as a lost link or a lost pose. On a machine that is busy with other work the
-# run takes longer instead (the summary says how long starts were held back).
+# stack rightly reads as a lost link or a lost pose. A job that must wait lets later jobs of the
+# queue start first if they fit. On a machine busy with other work the run takes longer instead
+# (the summary says how long starts were held back).
 # The rostests are isolated from each other: each has its own master (rostest picks a free port)
 # and its own world address and ports (test_rostest_ports.py holds that). One line per test as it
 # ends: "PASS <pkg>/<file>.test (<wall> s, CPU <cpu> s)" or FAIL with the log's tail; logs, the
@@ -52,6 +55,13 @@ expected() {
   awk -v id="$1" '$1 !~ /^#/ && $3 == id { print $1; found = 1; exit } END { if (!found) print 60 }' \
     "$REPO/tools/test_durations.txt" 2>/dev/null || echo 60
 }
+# Cores a job is expected to use: CPU over wall seconds as recorded; 0.5 when not recorded.
+declare -A cores_of
+for id in pytest "${rostests[@]}"; do
+  cores_of[$id]="$(awk -v id="$id" '$1 !~ /^#/ && $3 == id && $2 ~ /^[0-9]+$/ && $1 > 0 {
+      printf "%.2f", $2 / $1; found = 1; exit } END { if (!found) print 0.5 }' \
+    "$REPO/tools/test_durations.txt" 2>/dev/null || echo 0.5)"
+done
 queue=()
 while read -r _ id; do queue+=("$id"); done < <(
   for id in pytest "${rostests[@]}"; do echo "$(expected "$id") $id"; done | sort -k1,1nr -k2,2)
@@ -127,9 +137,18 @@ idle_cores() {
   awk -v a="${cpu_samples[0]}" -v b="${cpu_samples[${#cpu_samples[@]}-1]}" -v n="$(getconf _NPROCESSORS_ONLN)" \
     'BEGIN { split(a, x, " "); split(b, y, " "); d = y[2] - x[2]; printf "%.2f", (d > 0 ? n * (y[1] - x[1]) / d : 0) }'
 }
-may_start() {     # the first job always; another while the machine has room for it
-  [ "${#running[@]}" -eq 0 ] && return 0
-  awk -v idle="$(idle_cores)" -v need="$IDLE_CORES" 'BEGIN { exit !(idle >= need) }'
+pick_job() {      # the index in the queue of the first job there is room for (see the top), or -1
+  [ "${#running[@]}" -eq 0 ] && { echo 0; return; }
+  local id reserved="" queued=""
+  for id in "${running[@]}"; do reserved="$reserved ${cores_of[$id]:-0.5}"; done
+  for id in "${queue[@]}"; do queued="$queued ${cores_of[$id]:-0.5}"; done
+  awk -v idle="$(idle_cores)" -v margin="$IDLE_CORES" -v reserved="$reserved" -v queued="$queued" \
+      -v n="$(getconf _NPROCESSORS_ONLN)" 'BEGIN {
+    r = 0; k = split(reserved, a, " "); for (i = 1; i <= k; i++) r += a[i]
+    k = split(queued, q, " ")
+    for (i = 1; i <= k; i++) { need = (q[i] > margin ? q[i] : margin)
+      if (idle >= need && r + q[i] <= n - margin) { print i - 1; exit } }
+    print -1 }'
 }
 
 PYTEST_ARGS=("$@")
@@ -140,8 +159,9 @@ held_passes=0; most_running=0
 sample_cpu
 while [ "${#queue[@]}" -gt 0 ] || [ "${#running[@]}" -gt 0 ]; do
   while [ "${#running[@]}" -lt "$JOBS" ] && [ "${#queue[@]}" -gt 0 ]; do
-    if ! may_start; then held_passes=$((held_passes + 1)); break; fi
-    start_job "${queue[0]}"; queue=("${queue[@]:1}")
+    pick="$(pick_job)"
+    if [ "$pick" -lt 0 ]; then held_passes=$((held_passes + 1)); break; fi
+    start_job "${queue[$pick]}"; queue=("${queue[@]:0:$pick}" "${queue[@]:$((pick + 1))}")
     cpu_samples=("${cpu_samples[@]: -1}")     # what the new job's start costs shows before the next one
   done
   [ "${#running[@]}" -le "$most_running" ] || most_running="${#running[@]}"
