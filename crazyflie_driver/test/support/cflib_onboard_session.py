@@ -106,6 +106,12 @@ def run(args: argparse.Namespace) -> None:
     control.close()
 
 
+def plan_begin(mocap: Mocap) -> float:
+    """World time [s] the firmware began its current high-level plan: when the start command arrived,
+    which on a busy machine may be well after the ping taken before sending it."""
+    return float(mocap.control.control("vehicle_state", uri=mocap.uri)["plan_begin"])
+
+
 def fly_high_level(cf, control, mocap: Mocap, args: argparse.Namespace, phases: dict) -> None:
     """Upload the trajectory (Poly4D, write_data_sync), define it, take off, go_to, fly it, land."""
     import json
@@ -131,6 +137,7 @@ def fly_high_level(cf, control, mocap: Mocap, args: argparse.Namespace, phases: 
     RESULT["trajectory_start"] = control.ping()
     hlc.start_trajectory(1, 1.0, False)
     phase("trajectory", total + 2.0, idle, mocap, phases)
+    RESULT["trajectory_begin"] = plan_begin(mocap)
     hlc.land(0.0, 2.0)
     phase("land", 3.0, idle, mocap, phases)
 
@@ -160,6 +167,7 @@ def fly_compressed_broadcast(cf, control, mocap: Mocap, args: argparse.Namespace
         RESULT["trajectory_start"] = control.ping()
         broadcast.send_repeated(hl.start_trajectory_packet(2, version, group_mask_=GROUP))
         phase("trajectory", total + 1.0, idle, mocap, phases)
+        RESULT["trajectory_begin"] = plan_begin(mocap)
         broadcast.send_repeated(hl.land_packet(0.0, 2.0, version, group_mask=GROUP))
         phase("land", 2.5, idle, mocap, phases)
 
