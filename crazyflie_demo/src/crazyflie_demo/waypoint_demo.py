@@ -7,8 +7,10 @@ and 10° in yaw and has stayed there ``sleep`` seconds. Constructing a Demo need
 
 Beyond the chapter: ``~takeoff`` calls the controller's ``takeoff`` service first and
 ``~land_when_done`` lands after the last waypoint (sim:=true runs without a joystick); progress is
-published on ``~waypoint`` (std_msgs/Int32, the index flown to) and ``~finished`` (std_msgs/Bool),
-and the waypoints themselves are put on ``~waypoints`` for monitors. Unlike the chapter's blocking
+published on ``~waypoint`` (std_msgs/Int32, the index flown to), ``~reached``
+(geometry_msgs/PointStamped: each time a waypoint counts as reached, the position that decided it,
+stamped with that pose's time) and ``~finished`` (std_msgs/Bool), and the waypoints themselves are
+put on ``~waypoints`` for monitors. Unlike the chapter's blocking
 sleep, the goal keeps being published while a waypoint is held, and drifting away restarts the wait.
 """
 from __future__ import annotations
@@ -70,8 +72,8 @@ class Demo:
                     bool(rospy.get_param("~takeoff", False)), bool(rospy.get_param("~land_when_done", False)))
 
 
-def _lookup(buffer, world: str, frame: str) -> Optional[Tuple[Tuple[float, float, float], float]]:
-    """(position, yaw in degrees) of ``frame`` in ``world``, or None when unknown or too old."""
+def _lookup(buffer, world: str, frame: str) -> Optional[Tuple[Tuple[float, float, float], float, object]]:
+    """(position, yaw in degrees, the pose's stamp) of ``frame`` in ``world``, or None when unknown or too old."""
     import rospy
     import tf2_ros
     from crazyflie_demo.rosutil import quaternion_to_yaw
@@ -82,13 +84,13 @@ def _lookup(buffer, world: str, frame: str) -> Optional[Tuple[Tuple[float, float
     if (rospy.Time.now() - t.header.stamp).to_sec() > POSE_MAX_AGE_S:
         return None
     p, q = t.transform.translation, t.transform.rotation
-    return (p.x, p.y, p.z), math.degrees(quaternion_to_yaw(q.x, q.y, q.z, q.w))
+    return (p.x, p.y, p.z), math.degrees(quaternion_to_yaw(q.x, q.y, q.z, q.w)), t.header.stamp
 
 
 def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land_when_done: bool) -> bool:
     import rospy
     import tf2_ros
-    from geometry_msgs.msg import PoseStamped
+    from geometry_msgs.msg import PointStamped, PoseStamped
     from std_msgs.msg import Bool, Int32
     from std_srvs.srv import Empty
     from crazyflie_demo.rosutil import make_goal, say_launch_note, take_off_when_ready, wait_for_service
@@ -101,6 +103,7 @@ def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land
     tf2_ros.TransformListener(buffer)
     goal_pub = rospy.Publisher("goal", PoseStamped, queue_size=1)
     index_pub = rospy.Publisher("~waypoint", Int32, queue_size=1, latch=True)
+    reached_pub = rospy.Publisher("~reached", PointStamped, queue_size=len(demo.goals))
     done_pub = rospy.Publisher("~finished", Bool, queue_size=1, latch=True)
     done_pub.publish(Bool(False))
     if takeoff:
@@ -110,7 +113,14 @@ def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land
     while not rospy.is_shutdown():
         pose = _lookup(buffer, world, frame)
         if pose is not None:
+            reached = len(follower.reached_times)
             follower.update(rospy.get_time(), pose[0], pose[1])
+            if len(follower.reached_times) > reached:
+                point = PointStamped()
+                point.header.stamp, point.header.frame_id = pose[2], world
+                point.point.x, point.point.y, point.point.z = pose[0]
+                if not publish_unless_shutting_down(reached_pub, point):
+                    break
         if follower.index != last_index:
             last_index = demo.goalIndex = follower.index
             if not publish_unless_shutting_down(index_pub, Int32(last_index)):

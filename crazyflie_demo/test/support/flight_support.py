@@ -129,6 +129,8 @@ class Track:
     # that round trip; on a busy machine the test's thread may read an answer long after the world
     # gave it. Interpolation uses the samples answered within this many seconds when they exist.
     PRECISE_S = 0.01
+    # Interpolation spans at most this many sampling periods.
+    MAX_GAP_PERIODS = 3
 
     def __init__(self, probe: WorldProbe, names: Sequence[str], period: float = 0.05) -> None:
         self.probe, self.names, self.period = probe, list(names), period
@@ -169,14 +171,16 @@ class Track:
 
         A vehicle moving at 0.5 m/s covers 25 mm in half a sampling period: the closest sample
         alone is too coarse to judge a 0.3 m tolerance while it flies through a waypoint. A sample
-        whose answer took 0.1 s could be 50 ms off in time, so precise samples are preferred.
+        whose answer took 0.1 s could be 50 ms off in time, so precise samples are preferred, but
+        only around ``t``: on a busy machine the precise ones may lie a second apart, and a straight
+        line across a second of a decelerating flight trails the vehicle by centimetres.
         """
         with self._lock:
             rows = list(self.samples[name])
         for usable in ([r for r in rows if r[2] <= self.PRECISE_S], rows):
             before = [r for r in usable if r[0] <= t]
             after = [r for r in usable if r[0] > t]
-            if before and after:
+            if before and after and after[0][0] - before[-1][0] <= self.MAX_GAP_PERIODS * self.period:
                 (t0, s0, _), (t1, s1, _) = before[-1], after[0]
                 f = (t - t0) / (t1 - t0)
                 return tuple(a + f * (b - a) for a, b in zip(s0["position"], s1["position"]))

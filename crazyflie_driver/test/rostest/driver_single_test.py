@@ -146,10 +146,13 @@ class DriverSingle(unittest.TestCase):
         self.assertTrue(self.state()["emergency"])
         rospy.ServiceProxy(NS + "/emergency", Empty)()            # idempotent
         self.send_for(twist(z=45000.0), 0.5)                        # ignored from now on
-        t0 = time.monotonic()
+        # samples the Crazyflie took from here on (by their stamps, the sampling time: on a busy
+        # radio a sample from before the emergency may still arrive now)
+        after = rospy.Time.now()
         self.send_for(twist(z=45000.0), 0.5)
-        late = [m.values for _, m in self.motors.since(t0)]
-        self.assertTrue(late)
+        sampled_after = lambda: [m.values for _, m in self.motors.since(0.0) if m.header.stamp >= after]
+        self.assertTrue(wait_until(sampled_after, 3.0), "no motors sample taken after the emergency")
+        late = sampled_after()
         self.assertTrue(all(v == 0 for vals in late for v in vals), late[-1])
         self.assertEqual(self.state()["last_setpoint"][3], 0)
 
