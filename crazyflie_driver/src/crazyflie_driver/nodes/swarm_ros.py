@@ -46,6 +46,9 @@ DIAGNOSTICS_PERIOD_S = 1.0
 WATCH_PERIOD_S = 0.02           # how often stale poses and lost links are checked
 #: Parameter writes of the first fixes at once (each an acknowledged request on its Crazyflie's radio).
 FIRST_FIX_WRITERS = 8
+#: Failed initial-position writes of one Crazyflie logged each; after these, every PLACEMENT_LOG_EVERY-th.
+PLACEMENT_LOGGED_ATTEMPTS = 3
+PLACEMENT_LOG_EVERY = 10
 #: s between a swarm Crazyflie's polls when nothing is queued: the radio budget's keep-alive floor.
 SWARM_KEEPALIVE_S = 1.0 / radio_budget.KEEPALIVE_FLOOR_HZ
 
@@ -107,6 +110,7 @@ class RosSwarm:
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self._first_fixes: Optional[ThreadPoolExecutor] = None
         self.placement = estimator_placement.EstimatorPlacement()
+        self._placement_attempts: Dict[str, int] = {}      # failed initial-position writes, per Crazyflie
         self.heartbeat: Optional[Heartbeat] = None
         self._pose_periods: Dict[str, int] = {}
 
@@ -305,7 +309,14 @@ class RosSwarm:
         values = initial_position_params(position)
         _, errors = member.worker.update_params(values)
         if errors:
-            rospy.logerr("swarm: %s: initial position from its first pose not written: %s", name, "; ".join(errors))
+            # a write lost on the radio is no reason to leave it unplaced (its takeoff would be refused):
+            # the next pose tries again
+            attempts = self._placement_attempts[name] = self._placement_attempts.get(name, 0) + 1
+            if attempts <= PLACEMENT_LOGGED_ATTEMPTS or attempts % PLACEMENT_LOG_EVERY == 0:
+                rospy.logerr("swarm: %s: initial position from its first pose not written (attempt %d): %s; "
+                             "trying again with its next pose", name, attempts, "; ".join(errors))
+            if self.stream is not None and not shutting_down():
+                self.stream.refix(name)
         else:
             self.placement.placed(name)
             rospy.loginfo("swarm: %s first seen at (%.3f, %.3f, %.3f): estimator reset there", name, *position)

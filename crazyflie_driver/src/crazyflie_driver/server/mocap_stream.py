@@ -7,9 +7,10 @@ arrived since its last burst, two poses per packet (or four positions), in one t
 the stream runs at the motion-capture rate with one radio turn per frame and radio. A pose whose
 orientation is missing or not a unit quaternion goes out as a position only.
 
-The first pose of each Crazyflie is also reported once (``on_first_fix``), for the estimator's
-initial position (``kalman.initialX/Y/Z`` + ``kalman.resetEstimation``, as Crazyswarm does); that
-runs in its own thread so slow parameter writes never hold the stream.
+The first pose of each Crazyflie is also reported once (``on_first_fix``; again after ``refix``, when
+writing it failed), for the estimator's initial position (``kalman.initialX/Y/Z`` +
+``kalman.resetEstimation``, as Crazyswarm does); that runs in its own thread so slow parameter
+writes never hold the stream.
 """
 from __future__ import annotations
 
@@ -97,6 +98,11 @@ class MocapStream:
         if first:
             self._fixes.put((name, p))
         return True
+
+    def refix(self, name: str) -> None:
+        """Report ``name``'s next pose as a first fix again (its initial position was not written)."""
+        with self._cond:
+            self._fixed.discard(name)
 
     def pause(self, paused: bool = True) -> None:
         """Stop (or resume) sending, e.g. after an emergency; poses are still taken in."""

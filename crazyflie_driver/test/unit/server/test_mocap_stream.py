@@ -88,6 +88,20 @@ def test_the_sender_thread_streams_and_reports_each_first_fix_once():
     assert stream.frames >= 1 and all(data[1] == 9 for _, data in sent(medium))
 
 
+def test_refix_reports_the_next_pose_as_a_first_fix_again():
+    """A Crazyflie whose initial-position write failed is placed from its next pose, not never."""
+    bc, _ = rig()
+    stream = MocapStream(URIS, bc.send_poses, clock=lambda: 0.0)
+    stream.pose("cf1", (0.0, 0.0, 0.0), Q)
+    stream.pose("cf1", (0.1, 0.0, 0.0), Q)
+    assert stream._fixes.qsize() == 1                   # once per Crazyflie ...
+    stream.refix("cf1")
+    stream.pose("cf1", (0.2, 0.0, 0.0), Q)
+    stream.pose("cf1", (0.3, 0.0, 0.0), Q)
+    assert [stream._fixes.get_nowait() for _ in range(2)] == [("cf1", (0.0, 0.0, 0.0)), ("cf1", (0.2, 0.0, 0.0))]
+    assert stream._fixes.empty()                        # ... and once more after refix
+
+
 def test_a_radio_s_bursts_keep_the_period_its_budget_allows_and_carry_the_newest_poses():
     """Poses of one Crazyflie arrive faster than the radio's frame period: the bursts keep the period
     (on the stream's clock) and each carries the newest pose that arrived while it waited."""
