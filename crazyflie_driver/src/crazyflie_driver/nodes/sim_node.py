@@ -26,7 +26,9 @@ dongle per channel), named after its tf_prefix, as the server's motion capture l
 so set /use_sim_time yourself if you want ROS time to follow it); ``vrpn`` (false: also serve the
 motion capture as a VRPN server on loopback, one tracker per vehicle named after it, as a
 motion-capture PC would) and ``vrpn_port`` (default 3883 when free, else one the system picks;
-0 = any; the node logs which).
+0 = any; the node logs which); ``priority_boost`` (5 niceness steps the world's process is raised
+by where the system allows it, so host nodes on a busy machine cannot starve the world; 0: off;
+``sim.priority``).
 
 The frames come from the world's own motion-capture model (``sim.mocap.MocapModel``), sampled on
 world time; a vehicle added to the world at run time is reported too.
@@ -51,6 +53,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
+from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST, raise_priority
 
 MOCAP_STYLES = ("vicon", "vrpn", "both", "none")
 
@@ -495,6 +498,11 @@ def main() -> None:
     init_node("crazyflie_sim")
     params = _private_params()
     try:
+        boost = int(_number("~priority_boost", params.get("priority_boost", DEFAULT_PRIORITY_BOOST)))
+        refused = raise_priority(boost)
+        if refused is not None:
+            rospy.loginfo("crazyflie_sim: runs at normal priority: %s; on a busy machine the world may fall "
+                          "behind real time", refused)
         if params.get("swarm_file"):
             vehicles, need = vehicles_from_swarm_file(str(params["swarm_file"]))
             dongles = dongles_needed(vehicles, params.get("dongles", need))
