@@ -17,7 +17,7 @@ import pytest
 PACKAGE = pathlib.Path(__file__).resolve().parents[2] / "src" / "crazyflie_driver"
 
 ORDER = ("crtp", "radio", "protocol", "server", "nodes")
-BASE = {"errors"}                                  # importable from everywhere
+BASE = {"errors", "clock"}                                # importable from everywhere
 ROS = {"rospy", "rosgraph", "rostest", "roslib", "genpy", "tf2_ros", "geometry_msgs", "sensor_msgs", "std_msgs",
        "std_srvs", "visualization_msgs"}
 # The simulated world's own ROS node runs the simulator: it is an entry point of sim, not a user of it.

@@ -1,0 +1,158 @@
+"""The one clock every timing decision of the stack reads: the wall clock on hardware, the world's in simulation.
+
+A pacing loop, a timeout, a staleness check or a safety threshold asks a ``Clock`` for the time
+and waits on it. On hardware that is ``WallClock`` (``time.monotonic``). In simulation the ROS
+nodes pass a clock that follows ROS time, which follows the world's ``/clock``
+(``nodes.ros_clock``), so a world slowed down by a busy machine slows every decision with it
+instead of making the host side late in world time. Unit tests pass ``ManualClock``.
+
+The rule for waiting: a clock's ``wait``/``sleep`` of ``s`` seconds returns when ``s`` seconds of
+*its* time have passed (or the event is set). A clock that follows another (``FollowingClock``)
+polls that time in wall-clock slices; ``max_speed`` bounds how fast the followed time may run
+relative to the wall clock, so a slice never oversleeps a deadline.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable, List, Optional, Protocol
+
+
+class Clock(Protocol):
+    """Seconds on one monotonic time line, and waits measured on it."""
+
+    def now(self) -> float:
+        """The time [s] (monotonic within a run; its origin means nothing)."""
+        ...
+
+    def sleep(self, seconds: float) -> None:
+        """Return once ``seconds`` [s] of this clock's time have passed."""
+        ...
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        """Until ``event`` is set or ``seconds`` [s] of this clock's time have passed; whether it was set."""
+        ...
+
+    def wall_bound(self, seconds: float) -> float:
+        """Wall seconds [s] a ``Condition.wait`` may block without passing ``seconds`` of this clock's time.
+
+        For loops that wait on their own condition variable and re-check ``now()`` when they wake.
+        """
+        ...
+
+
+class WallClock:
+    """The host's monotonic clock: what hardware runs on."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        return event.wait(max(0.0, seconds))
+
+    def wall_bound(self, seconds: float) -> float:
+        return max(0.0, seconds)
+
+
+WALL = WallClock()
+"""The process-wide wall clock (stateless, so one instance serves every caller)."""
+
+MIN_SLICE_S = 0.0005
+"""Shortest wall-clock slice [s] a ``FollowingClock`` waits for at a time (bounds its polling cost)."""
+
+
+class FollowingClock:
+    """A clock that reads its time from ``now`` (e.g. ``rospy.get_time`` under ``/use_sim_time``).
+
+    ``max_speed``: how many of its seconds may pass per wall second at most (1.0: the followed
+    time never runs faster than real time, as a world slowed down for a busy machine). Waits
+    sleep ``remaining / max_speed`` wall seconds at a time and re-read the time.
+    """
+
+    def __init__(self, now: Callable[[], float], max_speed: float = 1.0) -> None:
+        if not max_speed > 0:
+            raise ValueError("max_speed must be > 0 (seconds of followed time per wall second), got %r"
+                             % (max_speed,))
+        self._now = now
+        self.max_speed = float(max_speed)
+
+    def now(self) -> float:
+        return float(self._now())
+
+    def wall_bound(self, seconds: float) -> float:
+        return max(0.0, seconds) / self.max_speed
+
+    def sleep(self, seconds: float) -> None:
+        deadline = self.now() + seconds
+        while True:
+            left = deadline - self.now()
+            if left <= 0:
+                return
+            time.sleep(max(MIN_SLICE_S, left / self.max_speed))
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        deadline = self.now() + seconds
+        while True:
+            left = deadline - self.now()
+            if left <= 0:
+                return event.is_set()
+            if event.wait(max(MIN_SLICE_S, left / self.max_speed)):
+                return True
+
+
+class ManualClock:
+    """A clock for tests: time moves only by ``advance`` (or by ``sleep`` when ``sleep_advances``).
+
+    ``wait`` and ``sleep`` block (when time does not move by themselves) until another thread's
+    ``advance`` passes their deadline, so a test drives a threaded component tick by tick.
+    """
+
+    def __init__(self, start: float = 0.0, sleep_advances: bool = True) -> None:
+        self._t = float(start)
+        self._cond = threading.Condition()
+        self.sleep_advances = sleep_advances
+        self.sleeps: List[float] = []
+        """Every ``sleep`` asked for [s], in order (what a test asserts pacing on)."""
+
+    def now(self) -> float:
+        with self._cond:
+            return self._t
+
+    def advance(self, seconds: float) -> float:
+        """Move time on by ``seconds`` [s]; wakes waiters whose deadline passed. The new time."""
+        if seconds < 0:
+            raise ValueError("time does not go back: advance(%r)" % (seconds,))
+        with self._cond:
+            self._t += seconds
+            self._cond.notify_all()
+            return self._t
+
+    def wall_bound(self, seconds: float) -> float:
+        return max(0.0, seconds)
+
+    def sleep(self, seconds: float) -> None:
+        self.sleeps.append(seconds)
+        if self.sleep_advances:
+            self.advance(max(0.0, seconds))
+            return
+        self._block_until(self.now() + seconds, None)
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        if event.is_set():
+            return True
+        if self.sleep_advances:
+            self.advance(max(0.0, seconds))
+            return event.is_set()
+        return self._block_until(self.now() + seconds, event)
+
+    def _block_until(self, deadline: float, event: Optional[threading.Event]) -> bool:
+        with self._cond:
+            while self._t < deadline:
+                if event is not None and event.is_set():
+                    return True
+                self._cond.wait(0.01)       # an event set by another thread is seen within 10 ms
+        return event.is_set() if event is not None else False

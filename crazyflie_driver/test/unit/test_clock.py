@@ -1,0 +1,81 @@
+"""The clocks timing decisions read: wall, following (ROS/world time) and manual (tests)."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from crazyflie_driver.clock import WALL, FollowingClock, ManualClock
+
+
+def test_wall_clock_is_monotonic_and_waits_on_events():
+    t0 = WALL.now()
+    ev = threading.Event()
+    ev.set()
+    assert WALL.wait(ev, 5.0) is True
+    assert WALL.now() >= t0
+
+
+def test_following_clock_sleeps_until_the_followed_time_passes():
+    """A followed time running at a quarter of real time: a 0.05 s sleep lasts about 0.2 wall seconds."""
+    w0 = time.monotonic()
+    clock = FollowingClock(lambda: (time.monotonic() - w0) * 0.25)
+    t0 = clock.now()
+    clock.sleep(0.05)
+    assert clock.now() - t0 >= 0.05
+    assert time.monotonic() - w0 >= 0.19
+
+
+def test_following_clock_wait_returns_at_once_when_the_event_is_set():
+    stopped = [0.0]
+    clock = FollowingClock(lambda: stopped[0])          # a followed time that does not move
+    ev = threading.Event()
+    threading.Timer(0.05, ev.set).start()
+    assert clock.wait(ev, 1.0) is True
+
+
+def test_following_clock_wait_times_out_on_followed_time():
+    t = [0.0]
+    clock = FollowingClock(lambda: t[0])
+    ev = threading.Event()
+
+    def run():
+        for _ in range(20):
+            time.sleep(0.005)
+            t[0] += 0.1
+    threading.Thread(target=run, daemon=True).start()
+    assert clock.wait(ev, 1.0) is False
+    assert clock.now() >= 1.0
+
+
+def test_following_clock_refuses_a_speed_that_is_not_positive():
+    with pytest.raises(ValueError, match="max_speed"):
+        FollowingClock(lambda: 0.0, max_speed=0.0)
+
+
+def test_manual_clock_sleep_advances_and_records():
+    clock = ManualClock(start=10.0)
+    clock.sleep(0.25)
+    clock.sleep(0.5)
+    assert clock.now() == pytest.approx(10.75)
+    assert clock.sleeps == [0.25, 0.5]
+
+
+def test_manual_clock_blocks_waiters_until_advanced():
+    clock = ManualClock(sleep_advances=False)
+    ev = threading.Event()
+    result = []
+    th = threading.Thread(target=lambda: result.append(clock.wait(ev, 1.0)))
+    th.start()
+    clock.advance(0.5)
+    th.join(0.1)
+    assert th.is_alive()                         # half the timeout: still waiting
+    clock.advance(0.6)
+    th.join(2.0)
+    assert result == [False]
+
+
+def test_manual_clock_refuses_to_go_back():
+    with pytest.raises(ValueError, match="does not go back"):
+        ManualClock().advance(-1.0)
