@@ -71,11 +71,12 @@ def in_groups(member_mask: int, request_mask: int) -> bool:
     return request_mask == 0 or bool(member_mask & request_mask)
 
 
-def nobody_addressed(request_mask: int, groups: str) -> CommandValueError:
+def nobody_addressed(request_mask: int, groups: str, what: str = "") -> CommandValueError:
     """The refusal of a command whose group mask reaches no Crazyflie (``groups``: theirs, for the
     message). The firmware would answer such a command OK and do nothing, so it is not sent."""
-    return CommandValueError("no Crazyflie is in group mask %d (%s): nothing would fly or land; 0 addresses every "
-                             "Crazyflie, and set_group_mask of each Crazyflie sets its groups" % (request_mask, groups))
+    return CommandValueError("%sno Crazyflie is in group mask %d (%s): nothing would fly or land; 0 addresses every "
+                             "Crazyflie, and set_group_mask of each Crazyflie sets its groups"
+                             % (what + " refused, nothing sent: " if what else "", request_mask, groups))
 
 
 def _vertical(cmd_old: int, cmd_new: int, height: float, duration: float, mask: int, yaw: Optional[float],

@@ -121,8 +121,8 @@ class OnboardCommands:
             raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
                                  "is restarted, removed and added again)" % (self.label, what))
         if not in_groups(self.group_mask, group_mask):
-            raise nobody_addressed(group_mask, "%s: %s refused, nothing sent; its group mask is %d"
-                                   % (self.label, what, self.group_mask))
+            raise nobody_addressed(group_mask, "%s is in group mask %d" % (self.label, self.group_mask),
+                                   "%s: %s" % (self.label, what))
 
     def _height(self) -> Optional[float]:
         """The Crazyflie's current height (m) where known, for the checks of a landing."""
