@@ -334,6 +334,10 @@ class SafetyMonitor:
                     self._thrusts.popleft()
             if self._flying:
                 self._motors_off_by = ""
+            # a low-level setpoint takes the priority: the firmware's planner stops and forgets its plan
+            # (a land command's landing included)
+            self._hl_flying = False
+            self._land_until = 0.0
             return True
 
     def note_stream_released(self, now: float) -> None:

@@ -107,5 +107,6 @@ class ObservedOnboardCommands(OnboardCommands):
         self._monitor.note_high_level(self._clock(), what)
 
     def land(self, group_mask: int, height: float, duration_s: float) -> None:
+        asked_at = self._clock()    # the firmware starts the plan later: the monitor never outlasts its landing
         super().land(group_mask, height, duration_s)
-        self._monitor.note_high_level(self._clock(), "land", duration_s)
+        self._monitor.note_high_level(asked_at, "land", duration_s)

@@ -80,6 +80,9 @@ def test_a_landing_under_way_refuses_what_flies_and_takes_land_and_stop(start):
     assert m.refusal(t + 0.1, "land") is None and m.refusal(t + 0.1, "stop") is None
     if start == "user land":
         assert m.refusal(t + 2.01, "go_to") is None          # the landing's plan has ended: a new flight may start
+        m.note_high_level(t + 3.0, "land", 2.0)
+        assert m.note_setpoint(t + 3.5, 0)                   # a low-level setpoint: the planner forgets the landing
+        assert m.refusal(t + 3.6, "takeoff") is None and not m.flying
 
 
 def test_a_go_to_that_got_through_during_the_reactions_landing_makes_it_land_again_not_stop_in_the_air():
