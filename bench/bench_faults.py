@@ -523,6 +523,61 @@ def remove(bench: Bench) -> None:
     bench.rospy.ServiceProxy("/remove_crazyflie", RemoveCrazyflie)(uri=URI)
 
 
+GO_TO_PERIOD_S = 0.1     # another client's go_to while the server lands the Crazyflie
+
+
+def go_to_request(goal: Tuple[float, float, float], group_mask: int = 0):
+    import rospy
+    from crazyflie_driver.srv import GoTo
+    req = GoTo._request_class(groupMask=group_mask, relative=False, yaw=0.0, duration=rospy.Duration(1.0))
+    req.goal.x, req.goal.y, req.goal.z = goal
+    return req
+
+
+def remove_with_go_to(bench: Bench) -> None:
+    """``/remove_crazyflie`` while it flies, and meanwhile another client's go_to (to the goal) every 0.1 s
+    until the removal answers: each one during the server's landing must be refused, not end it in the air."""
+    from crazyflie_driver.srv import GoTo
+    go_to = bench.rospy.ServiceProxy("/%s/go_to" % NAME, GoTo)
+    done = threading.Event()
+    said: List[str] = []
+
+    def meanwhile() -> None:
+        while not done.is_set():
+            try:
+                go_to(go_to_request(GOAL))
+                said.append("ok")
+            except (bench.rospy.ServiceException, bench.rospy.ROSException) as e:
+                said.append("refused" if "refused" in str(e) else "failed")
+            time.sleep(GO_TO_PERIOD_S)
+    thread = threading.Thread(target=meanwhile, daemon=True)
+    thread.start()
+    try:
+        remove(bench)
+    finally:
+        done.set()
+        thread.join(2.0)
+    print("  go_to during the removal: %s" % ", ".join("%d %s" % (said.count(k), k) for k in ("ok", "refused",
+                                                                                           "failed")))
+
+
+def refused_call(service: str, **fields: Any) -> Callable[[Bench], None]:
+    """A ``land`` (height, duration_s) or ``go_to`` (goal, group_mask) of ``/crazyflie1`` that the server
+    should refuse, nothing sent: the answer is printed; the row's truth says whether it kept hovering."""
+    def act(bench: Bench) -> None:
+        from crazyflie_driver.srv import GoTo, Land
+        try:
+            if service == "go_to":
+                bench.rospy.ServiceProxy("/%s/go_to" % NAME, GoTo)(go_to_request(fields["goal"], fields["group_mask"]))
+            else:
+                bench.rospy.ServiceProxy("/%s/land" % NAME, Land)(
+                    groupMask=0, height=fields["height"], duration=bench.rospy.Duration(fields["duration_s"]))
+            print("  %s: accepted" % service)
+        except bench.rospy.ServiceException as e:
+            print("  %s refused: %s" % (service, str(e)[:160]))
+    return act
+
+
 def streamed_then_silent(bench: Bench) -> None:
     """Position setpoints streamed at the goal for 1 s (50 Hz), then none: a setpoint source gone silent."""
     from crazyflie_driver.msg import Position
@@ -602,6 +657,14 @@ def rows() -> List[Row]:
             streamed_then_silent, 8.0),
         Row("remove", "/remove_crazyflie while flying", "chapter", remove, 10.0),
         Row("remove_onboard", "/remove_crazyflie while flying", "onboard", remove, 8.0),
+        Row("remove_go_to_onboard", "/remove_crazyflie while flying, another client's go_to every 0.1 s", "onboard",
+            remove_with_go_to, 8.0),
+        Row("land0_onboard", "land with duration 0 (refused: motors off in the air)", "onboard",
+            refused_call("land", height=0.0, duration_s=0.0), 4.0),
+        Row("land_up_onboard", "land to 1.9 m, above the Crazyflie (refused: a climb, then a fall)", "onboard",
+            refused_call("land", height=1.9, duration_s=2.0), 5.0),
+        Row("go_to_nobody_onboard", "go_to with a group mask addressing nobody (refused)", "onboard",
+            refused_call("go_to", goal=(GOAL[0], GOAL[1], GOAL[2] + 0.5), group_mask=2), 4.0),
         Row("freeze02", "mocap frozen 0.2 s", "chapter", inject("mocap %s --freeze 0.2" % NAME), 5.0, clear),
         Row("freeze2", "mocap frozen 2 s", "chapter", inject("mocap %s --freeze 2" % NAME), 8.0, clear),
         Row("freeze", "mocap frozen for good", "chapter", inject("mocap %s --freeze" % NAME), 10.0, clear),

@@ -75,7 +75,15 @@ class NotSupported(CrazyflieError):
 
 
 class CommandRejected(CrazyflieError):
-    """The Crazyflie answered a command with an error code."""
+    """A command not taken: the Crazyflie answered it with an error code, or (a subclass) the server
+    refused it before anything was sent."""
+
+
+class FlightRefused(CommandRejected):
+    """A takeoff, go_to or start_trajectory refused by the server, nothing sent: it would cancel a
+    landing under way (a safety reaction's, the shutdown's or removal's, or a land command's) or start
+    a flight nobody would supervise (the server is letting the Crazyflie go). Land and stop are
+    still taken, and the command is once the landing has ended."""
 
 
 class SwarmConfigError(CrazyflieError, ValueError):

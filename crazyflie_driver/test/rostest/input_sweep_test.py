@@ -218,9 +218,13 @@ class InputSweep(unittest.TestCase):
                           not fits_float32(v), ["height"])
                 stop()
             for d in durations:
-                self.call("%s duration %r" % (what, d), proxy,
-                          cls(groupMask=rng.choice((0, 1, 255)), height=0.3, duration=rospy.Duration.from_sec(d)),
-                          d < 0, ["duration"])
+                # a land of no time stops the motors in the air, and a group mask that addresses no
+                # Crazyflie (each one here is in group mask 0) does nothing: both refused by name
+                mask = rng.choice((0, 1, 255))
+                self.call("%s duration %r group mask %d" % (what, d, mask), proxy,
+                          cls(groupMask=mask, height=0.3 if service == "/takeoff" else 0.0,
+                              duration=rospy.Duration.from_sec(d)),
+                          d < 0 or (service == "/land" and d == 0) or mask != 0, ["duration", "group mask"])
                 stop()
         if "/go_to" not in services:
             return

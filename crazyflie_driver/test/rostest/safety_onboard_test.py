@@ -10,8 +10,10 @@ Each Crazyflie flies by streamed ``cmd_position`` setpoints with the Kalman esti
 * both Crazyradios are unplugged while crazyflie1 (emergency-stop watchdog keep-alive on) and
   crazyflie2 (off, the default) hover: crazyflie1's motors stop within 1 s of world time (the
   firmware's watchdog), crazyflie2's after the firmware's 2 s setpoint watchdog, as before;
-* crazyflie4 is removed by ``/remove_crazyflie`` while it hovers (its setpoints keep coming): the
-  server lands it first, the service answers once it rests with its motors off.
+* crazyflie4 is removed by ``/remove_crazyflie`` while it hovers (its setpoints keep coming, and
+  another client calls its ``go_to`` every 0.1 s, to where it hovers): the server lands it first, each
+  go_to during that landing is refused (one accepted would end the landing in the air), the service
+  answers once it rests with its motors off.
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ from geometry_msgs.msg import PointStamped
 
 from crazyflie_driver.msg import Position
 from crazyflie_driver.sim.world_clock import WorldClock
-from crazyflie_driver.srv import RemoveCrazyflie, UpdateParams
+from crazyflie_driver.srv import GoTo, RemoveCrazyflie, UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
@@ -43,6 +45,7 @@ WARNING_V, CRITICAL_V = 3.40, 3.25      # below the server's defaults, 3.45 and 
 #: (the unplug's and the supervisor lock's world time), so how often the test looks does not count.
 WATCHDOG_S = 1.0 + 0.02
 SETPOINT_WATCHDOG_S = 2.0
+GO_TO_PERIOD_S = 0.1        # another client's go_to during the removal's landing
 
 
 class Flyer:
@@ -156,12 +159,28 @@ class SafetyOnboard(unittest.TestCase):
         name = "crazyflie4"
         self.take_off(name)
         answered = threading.Event()
+        hover = self.flyers[name].truth()["position"]
+        go_to = rospy.ServiceProxy("/%s/go_to" % name, GoTo)
+        go_to.wait_for_service(5.0)
+        outcomes = []       # (world s, "ok" or the refusal) of each go_to while the removal lands it
+
+        def go_to_meanwhile():
+            req = GoTo._request_class(groupMask=0, relative=False, yaw=0.0, duration=rospy.Duration(1.0))
+            req.goal.x, req.goal.y, req.goal.z = hover
+            while not answered.is_set():
+                try:
+                    go_to(req)
+                    outcomes.append((self.clock.now(), "ok"))
+                except (rospy.ServiceException, rospy.ROSException) as e:
+                    outcomes.append((self.clock.now(), str(e)))
+                time.sleep(GO_TO_PERIOD_S)
 
         def remove():
             rospy.ServiceProxy("/remove_crazyflie", RemoveCrazyflie)(uri=URIS[name])
             answered.set()
         threading.Thread(target=remove, daemon=True).start()
-        rows = self.track(name, answered.is_set, 15.0)
+        threading.Thread(target=go_to_meanwhile, daemon=True).start()
+        rows = self.track(name, lambda: answered.is_set() and not self.motors_on(name), 15.0)
         self.assertTrue(answered.is_set(), "/remove_crazyflie did not answer within 15 s of world time")
         on = [r for r in rows if r[3]]
         print("SAFETY_REMOVE truth (world s, z m, motors on): %s"
@@ -172,6 +191,9 @@ class SafetyOnboard(unittest.TestCase):
         self.assertGreater(off[0] - rows[0][0], 1.0, "motors stopped at once: a drop, not a landing")
         self.assertLess(-min(vz for _, _, vz, _ in on), 0.8, "fell instead of landing")
         self.assertTrue(self.rosout.find("removed by /remove_crazyflie"), self.rosout.lines[-5:])
+        refused = [t for t, text in outcomes if "refused, nothing sent: the server is bringing it down" in text]
+        print("SAFETY_REMOVE go_to calls during the removal: %d, refused: %d" % (len(outcomes), len(refused)))
+        self.assertGreater(len(refused), 5, outcomes[:5])
         self.flyers[name].goal = None
 
     def test_c_radio_lost_watchdog_keepalive_on_and_off(self):

@@ -144,7 +144,8 @@ class RosSwarm:
                                             repeats=self.options.broadcast_repeats,
                                             interval_s=self.options.broadcast_interval)
         self.broadcaster.open()
-        self.commands = SwarmCommands(self.live_members, self.broadcaster, observe=observe_in_safety)
+        self.commands = SwarmCommands(self.live_members, self.broadcaster, observe=observe_in_safety,
+                                      refusal=refusal_in_safety, height=height_in_safety)
         if self.options.emergency_watchdog:
             self.heartbeat = Heartbeat(self.broadcaster.watchdog).start()
         self._advertise()
@@ -449,6 +450,16 @@ def observe_in_safety(targets, what: str, duration: float) -> None:
     now = time.monotonic()
     for m in targets:
         m.worker.safety.note_high_level(now, what, duration)
+
+
+def refusal_in_safety(member: SwarmMember, what: str) -> Optional[str]:
+    """Why a swarm command must not reach this Crazyflie now (a landing under way), from its safety monitor."""
+    return member.worker.safety.refusal(time.monotonic(), what)
+
+
+def height_in_safety(member: SwarmMember) -> Optional[float]:
+    """The height of the Crazyflie's last fresh pose, as its safety monitor knows it (None: unknown)."""
+    return member.worker.safety.current_height(time.monotonic())
 
 
 def initial_position_params(position) -> Dict[str, Any]:

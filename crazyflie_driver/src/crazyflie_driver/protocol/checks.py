@@ -44,6 +44,14 @@ def positive(name: str, value) -> float:
     return number
 
 
+def positive_duration(value) -> float:
+    """A command's duration in s, finite and > 0 (a zero-length plan jumps: a land ends at once, in the air)."""
+    duration = finite("duration", value)
+    if duration <= 0:
+        raise CommandValueError("duration must be > 0 s, got %r" % (value,))
+    return duration
+
+
 def milli_int16(name: str, value) -> int:
     """A value in base units as a signed 16-bit count of thousandths (m -> mm), truncated
     towards zero as the reference host libraries do; CommandValueError outside +-32.767."""

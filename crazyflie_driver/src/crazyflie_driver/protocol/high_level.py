@@ -12,7 +12,7 @@ import struct
 from typing import Callable, Dict, NamedTuple, Optional, Sequence
 
 from crazyflie_driver.crtp.packet import PORT_HIGH_LEVEL, CRTPPacket
-from crazyflie_driver.errors import CommandRejected, NotSupported, TrajectoryError
+from crazyflie_driver.errors import CommandRejected, CommandValueError, NotSupported, TrajectoryError
 from crazyflie_driver.protocol.checks import finite, group_mask, non_negative, positive
 from crazyflie_driver.protocol.memory import TYPE_TRAJECTORY, MemoryClient
 from crazyflie_driver.protocol.trajectory import PIECE_BYTES, Piece, check_id, pack_compressed, pack_poly4d
@@ -63,6 +63,20 @@ def _packet(fmt: str, *values) -> CRTPPacket:
 def set_group_mask_packet(mask: int) -> CRTPPacket:
     """Make the Crazyflie a member of the groups whose bits are set (0: of none)."""
     return _packet("<BB", CMD_SET_GROUP_MASK, group_mask(mask))
+
+
+def in_groups(member_mask: int, request_mask: int) -> bool:
+    """Whether a Crazyflie in groups ``member_mask`` takes a command sent to ``request_mask`` (the
+    firmware's rule: 0 reaches every Crazyflie, otherwise a shared bit)."""
+    return request_mask == 0 or bool(member_mask & request_mask)
+
+
+def nobody_addressed(request_mask: int, groups: str, what: str = "") -> CommandValueError:
+    """The refusal of a command whose group mask reaches no Crazyflie (``groups``: theirs, for the
+    message). The firmware would answer such a command OK and do nothing, so it is not sent."""
+    return CommandValueError("%sno Crazyflie is in group mask %d (%s): nothing would fly or land; 0 addresses every "
+                             "Crazyflie, and set_group_mask of each Crazyflie sets its groups"
+                             % (what + " refused, nothing sent: " if what else "", request_mask, groups))
 
 
 def _vertical(cmd_old: int, cmd_new: int, height: float, duration: float, mask: int, yaw: Optional[float],

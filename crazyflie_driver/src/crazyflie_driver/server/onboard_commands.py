@@ -13,21 +13,37 @@ Where this differs from crazyflie_ros HEAD (see the package README):
   API's streams and the worker's own: cmd_vel, a controller's RPYT) is preceded by
   notify-setpoints-stop, because the firmware ignores the high-level commander while low-level
   setpoints hold the priority (docs/protocol.md, "The commander's priority"); HEAD leaves that to
-  the user.
+  the user;
+* a command whose group mask does not address this Crazyflie is refused (HEAD sends it, the firmware
+  answers OK and does nothing), and so is a land that would drop it (``server.safety.checked_landing``).
 """
 from __future__ import annotations
 
 import threading
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Mapping, Optional, Sequence
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.protocol import high_level, setpoints
+from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.commander import stop_packet
 from crazyflie_driver.protocol.localization import external_pose_packet, external_position_packet
 from crazyflie_driver.protocol.trajectory import make_piece
+from crazyflie_driver.server.safety import checked_landing
 
 Quaternion = Sequence[float]
+
+#: The firmware parameter holding a Crazyflie's groups (set_group_mask sets the same variable).
+GROUP_MASK_PARAM = "hlCommander.groupmask"
+
+
+def known_group_mask(params: Mapping[str, Any]) -> int:
+    """A Crazyflie's group mask from its parameter values as read at connect: a Crazyflie not restarted
+    since an earlier session keeps its groups. 0 (the firmware's start value) when not read."""
+    try:
+        return int(params.get(GROUP_MASK_PARAM, 0)) & 0xFF
+    except (TypeError, ValueError):
+        return 0
 
 
 class OnboardCommands:
@@ -36,11 +52,12 @@ class OnboardCommands:
     (False after emergency); ``emergency_active()`` tells whether the worker is in emergency;
     ``on_pose()``, if given, is called for each external position/pose sent (for ``/diagnostics``);
     ``low_level_sent()``, if given, counts the low-level setpoints the worker has sent (any source):
-    one sent since the last notify-setpoints-stop holds the firmware's priority again."""
+    one sent since the last notify-setpoints-stop holds the firmware's priority again; ``group_mask``:
+    the Crazyflie's groups as last read (``hlCommander.groupmask``; 0 after a restart)."""
 
     def __init__(self, cf, stream: Callable[[CRTPPacket], bool], emergency_active: Callable[[], bool],
                  label: str = "", on_pose: Optional[Callable[[], None]] = None,
-                 low_level_sent: Optional[Callable[[], int]] = None) -> None:
+                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0) -> None:
         self.cf = cf
         self._on_pose = on_pose
         self._low_level_sent = low_level_sent
@@ -50,7 +67,7 @@ class OnboardCommands:
         self.label = label or str(getattr(cf, "uri", ""))
         self._lock = threading.Lock()
         self._low_level_active = True    # connect sends zero setpoints: assume low level owns it
-        self.group_mask = 0              # as last set by set_group_mask (the firmware starts with 0)
+        self.group_mask = group_mask     # as last set by set_group_mask (the firmware starts with 0)
 
     @property
     def low_level_active(self) -> bool:
@@ -97,12 +114,24 @@ class OnboardCommands:
         return self.cf.link.send(external_pose_packet(x, y, z, quaternion))
 
     # -- high-level services --------------------------------------------------------------------
-    def _fly(self, what: str, packet: CRTPPacket, idempotent: bool = True) -> None:
+    def _refuse(self, what: str, group_mask: int) -> None:
+        """Raise, before anything is sent, when ``what`` must not go out: after emergency, or when
+        ``group_mask`` does not address this Crazyflie."""
+        if self._emergency_active():
+            raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
+                                 "is restarted, removed and added again)" % (self.label, what))
+        if not in_groups(self.group_mask, group_mask):
+            raise nobody_addressed(group_mask, "%s is in group mask %d" % (self.label, self.group_mask),
+                                   "%s: %s" % (self.label, what))
+
+    def _height(self) -> Optional[float]:
+        """The Crazyflie's current height (m) where known, for the checks of a landing."""
+        return None
+
+    def _fly(self, what: str, packet: CRTPPacket, group_mask: int, idempotent: bool = True) -> None:
         """Send a checked high-level packet; first hand control back from the low-level stream."""
         with self._lock:
-            if self._emergency_active():
-                raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
-                                     "is restarted, removed and added again)" % (self.label, what))
+            self._refuse(what, group_mask)
             if self.low_level_active:
                 self.notify_setpoints_stop(0)
             self.cf.high_level.command(packet, idempotent=idempotent)
@@ -122,24 +151,26 @@ class OnboardCommands:
         self._low_level_active = False
 
     def takeoff(self, group_mask: int, height: float, duration_s: float) -> None:
-        self._fly("takeoff", high_level.takeoff_packet(height, duration_s, self.cf.protocol_version, group_mask))
+        self._fly("takeoff", high_level.takeoff_packet(height, duration_s, self.cf.protocol_version, group_mask),
+                  group_mask)
 
     def land(self, group_mask: int, height: float, duration_s: float) -> None:
-        self._fly("land", high_level.land_packet(height, duration_s, self.cf.protocol_version, group_mask))
+        height, duration_s = checked_landing(height, duration_s, self._height(), self.label)
+        self._fly("land", high_level.land_packet(height, duration_s, self.cf.protocol_version, group_mask), group_mask)
 
     def stop(self, group_mask: int) -> None:
-        self._fly("stop", high_level.stop_packet(group_mask))
+        self._fly("stop", high_level.stop_packet(group_mask), group_mask)
 
     def go_to(self, group_mask: int, relative: bool, goal: Sequence[float], yaw: float, duration_s: float) -> None:
         packet = high_level.go_to_packet(goal[0], goal[1], goal[2], yaw, duration_s, self.cf.protocol_version,
                                          relative=relative, group_mask_=group_mask)
-        self._fly("go_to", packet, idempotent=not relative)
+        self._fly("go_to", packet, group_mask, idempotent=not relative)
 
     def start_trajectory(self, group_mask: int, trajectory_id: int, timescale: float, reversed_: bool,
                          relative: bool) -> None:
         packet = self.cf.high_level.start_trajectory_packet(trajectory_id, timescale, reversed_, relative,
                                                             group_mask=group_mask)
-        self._fly("start_trajectory", packet)
+        self._fly("start_trajectory", packet, group_mask)
 
     def set_group_mask(self, group_mask: int) -> None:
         packet = high_level.set_group_mask_packet(group_mask)

@@ -15,6 +15,13 @@ reactions (docs/safety.md has the figures and why):
   ``battery_critical_v``: the same landing or descent;
 * host shutdown: the same landing or descent for every Crazyflie in the air, within a budget.
 
+A landing under way (any of these, the shutdown's or a removal's, or a land command's) is never
+cancelled by a command that does not itself land: :meth:`SafetyMonitor.refusal` says why a takeoff,
+go_to or start_trajectory must not go out, and one that went out anyway (a broadcast, a race) makes
+the reaction land again from where the Crazyflie is. :func:`checked_landing` refuses a land command
+that would drop the Crazyflie. An emergency stop (or the supervisor's lock) ends whatever the
+monitor believed flew: nothing is left to land.
+
 The emergency-stop watchdog keep-alive (``emergency_watchdog``) is only a switch here; the worker
 sends it. Every reaction is logged once with its reason and stays in :meth:`SafetyMonitor.report`.
 """
@@ -28,6 +35,8 @@ from collections import deque
 from typing import Any, Callable, Deque, List, NamedTuple, Optional, Tuple
 
 from crazyflie_driver.crtp.firmware_limits import MAX_THRUST
+from crazyflie_driver.errors import CommandValueError
+from crazyflie_driver.protocol.checks import finite, positive_duration
 from crazyflie_driver.protocol.high_level import HIGH_LEVEL_FROM
 
 LOG = logging.getLogger("crazyflie_driver.server.safety")
@@ -56,6 +65,11 @@ LAND_SETTLE_S = 2.0
 #: ... and at the latest this long (s) after the plan's end (a floor above z = 0, a pose offset).
 LAND_GIVE_UP_S = 4.0
 OFF_REPEATS = 3                 # zero-thrust setpoints that end a reaction (one may be lost)
+#: m a land command's target may lie above the Crazyflie's last known height (pose noise; a drop of a few
+#: centimetres at the end). Higher, the firmware climbs there, then stops the motors at the plan's end.
+LAND_CLIMB_TOLERANCE_M = 0.05
+#: High-level commands that fly: none of them may cancel a landing under way.
+FLYING_COMMANDS = frozenset(("takeoff", "go_to", "start_trajectory"))
 
 OK, WARN, ERROR = 0, 1, 2       # same numbers as server.status and diagnostic_msgs
 
@@ -105,6 +119,28 @@ class SafetyConfig:
                 value = float(value)
             values[f.name] = value
         return cls(**values)
+
+
+def checked_landing(height: float, duration_s: float, current_z: Optional[float] = None,
+                    who: str = "") -> Tuple[float, float]:
+    """(height m, duration s) of a land command that brings the Crazyflie down, else CommandValueError
+    naming what was refused. The firmware stops the motors at the end of a landing plan wherever the
+    Crazyflie is: a duration of 0 stops them at once, in the air, and a target above ``current_z``
+    (its last known height, m; None: unknown, not checked) is a climb and then a fall."""
+    where = who + ": " if who else ""
+    height = finite("height", height)
+    try:
+        duration = positive_duration(duration_s)
+    except CommandValueError as e:
+        raise CommandValueError("%sland refused: %s: the firmware stops the motors at the end of the landing "
+                                "plan, so a landing of no time drops the Crazyflie from where it is; give it the "
+                                "time to come down (about %.1f s per metre)"
+                                % (where, e, 1.0 / SafetyConfig.descent_rate))
+    if current_z is not None and height > current_z + LAND_CLIMB_TOLERANCE_M:
+        raise CommandValueError("%sland refused: target height %.2f m is above the Crazyflie (%.2f m): it would climb "
+                                "there, then stop its motors and fall; land to the floor (height 0) and use go_to to "
+                                "go up" % (where, height, current_z))
+    return height, duration
 
 
 def thrust_change_for(accel: float, hover_thrust: float) -> float:
@@ -236,6 +272,8 @@ class SafetyMonitor:
         self._said_ignored = False
         self._offs_left = 0                     # zero-thrust setpoints still to send after a reaction
         self._offs_sent = True                  # and the last of them went out (the worker polled again)
+        self._motors_off_by = ""                # why the motors are off, when something else stopped them
+        self._stopped_for_good = False          # by an emergency stop: nothing of the user's counts any more
 
     # ------------------------------------------------------------------ notes (any thread)
 
@@ -294,6 +332,12 @@ class SafetyMonitor:
                     self._thrusts.append((now, int(thrust)))
                 while self._thrusts and self._thrusts[0][0] < now - HOVER_WINDOW_S:
                     self._thrusts.popleft()
+            if self._flying:
+                self._motors_off_by = ""
+            # a low-level setpoint takes the priority: the firmware's planner stops and forgets its plan
+            # (a land command's landing included)
+            self._hl_flying = False
+            self._land_until = 0.0
             return True
 
     def note_stream_released(self, now: float) -> None:
@@ -312,15 +356,65 @@ class SafetyMonitor:
     def note_high_level(self, now: float, what: str, duration: float = 0.0) -> None:
         """A high-level command was accepted: takeoff, go_to, start_trajectory, land or stop."""
         with self._lock:
+            if self._stopped_for_good:
+                return
             self._hl_used = True
             if what == "stop":
                 self._hl_flying = False
-            elif what == "land":
-                self._hl_flying = True
+                return
+            self._hl_flying = True
+            self._motors_off_by = ""
+            if what == "land":
                 self._land_until = max(self._land_until, now + duration)
-            else:
-                self._hl_flying = True
+            elif self.reaction == Reaction.LANDING:
+                # past refusal() (a broadcast, or sent while the reaction began): the firmware flies that
+                # command now, so the landing starts again from here; it is never ended in the air
+                self._plan_landing(now)
+                self._event(LOG.error, "%s: a %s replaced the landing in the firmware: landing again in %.1f s"
+                            % (self.reason, what, self._pending_land))
+            elif self.reaction not in (Reaction.HOLD, Reaction.DESCENT):
                 self._land_until = 0.0
+
+    def note_motors_off(self, now: float, why: str, for_good: bool = False) -> None:
+        """Something else stopped the motors (an emergency stop, ``for_good``; the supervisor's lock):
+        nothing is in the air any more, a reaction under way is over and a shutdown has nothing to land."""
+        with self._lock:
+            if self.reaction in (Reaction.HOLD, Reaction.DESCENT, Reaction.LANDING):
+                self._down(now, why, offs=0)
+            self._flying = self._hl_flying = False
+            self._stream = ""
+            self._last_setpoint_at = None
+            self._thrusts.clear()
+            self._pending_land = None
+            self._land_until = 0.0
+            self._battery_critical_pending = False
+            self._motors_off_by = why
+            self._stopped_for_good = self._stopped_for_good or for_good
+
+    def current_height(self, now: float) -> Optional[float]:
+        """The height (m) of the last pose sent to the onboard estimator if it is fresh, else None."""
+        with self._lock:
+            if self._pose_z is not None and now - self._pose_at < POSE_FRESH_S:
+                return self._pose_z
+            return None
+
+    def refusal(self, now: float, what: str) -> Optional[str]:
+        """Why the high-level command ``what`` must not go out now, or None. A command that flies
+        (``FLYING_COMMANDS``) never cancels a landing under way, nor starts a flight while the server
+        lets the Crazyflie go; land and stop always may (stop is motors off, as emergency)."""
+        if what not in FLYING_COMMANDS:
+            return None
+        with self._lock:
+            if self.reaction in (Reaction.HOLD, Reaction.DESCENT, Reaction.LANDING):
+                return ("the server is bringing it down (%s); a %s would end that in the air. Land and stop are "
+                        "taken meanwhile" % (self.reason, what))
+            if self._shutdown:
+                return ("the server is shutting down or letting this Crazyflie go: nothing may send it up again "
+                        "without supervision")
+            if self._hl_flying and now < self._land_until:
+                return ("a landing is under way (%.1f s to go) and a %s would cancel it in the air; wait for its "
+                        "end, or land again or stop" % (self._land_until - now, what))
+            return None
 
     def note_battery(self, now: float, volts: float) -> None:
         """A ``pm.vbat`` sample (V)."""
@@ -391,6 +485,9 @@ class SafetyMonitor:
             if self.reaction in (Reaction.DESCENT, Reaction.LANDING):
                 return True
             if not self._in_air(now):
+                if self._motors_off_by:
+                    self._event(LOG.info, "%s: nothing to bring down, its motors are off (%s)"
+                                % (reason, self._motors_off_by))
                 return False
             self.reaction = Reaction.NONE
             self._start(now, reason, hold=False)
@@ -426,14 +523,7 @@ class SafetyMonitor:
             self._event(LOG.error, "%s: already landing, %.1f s to go" % (reason, self._land_until - now))
             return
         if self.onboard_control(now):
-            height = self._pose_z if self._pose_z is not None else self.config.descent_max_height
-            duration = max(MIN_LAND_S, max(height, 0.0) / self.config.descent_rate)
-            duration = min(duration, max(MIN_LAND_S, self._deadline - now - LAND_SETTLE_S))
-            self.reaction = Reaction.LANDING
-            self._pending_land = duration
-            self._land_distance = max(height, 0.0)
-            self._own_landing = True
-            self._land_until = now + duration
+            height, duration = self._plan_landing(now)
             self._event(LOG.error, "%s: landing by the onboard high-level commander from %s in %.1f s"
                         % (reason, "%.2f m" % height if self._pose_z is not None else "its height", duration))
             return
@@ -450,6 +540,19 @@ class SafetyMonitor:
         self._event(LOG.error, "%s: holding level at thrust %d%s, then descending at %.2f m/s for up to %.1f s "
                     "and motors off%s" % (reason, hover, " for %.1f s" % self._plan.hold_s if hold else "",
                                           self.config.descent_rate, self._plan.duration, cut))
+
+    def _plan_landing(self, now: float) -> Tuple[float, float]:
+        """The reaction's own landing from the last known height (else the highest expected flight),
+        sent at the next poll: (height m, duration s)."""
+        height = self._pose_z if self._pose_z is not None else self.config.descent_max_height
+        duration = max(MIN_LAND_S, max(height, 0.0) / self.config.descent_rate)
+        duration = min(duration, max(MIN_LAND_S, self._deadline - now - LAND_SETTLE_S))
+        self.reaction = Reaction.LANDING
+        self._pending_land = duration
+        self._land_distance = max(height, 0.0)
+        self._own_landing = True
+        self._land_until = now + duration
+        return height, duration
 
     def _hover_thrust(self) -> Optional[int]:
         if not self._thrusts:

@@ -9,7 +9,7 @@ import time
 from typing import Any, Callable, Optional, Tuple
 
 from crazyflie_driver.crtp.packet import PORT_GENERIC_SETPOINT, CRTPPacket
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CrazyflieError, FlightRefused
 from crazyflie_driver.protocol import high_level, setpoints
 from crazyflie_driver.protocol.supervisor import WATCHDOG_KEEPALIVE_PERIOD_S, watchdog_packet
 from crazyflie_driver.server.onboard_commands import OnboardCommands
@@ -70,12 +70,14 @@ def send_watchdog_keepalive(cf: Any) -> bool:
 
 class ObservedOnboardCommands(OnboardCommands):
     """Onboard commands that also tell the Crazyflie's safety monitor about the poses sent to its
-    estimator and the high-level commands it accepted (to choose how to land it)."""
+    estimator and the high-level commands it accepted (to choose how to land it), and that refuse
+    what the monitor rules out (a command that would cancel a landing under way)."""
 
     def __init__(self, cf, stream, emergency_active, label: str, monitor: SafetyMonitor,
                  clock: Callable[[], float] = time.monotonic, on_pose: Optional[Callable[[], None]] = None,
-                 low_level_sent: Optional[Callable[[], int]] = None) -> None:
-        super().__init__(cf, stream, emergency_active, label, on_pose=on_pose, low_level_sent=low_level_sent)
+                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0) -> None:
+        super().__init__(cf, stream, emergency_active, label, on_pose=on_pose, low_level_sent=low_level_sent,
+                         group_mask=group_mask)
         self._monitor = monitor
         self._clock = clock
 
@@ -91,10 +93,20 @@ class ObservedOnboardCommands(OnboardCommands):
             self._monitor.note_pose(self._clock(), z)
         return sent
 
-    def _fly(self, what: str, packet: CRTPPacket, idempotent: bool = True) -> None:
-        super()._fly(what, packet, idempotent)
+    def _refuse(self, what: str, group_mask: int) -> None:
+        super()._refuse(what, group_mask)
+        why = self._monitor.refusal(self._clock(), what)
+        if why is not None:
+            raise FlightRefused("%s: %s refused, nothing sent: %s" % (self.label, what, why))
+
+    def _height(self) -> Optional[float]:
+        return self._monitor.current_height(self._clock())
+
+    def _fly(self, what: str, packet: CRTPPacket, group_mask: int, idempotent: bool = True) -> None:
+        super()._fly(what, packet, group_mask, idempotent)
         self._monitor.note_high_level(self._clock(), what)
 
     def land(self, group_mask: int, height: float, duration_s: float) -> None:
+        asked_at = self._clock()    # the firmware starts the plan later: the monitor never outlasts its landing
         super().land(group_mask, height, duration_s)
-        self._monitor.note_high_level(self._clock(), "land", duration_s)
+        self._monitor.note_high_level(asked_at, "land", duration_s)

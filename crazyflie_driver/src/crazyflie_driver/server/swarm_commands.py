@@ -4,9 +4,11 @@ Takeoff, land, go_to, start_trajectory and stop go to every Crazyflie at once by
 radio (``SwarmBroadcaster``), each with a group mask: 0 reaches every Crazyflie, otherwise those whose
 group mask (``set_group_mask``) shares a bit with it. go_to and start_trajectory are relative, as
 Crazyswarm's: one absolute goal for all would send them to one point. A request that fails its checks
-(group mask outside 0..255, NaN, a duration that is not > 0, a trajectory some addressed Crazyflie has
-not uploaded) raises ``CommandValueError`` naming the fault and sends nothing. Emergency goes out by
-broadcast and by unicast to every Crazyflie, and never raises.
+(group mask outside 0..255 or addressing no Crazyflie, NaN, a duration that is not > 0, a land that would
+drop a Crazyflie, a trajectory some addressed Crazyflie has not uploaded) raises ``CommandValueError``
+naming the fault and sends nothing; so does (``FlightRefused``) a takeoff, go_to or start_trajectory that
+would cancel an addressed Crazyflie's landing under way. Emergency goes out by broadcast and by unicast
+to every Crazyflie, and never raises.
 """
 from __future__ import annotations
 
@@ -16,8 +18,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
-from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive
+from crazyflie_driver.errors import CrazyflieError, FlightRefused, TrajectoryError
+from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive, positive_duration
+from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
+from crazyflie_driver.server.safety import checked_landing
 
 LOG = logging.getLogger("crazyflie_driver.server.swarm")
 
@@ -34,33 +38,42 @@ class SwarmMember:
     onboard: Any
 
 
-def in_groups(member_mask: int, request_mask: int) -> bool:
-    """Whether a Crazyflie with ``member_mask`` takes a command sent to ``request_mask`` (the firmware's rule)."""
-    return request_mask == 0 or bool(member_mask & request_mask)
-
-
-def positive_duration(value: float) -> float:
-    d = finite("duration", value)
-    if d <= 0:
-        raise CommandValueError("duration must be > 0 s, got %r" % (value,))
-    return d
-
-
 class SwarmCommands:
     """The swarm-wide services behind ``/takeoff``, ``/land``, ``/go_to``, ``/start_trajectory``,
     ``/stop``, ``/emergency``. ``members()`` gives the Crazyflies served now; ``broadcaster`` is a
-    ``SwarmBroadcaster`` reaching all of them."""
+    ``SwarmBroadcaster`` reaching all of them; ``refusal(member, command)`` why a command must not reach
+    that Crazyflie now (its safety monitor's ``refusal``), ``height(member)`` its current height (m) or None."""
 
     def __init__(self, members: Callable[[], Sequence[SwarmMember]], broadcaster: Any,
-                 observe: Optional[Callable[[Sequence[SwarmMember], str, float], None]] = None) -> None:
+                 observe: Optional[Callable[[Sequence[SwarmMember], str, float], None]] = None,
+                 refusal: Callable[[SwarmMember, str], Optional[str]] = lambda member, what: None,
+                 height: Callable[[SwarmMember], Optional[float]] = lambda member: None) -> None:
         self._members = members
         self.broadcaster = broadcaster
         self._observe = observe     # (targets, command, duration s) after a command went out: the safety monitors
+        self._refusal = refusal
+        self._height = height
         self._lock = threading.Lock()
 
     def targets(self, group_mask: int) -> List[SwarmMember]:
+        """The Crazyflies ``group_mask`` addresses; CommandValueError when it addresses none (the broadcast
+        would go out and do nothing)."""
         mask = checked_group_mask(group_mask)
-        return [m for m in self._members() if in_groups(getattr(m.onboard, "group_mask", 0), mask)]
+        members = list(self._members())
+        targets = [m for m in members if in_groups(getattr(m.onboard, "group_mask", 0), mask)]
+        if not targets:
+            masks = sorted(set(getattr(m.onboard, "group_mask", 0) for m in members))
+            raise nobody_addressed(mask, "the swarm's Crazyflies have group masks %s" % ", ".join(map(str, masks))
+                                   if members else "no Crazyflie is served")
+        return targets
+
+    def _check_flight(self, targets: Sequence[SwarmMember], what: str) -> None:
+        """FlightRefused, naming each, when ``what`` would cancel an addressed Crazyflie's landing under way."""
+        refused = [(m.name, why) for m in targets for why in (self._refusal(m, what),) if why]
+        if refused:
+            raise FlightRefused("%s refused, nothing sent: %s; leave %s out with a group mask, or wait for the "
+                                "landing's end" % (what, "; ".join("%s: %s" % r for r in refused[:3]),
+                                                   ", ".join(name for name, _ in refused)))
 
     def _hand_over(self, targets: Sequence[SwarmMember]) -> None:
         """A Crazyflie whose low-level setpoints hold the priority ignores the high-level commander:
@@ -84,11 +97,13 @@ class SwarmCommands:
     def takeoff(self, group_mask: int, height: float, duration_s: float) -> int:
         targets = self.targets(group_mask)
         height, duration = finite("height", height), positive_duration(duration_s)
+        self._check_flight(targets, "takeoff")
         return self._send(targets, lambda: self.broadcaster.takeoff(height, duration, group_mask), "takeoff", duration)
 
     def land(self, group_mask: int, height: float, duration_s: float) -> int:
         targets = self.targets(group_mask)
-        height, duration = finite("height", height), positive_duration(duration_s)
+        for m in targets:       # the per-Crazyflie land's check, with each one's height
+            height, duration = checked_landing(height, duration_s, self._height(m), m.name)
         return self._send(targets, lambda: self.broadcaster.land(height, duration, group_mask), "land", duration)
 
     def stop(self, group_mask: int) -> int:
@@ -100,19 +115,18 @@ class SwarmCommands:
         targets = self.targets(group_mask)
         goal = [finite("goal " + axis, v) for axis, v in zip("xyz", offset)]
         yaw, duration = finite("yaw", yaw), positive_duration(duration_s)
+        self._check_flight(targets, "go_to")
         return self._send(targets, lambda: self.broadcaster.go_to(goal, yaw, duration, group_mask), "go_to", duration)
 
     def start_trajectory(self, group_mask: int, trajectory_id: int, timescale: float, reversed_: bool) -> int:
         """Every addressed Crazyflie flies its own uploaded trajectory from where it is."""
         targets = self.targets(group_mask)
         timescale = positive("timescale", timescale)
-        if not targets:
-            raise CommandValueError("no Crazyflie is in group mask %d (set_group_mask of each Crazyflie sets its "
-                                    "groups)" % group_mask)
         missing = [m.name for m in targets if trajectory_id not in _uploaded(m)]
         if missing:
             raise TrajectoryError("trajectory %r was not uploaded to %s; call their upload_trajectory first"
                                   % (trajectory_id, ", ".join(missing)))
+        self._check_flight(targets, "start_trajectory")
         return self._send(targets, lambda: self.broadcaster.start_trajectory(trajectory_id, timescale, reversed_,
                                                                              group_mask), "start_trajectory")
 

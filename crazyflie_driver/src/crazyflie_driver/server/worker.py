@@ -281,6 +281,7 @@ class CrazyflieWorker:
             except Exception as e:      # the worker keeps sending zero-thrust setpoints anyway
                 LOG.error("%s: emergency stop packet failed: %s (zero-thrust setpoints follow)", self.uri, e)
         if first:
+            self.safety.note_motors_off(self._clock(), "emergency stop", for_good=True)
             LOG.warning("%s: EMERGENCY: motors stopped; this Crazyflie will not fly again until it is "
                         "removed and added again", self.uri)
             try:
@@ -709,6 +710,8 @@ class CrazyflieWorker:
         text = watchdog_notice.cut_message(silent, locked, self._protocol_version(), link_down)
         self.watchdog.said(text, locked)
         LOG.warning("%s: %s", self.uri, text)
+        if locked:
+            self.safety.note_motors_off(now, "locked by its supervisor after the setpoint watchdog's cut")
 
     def _restore(self) -> None:
         LOG.warning("%s: link restored after %.1f s", self.uri, self._clock() - self._lost_at)
