@@ -346,7 +346,7 @@ class RosSwarm:
             events = self.watch.check(now)
         for ev in events:
             if ev.kind == "stale":
-                rospy.logwarn("swarm: %s: no pose sent for %.2f s (%s); it lands in %.1f s unless the pose comes "
+                rospy.logwarn("swarm: %s: no pose for %.2f s (%s); it lands in %.1f s unless the pose comes "
                               "back", ev.name, ev.age, self._stale_cause(ev.name), self.options.stale_hold)
             elif ev.kind == "fresh":
                 rospy.loginfo("swarm: %s: pose back", ev.name)
@@ -356,6 +356,8 @@ class RosSwarm:
                                  name="land %s" % ev.name, daemon=True).start()
 
     def _stale_cause(self, name: str) -> str:
+        if self._emergency:
+            return "the emergency stopped the stream"
         refusal = self.stream.last_refusal.get(name) if self.stream is not None else None
         return "its poses are refused: %s" % refusal if refusal else "motion capture lost it"
 
