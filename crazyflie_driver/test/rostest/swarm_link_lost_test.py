@@ -2,7 +2,10 @@
 """Swarm mode on the world's truth: the radio of one hovering Crazyflie is unplugged; it is named on
 /diagnostics and its motors stop one watchdog period after the last keep-alive it heard (the server's
 broadcast emergency-stop watchdog), while the Crazyflies on the other radio keep hovering. Before that,
-a takeoff that addresses a Crazyflie whose estimator motion capture never placed is refused whole."""
+a takeoff that addresses a Crazyflie whose estimator motion capture never placed is refused whole.
+Then motion capture sees one of the two on radio 0 as a ghost 100 m away (noise 100 m, beyond the packed
+broadcast's +-32.767 m): its neighbour keeps getting poses at the stream's rate and keeps hovering, and the
+ghost's Crazyflie goes stale and is landed."""
 from __future__ import annotations
 
 import math
@@ -16,6 +19,8 @@ import rostest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
+from crazyflie_driver.sim.air.faults import parse_command
+
 from crazyflie_driver.srv import Takeoff
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
@@ -25,6 +30,7 @@ HEIGHT = 0.5
 TOL = 0.05              # m from the hover point
 WATCHDOG_S = 1.0        # the firmware's emergency-stop watchdog period (world s)
 KEEPALIVE_S = 0.25      # the server's keep-alive period
+GHOST_S = 6.0           # how long the ghost is watched (s)
 
 
 class SwarmLinkLost(unittest.TestCase):
@@ -93,6 +99,66 @@ class SwarmLinkLost(unittest.TestCase):
             self.assertTrue(all(self.hover_error(n) < TOL for n in others))     # still in the air, in place
         finally:
             self.world.set_dongle_faults(1, unplugged=False)
+
+    def poses_sent(self, msg, name):
+        """(stamp s, "poses sent" of ``name``) from a /diagnostics message, or None."""
+        for st in msg.status:
+            if st.name == "crazyflie_server swarm: %s" % name:
+                values = {kv.key: kv.value for kv in st.values}
+                if "poses sent" in values:
+                    return msg.header.stamp.to_sec(), int(values["poses sent"])
+        return None
+
+    def pose_rate(self, name, seconds):
+        """Poses per s the server sent ``name`` over ``seconds`` of /diagnostics (the server's own count)."""
+        first = wait_until(lambda: self.diagnostics.latest() is not None
+                           and self.poses_sent(self.diagnostics.latest(), name), 5.0)
+        self.assertTrue(first, self.diagnostics.latest())
+        t_end = time.monotonic() + seconds
+        last = first
+        while time.monotonic() < t_end:
+            last = self.poses_sent(self.diagnostics.latest(), name) or last
+            time.sleep(0.1)
+        self.assertGreater(last[0] - first[0], 0.5 * seconds, (first, last))
+        return (last[1] - first[1]) / (last[0] - first[0])
+
+    def test_with_one_ghost_on_radio_0_its_neighbour_keeps_its_poses_and_the_ghost_lands(self):
+        """Runs after the unplug test (cf1 and cf2 hover on radio 0; takes them off itself if not)."""
+        if not all(self.hover_error(n) < TOL for n in ("cf1", "cf2")):
+            rospy.ServiceProxy("/takeoff", Takeoff)(groupMask=1, height=HEIGHT, duration=rospy.Duration(2.0))
+            self.assertTrue(wait_until(lambda: all(self.hover_error(n) < TOL for n in ("cf1", "cf2")), 20.0))
+        before = self.pose_rate("cf1", 2.0)
+        self.assertGreater(before, 20.0)
+        op, args = parse_command("mocap cf2 --noise 100")
+        self.world.control(op, **args)
+        try:
+            worst, t_end = 0.0, time.monotonic() + GHOST_S
+            first = self.poses_sent(self.diagnostics.latest(), "cf1")
+            while time.monotonic() < t_end:
+                worst = max(worst, self.hover_error("cf1"))
+                time.sleep(0.02)
+            last = self.poses_sent(self.diagnostics.latest(), "cf1")
+            during = (last[1] - first[1]) / (last[0] - first[0])
+            rospy.loginfo("ghost on cf2: cf1 got %.1f poses/s (%.1f before), worst hover error %.3f m", during,
+                          before, worst)
+            # the neighbour: poses at the rate it had before, hovering in place (the world's truth)
+            self.assertGreater(during, 0.8 * before, (before, during))
+            self.assertLess(worst, TOL)
+            # the ghost's Crazyflie: stale, told to land, on the floor (its poses never went out)
+            cf2 = self.state("cf2")
+            self.assertLess(cf2["position"][2], 0.05, cf2)
+            self.assertTrue(self.rosout.find("cf2: landing by itself: no pose"), "cf2 not landed by the watch")
+            self.assertTrue(self.rosout.find("cf2: pose refused, not sent"))
+
+            def cf2_refused_on_diagnostics():
+                msg = self.diagnostics.latest()
+                return msg is not None and any(
+                    st.name == "crazyflie_server swarm: cf2" and st.level == DiagnosticStatus.ERROR
+                    and "refused" in st.message for st in msg.status)
+            self.assertTrue(wait_until(cf2_refused_on_diagnostics, 3.0), self.diagnostics.latest())
+        finally:
+            op, args = parse_command("mocap cf2 --clear")
+            self.world.control(op, **args)
 
 
 if __name__ == "__main__":

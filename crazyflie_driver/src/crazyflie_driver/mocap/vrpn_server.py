@@ -7,19 +7,27 @@ get away with hard-coded ids), then ``vrpn_Tracker Pos_Quat`` (and optionally
 connection, stop and restart on the same port, hide a tracker (as a mocap does with an occluded
 body), inject unknown or malformed messages, or bytes that break the framing.
 
+Sends never block: each client has its own backlog of what its socket did not take yet, flushed as
+it drains. A client whose backlog grows older than ``MAX_CLIENT_LAG_S`` (or bigger than
+``MAX_CLIENT_BACKLOG_BYTES``) is disconnected, so a client that stops reading never holds back the
+others (docs/mocap.md, "Slow clients").
+
 Standalone: ``python3 -m crazyflie_driver.mocap.vrpn_server --tracker cf1 --tracker cf2``
 (see ``--help``); poses are given in the ROS Z-up frame and streamed Y-up with ``--y-up``.
 """
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import random
+import select
 import socket
 import sys
 import threading
 import time
-from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
+from collections import deque
+from typing import Callable, Deque, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.mocap import vrpn_protocol as vp
 from crazyflie_driver.mocap.frames import z_up_to_y_up_quaternion, z_up_to_y_up_vector
@@ -38,13 +46,55 @@ GARBAGE_KINDS = ("unknown_type", "undescribed", "short_pos_quat", "long_velocity
 
 PoseFn = Callable[[str, float], Tuple[Sequence[float], Sequence[float]]]
 
+LOG = logging.getLogger(__name__)
+#: A client whose oldest unsent data waited this long (s) is disconnected: its poses are stale for any
+#: controller by then (a swarm calls a pose stale after 0.2 s), and a reconnect gives it a current stream.
+MAX_CLIENT_LAG_S = 1.0
+#: ... or whose unsent data exceeds this (bytes; about 1 s of 100 trackers at 100 Hz), whatever the rate.
+MAX_CLIENT_BACKLOG_BYTES = 1 << 20
+#: Kernel send buffer of each client socket (bytes; ~15 frames of 49 trackers): what a client has not
+#: taken waits in its backlog, where its age is known, rather than unseen in an ever-growing kernel buffer.
+CLIENT_SEND_BUFFER_BYTES = 64 * 1024
+#: How often a client's reader thread looks up when nothing happens (s).
+_PEER_POLL_S = 0.2
+
 
 class _Peer:
+    """One client: its non-blocking socket and what it has not taken yet (``lock`` guards both)."""
+
     def __init__(self, sock: socket.socket, addr) -> None:
         self.sock = sock
         self.addr = addr
         self.lock = threading.Lock()
         self.alive = True
+        self.backlog: Deque[Tuple[bytes, float]] = deque()     # (bytes, when queued), oldest first
+        self.backlog_bytes = 0
+
+    def queue(self, pieces: Sequence[bytes], now: float) -> None:
+        for piece in pieces:
+            self.backlog.append((piece, now))
+            self.backlog_bytes += len(piece)
+
+    def flush(self, now: float) -> Optional[str]:
+        """Send what the socket takes without waiting; why the client must go (or None)."""
+        while self.backlog:
+            piece, queued = self.backlog[0]
+            try:
+                n = self.sock.send(piece)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as e:
+                return "gone (%s)" % (e,)
+            self.backlog_bytes -= n
+            if n < len(piece):
+                self.backlog[0] = (piece[n:], queued)
+                break
+            self.backlog.popleft()
+        if self.backlog:
+            lag = now - self.backlog[0][1]
+            if lag > MAX_CLIENT_LAG_S or self.backlog_bytes > MAX_CLIENT_BACKLOG_BYTES:
+                return "too slow: took nothing for %.2f s, %d bytes waiting" % (lag, self.backlog_bytes)
+        return None
 
 
 class VrpnTestServer:
@@ -86,6 +136,7 @@ class VrpnTestServer:
         self.poses_sent = 0             # Pos_Quat messages written (all clients)
         self.accepted = 0               # connections that completed the handshake
         self.rejected_cookies = 0
+        self.slow_clients = 0           # disconnected for not reading (MAX_CLIENT_LAG_S)
         for name in trackers:
             self.add_tracker(name)
 
@@ -249,6 +300,7 @@ class VrpnTestServer:
     def _handshake(self, sock: socket.socket, addr) -> None:
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, CLIENT_SEND_BUFFER_BYTES)
             sock.sendall(vp.encode_cookie(self.version))
             sock.settimeout(3.0)
             cookie = b""
@@ -266,6 +318,7 @@ class VrpnTestServer:
         try:
             sock.settimeout(2.0)
             sock.sendall(self._descriptions())
+            sock.setblocking(False)         # from now on every send is the backlog's, and never waits
         except OSError:
             sock.close()
             return
@@ -275,16 +328,33 @@ class VrpnTestServer:
         self._drain(peer)
 
     def _drain(self, peer: _Peer) -> None:
-        """Read (and discard) what the client sends, to notice when it leaves."""
-        peer.sock.settimeout(0.2)
+        """Read (and discard) what the client sends, to notice when it leaves; flush its backlog as its
+        socket takes it."""
+        sock = peer.sock
         while peer.alive and not self._stop.is_set():
+            with peer.lock:
+                waiting = bool(peer.backlog)
             try:
-                if not peer.sock.recv(4096):
+                readable, writable, _ = select.select([sock], [sock] if waiting else [], [], _PEER_POLL_S)
+                if readable and not sock.recv(4096):
                     break
-            except socket.timeout:
+            except (BlockingIOError, InterruptedError):
                 continue
-            except OSError:
+            except (OSError, ValueError):       # closed under us
                 break
+            if writable:
+                with peer.lock:
+                    why = peer.flush(time.monotonic())
+                if why is not None:
+                    self._drop(peer, why)
+                    return
+        self._remove(peer)
+
+    def _drop(self, peer: _Peer, why: str) -> None:
+        if why.startswith("too slow"):
+            self.slow_clients += 1
+            LOG.warning("VRPN client %s:%d disconnected, %s (the others do not wait for it; it may reconnect)",
+                        peer.addr[0], peer.addr[1], why)
         self._remove(peer)
 
     def _remove(self, peer: _Peer) -> None:
@@ -298,21 +368,24 @@ class VrpnTestServer:
             pass
 
     def _broadcast(self, data: bytes) -> None:
+        """``data`` to every client, without waiting for any: what a socket does not take now waits in
+        that client's backlog (a client too far behind is disconnected)."""
         with self._lock:
             peers = list(self._peers)
+        pieces = [data]
+        if self.fragment:
+            pieces, pos = [], 0
+            while pos < len(data):
+                n = self._rng.randint(1, 61)
+                pieces.append(data[pos:pos + n])
+                pos += n
+        now = time.monotonic()
         for p in peers:
-            try:
-                with p.lock:
-                    if self.fragment:
-                        pos = 0
-                        while pos < len(data):
-                            n = self._rng.randint(1, 61)
-                            p.sock.sendall(data[pos:pos + n])
-                            pos += n
-                    else:
-                        p.sock.sendall(data)
-            except OSError:
-                self._remove(p)
+            with p.lock:
+                p.queue(pieces, now)
+                why = p.flush(now)
+            if why is not None:
+                self._drop(p, why)
 
     def _pose_of(self, index: int, name: str, t: float) -> Tuple[Sequence[float], Sequence[float]]:
         if self.pose_fn is not None:

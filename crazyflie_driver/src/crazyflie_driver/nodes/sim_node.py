@@ -53,6 +53,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
+from crazyflie_driver.sim.air.faults import MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M
 from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST, raise_priority
 
 MOCAP_STYLES = ("vicon", "vrpn", "both", "none")
@@ -187,8 +188,9 @@ def mocap_from_params(params: Mapping[str, Any]) -> MocapConfig:
     noise = _number("~mocap_noise", params.get("mocap_noise", 0.0))
     latency = _number("~mocap_latency", params.get("mocap_latency", 0.0))
     dropout = _number("~mocap_dropout", params.get("mocap_dropout", 0.0))
-    if noise < 0 or latency < 0 or not 0.0 <= dropout < 1.0:
-        raise SimConfigError("~mocap_noise and ~mocap_latency must be >= 0 and ~mocap_dropout in [0, 1)")
+    if not (0 <= noise <= MAX_MOCAP_NOISE_M and 0 <= latency <= MAX_MOCAP_LATENCY_S and 0.0 <= dropout < 1.0):
+        raise SimConfigError("~mocap_noise must be 0..%g m, ~mocap_latency 0..%g s and ~mocap_dropout in [0, 1), "
+                             "got %r, %r and %r" % (MAX_MOCAP_NOISE_M, MAX_MOCAP_LATENCY_S, noise, latency, dropout))
     frame = str(params.get("world_frame", "world")).strip("/") or "world"
     return MocapConfig(style, rate, noise, latency, dropout, frame)
 

@@ -282,10 +282,11 @@ class RosSwarm:
         stream = self.stream
 
         def pose(name, position, orientation=None, received=None):
+            taken = stream.pose(name, position, orientation, received)
             monitor = monitors.get(name)
-            if monitor is not None:     # the height a safety landing starts from
+            if taken and monitor is not None:     # the height a safety landing starts from
                 monitor.note_pose(time.monotonic(), position[2])
-            return stream.pose(name, position, orientation, received)
+            return taken
         self._sources.append(swarm_mocap_sources.start(self.options, names, pose))
 
     def _pose_seen(self, name: str, now: float) -> None:
@@ -346,14 +347,20 @@ class RosSwarm:
             events = self.watch.check(now)
         for ev in events:
             if ev.kind == "stale":
-                rospy.logwarn("swarm: %s: no pose for %.2f s (motion capture lost it); it lands in %.1f s unless "
-                              "the pose comes back", ev.name, ev.age, self.options.stale_hold)
+                rospy.logwarn("swarm: %s: no pose for %.2f s (%s); it lands in %.1f s unless the pose comes "
+                              "back", ev.name, ev.age, self._stale_cause(ev.name), self.options.stale_hold)
             elif ev.kind == "fresh":
                 rospy.loginfo("swarm: %s: pose back", ev.name)
             elif ev.kind == "land" and ev.name in members and not self._emergency:
                 rospy.logerr("swarm: %s: landing by itself: %s", ev.name, ev.reason)
                 threading.Thread(target=self._land_one, args=(members[ev.name], ev.reason),
                                  name="land %s" % ev.name, daemon=True).start()
+
+    def _stale_cause(self, name: str) -> str:
+        if self._emergency:
+            return "the emergency stopped the stream"
+        refusal = self.stream.last_refusal.get(name) if self.stream is not None else None
+        return "its poses are refused: %s" % refusal if refusal else "motion capture lost it"
 
     def _link_lost_outcome(self) -> str:
         if self.heartbeat is not None and self.heartbeat.running:
@@ -395,6 +402,11 @@ class RosSwarm:
                     status.message = "radio link lost: %s; %s" % (self._link_lost_outcome(), status.message)
                 status.values = [KeyValue("pose age_s", "%.3f" % age if math.isfinite(age) else "never"),
                                  KeyValue("link", "ok" if link_ok else "lost")]
+                if self.stream is not None:     # a pose counts once it went out; refused ones say why
+                    status.values += [KeyValue("poses sent", str(self.stream.sent_by_name.get(m.name, 0))),
+                                      KeyValue("poses refused", str(self.stream.refused.get(m.name, 0)))]
+                    if state != "ok" and self.stream.last_refusal.get(m.name):
+                        status.message += "; last pose refused: %s" % self.stream.last_refusal[m.name]
                 arr.status.append(status)
             for name, error in self.failed.items():
                 arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, name="crazyflie_server swarm: %s"

@@ -13,7 +13,7 @@ from typing import List, Sequence, Tuple
 from crazyflie_driver.crtp.packet import PORT_LOCALIZATION, CRTPPacket
 from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.errors import CommandValueError
-from crazyflie_driver.protocol.checks import byte, finite, milli_int16
+from crazyflie_driver.protocol.checks import INT16_MAX, byte, finite, milli_int16
 
 CH_EXTERNAL_POSITION = 0
 CH_GENERIC = 1
@@ -24,6 +24,8 @@ TYPE_EMERGENCY_STOP_WATCHDOG = 4
 TYPE_EXTERNAL_POSE = 8
 TYPE_EXTERNAL_POSE_PACKED = 9
 
+#: Largest |coordinate| a packed position or pose carries (m): signed 16-bit millimetres.
+PACKED_RANGE_M = INT16_MAX / 1000.0
 POSITIONS_PER_PACKET = 4
 POSES_PER_PACKET = 2
 _POSITION_ITEM = struct.Struct("<B3h")
@@ -56,6 +58,17 @@ def external_pose_packet(x: float, y: float, z: float, quaternion: Sequence[floa
     compress_quaternion(q)   # rejects a zero quaternion like the packed form does
     return CRTPPacket(PORT_LOCALIZATION, CH_GENERIC,
                       struct.pack("<B7f", TYPE_EXTERNAL_POSE, finite("x", x), finite("y", y), finite("z", z), *q))
+
+
+def packed_position(position: Sequence[float]) -> Tuple[float, float, float]:
+    """``position`` (x, y, z in m) as floats when a packed item can carry it, else CommandValueError
+    naming the coordinate: NaN, infinity and anything beyond +-PACKED_RANGE_M do not fit. A stream
+    checks each pose with this before it joins a frame, so one bad pose never sinks the others' packets."""
+    if len(position) != 3:
+        raise CommandValueError("a position has 3 coordinates (x, y, z), got %d" % len(position))
+    for axis, value in zip("xyz", position):
+        milli_int16(axis, value)
+    return (float(position[0]), float(position[1]), float(position[2]))
 
 
 def _chunks(items: Sequence, size: int) -> List[Sequence]:

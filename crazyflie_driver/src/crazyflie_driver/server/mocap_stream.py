@@ -7,6 +7,14 @@ arrived since its last burst, two poses per packet (or four positions), in one t
 the stream runs at the motion-capture rate with one radio turn per frame and radio. A pose whose
 orientation is missing or not a unit quaternion goes out as a position only.
 
+A pose the packed format cannot carry (NaN, infinity, a coordinate beyond +-32.767 m: a tracker's
+outlier or ghost) is refused on its own: the other Crazyflies of its radio get their poses as usual,
+the refused one keeps its last good pose pending, and the log names the Crazyflie and the value (the
+first refusal at once, then at most one line per ``REFUSAL_LOG_PERIOD_S`` with the count). Dropping
+beats clamping: a clamped pose is a wrong position the estimator would trust. ``on_pose`` reports
+a pose only once its burst went out, so a Crazyflie whose poses are all refused (or whose radio
+fails) goes stale for the swarm watch and ``/diagnostics`` instead of looking fresh.
+
 The first pose of each Crazyflie is also reported once (``on_first_fix``; again after ``refix``, when
 writing it failed), for the estimator's initial position (``kalman.initialX/Y/Z`` +
 ``kalman.resetEstimation``, as Crazyswarm does); that runs in its own thread so slow parameter
@@ -21,6 +29,9 @@ import threading
 import time
 from typing import Callable, Dict, Hashable, List, Mapping, Optional, Sequence, Tuple
 
+from crazyflie_driver.errors import CommandValueError
+from crazyflie_driver.protocol.localization import packed_position
+
 LOG = logging.getLogger("crazyflie_driver.server.mocap")
 
 Position = Tuple[float, float, float]
@@ -28,6 +39,8 @@ Quaternion = Tuple[float, float, float, float]
 #: How long the sender waits for the rest of a frame after its first pose (s).
 DEFAULT_GATHER_S = 0.002
 LATENCY_SAMPLES = 2000          # kept for the median / p99 (the newest ones)
+#: A Crazyflie's refused poses are logged at most once in this many seconds (s; its first one at once).
+REFUSAL_LOG_PERIOD_S = 5.0
 
 
 def usable_quaternion(q: Optional[Sequence[float]]) -> Optional[Quaternion]:
@@ -45,7 +58,8 @@ class MocapStream:
     (x, y, z)); ``uris``: the URI of each Crazyflie name the poses come under; ``radio_of(uri)``: the
     key of the radio that reaches it (one sender thread each; default: one for all); ``frame_periods``:
     the shortest time between two bursts of a radio (s, by radio key; default none: every frame);
-    ``clock`` and ``sleep`` time the poses and pace the bursts."""
+    ``clock`` and ``sleep`` time the poses and pace the bursts; ``on_pose(name, received)`` is called
+    for each pose once its burst went out (``received``: when the pose came in)."""
 
     def __init__(self, uris: Mapping[str, str], send: Callable[[Dict[str, tuple], bool], int],
                  position_only: bool = False, on_first_fix: Optional[Callable[[str, Position], None]] = None,
@@ -78,23 +92,29 @@ class MocapStream:
         self.poses_sent = 0
         self.send_errors = 0
         self.latencies: List[float] = []        # s from a pose's arrival to its burst leaving
+        self.sent_by_name: Dict[str, int] = {name: 0 for name in self.uris}      # poses that went out
+        self.refused: Dict[str, int] = {name: 0 for name in self.uris}           # poses refused
+        self.last_refusal: Dict[str, str] = {}                                  # why, the newest one
+        self._refusal_logged: Dict[str, Tuple[float, int]] = {}                 # when, count then
 
     # -- input (any thread) ---------------------------------------------------------------------
     def pose(self, name: str, position: Sequence[float], orientation: Optional[Sequence[float]] = None,
              received: Optional[float] = None) -> bool:
         """A new pose of ``name`` (m, world frame); False when the name is not in the swarm or the
-        position is not finite (dropped)."""
-        if name not in self.uris or len(position) != 3 or not all(math.isfinite(c) for c in position):
+        packed format cannot carry the position (refused and logged; the last good pose stays pending)."""
+        if name not in self.uris:
+            return False
+        try:
+            p = packed_position(position)
+        except CommandValueError as e:
+            self._refuse(name, str(e))
             return False
         now = self._clock() if received is None else received
-        p = (float(position[0]), float(position[1]), float(position[2]))
         with self._cond:
             self._pending[self._radio[name]][name] = (now, p, usable_quaternion(orientation))
             self._cond.notify_all()
             first = name not in self._fixed
             self._fixed.add(name)
-        if self._on_pose is not None:
-            self._on_pose(name, now)
         if first:
             self._fixes.put((name, p))
         return True
@@ -113,6 +133,14 @@ class MocapStream:
         """The poses not sent yet, of every radio (tests send them with ``send_frame``)."""
         with self._cond:
             return {name: item for frame in self._pending.values() for name, item in frame.items()}
+
+    def take_pending(self) -> Dict[str, Tuple[float, Position, Optional[Quaternion]]]:
+        """``pending()``, taken: the next frame starts empty (tests drive bursts with this and ``send_frame``)."""
+        with self._cond:
+            frame = {name: item for frame in self._pending.values() for name, item in frame.items()}
+            for radio in self._pending:
+                self._pending[radio] = {}
+            return frame
 
     def start(self) -> "MocapStream":
         targets = [(lambda radio=radio: self._run(radio), "mocap stream %s" % (radio,)) for radio in self._pending]
@@ -148,9 +176,21 @@ class MocapStream:
                 self.send_frame(frame)
 
     def send_frame(self, frame: Mapping[str, Tuple[float, Position, Optional[Quaternion]]]) -> int:
-        """Send one frame now (the sender thread calls this; tests may too). Returns USB transfers."""
+        """Send one frame now (the sender thread calls this; tests may too). Returns USB transfers.
+        A pose the packed format cannot carry is left out (and logged), never the whole frame."""
         poses: Dict[str, tuple] = {}
         positions: Dict[str, tuple] = {}
+        good = {}
+        for name, item in frame.items():
+            try:
+                packed_position(item[1])
+            except CommandValueError as e:
+                self._refuse(name, str(e))
+                continue
+            good[name] = item
+        frame = good
+        if not frame:
+            return 0
         for name, (_, p, q) in frame.items():
             if self.position_only or q is None:
                 positions[self.uris[name]] = p
@@ -172,10 +212,30 @@ class MocapStream:
             self.frames += 1
             self.transfers += taken
             self.poses_sent += len(frame)
+            for name in frame:
+                self.sent_by_name[name] += 1
             self.latencies.extend(sent_at - t for t, _, _ in frame.values())
             if len(self.latencies) > LATENCY_SAMPLES:
                 del self.latencies[:-LATENCY_SAMPLES]
+        if self._on_pose is not None:
+            for name, (received, _, _) in frame.items():
+                self._on_pose(name, received)
         return taken
+
+    def _refuse(self, name: str, why: str) -> None:
+        """Count and log a pose of ``name`` the packed format cannot carry (throttled per Crazyflie)."""
+        now = self._clock()
+        with self._stats_lock:
+            self.refused[name] = count = self.refused.get(name, 0) + 1
+            self.last_refusal[name] = why
+            logged_at, logged_count = self._refusal_logged.get(name, (-math.inf, 0))
+            due = now - logged_at >= REFUSAL_LOG_PERIOD_S
+            if due:
+                self._refusal_logged[name] = (now, count)
+        if due:
+            LOG.error("motion capture: %s: pose refused, not sent (%s); %d refused in all%s; its radio's other "
+                      "Crazyflies get theirs", name, why, count,
+                      "" if logged_count == 0 else ", %d since the last report" % (count - logged_count))
 
     def _run_fixes(self) -> None:
         while True:

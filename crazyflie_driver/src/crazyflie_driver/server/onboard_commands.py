@@ -50,7 +50,8 @@ class OnboardCommands:
     """The HEAD API for one Crazyflie. ``cf`` is a connected ``Crazyflie`` (its ``high_level``,
     ``link``, ``protocol_version``); ``stream(packet) -> bool`` hands a setpoint to the worker
     (False after emergency); ``emergency_active()`` tells whether the worker is in emergency;
-    ``on_pose()``, if given, is called for each external position/pose sent (for ``/diagnostics``);
+    ``on_pose()``, if given, is called for each external position/pose the Crazyflie acknowledged (for
+    ``/diagnostics``);
     ``low_level_sent()``, if given, counts the low-level setpoints the worker has sent (any source):
     one sent since the last notify-setpoints-stop holds the firmware's priority again; ``group_mask``:
     the Crazyflie's groups as last read (``hlCommander.groupmask``; 0 after a restart)."""
@@ -102,16 +103,20 @@ class OnboardCommands:
     def external_position(self, x: float, y: float, z: float) -> bool:
         if self._emergency_active():
             return False
-        if self._on_pose is not None:
-            self._on_pose()
-        return self.cf.link.send(external_position_packet(x, y, z))
+        return self._pose_out(external_position_packet(x, y, z))
 
     def external_pose(self, x: float, y: float, z: float, quaternion: Quaternion) -> bool:
         if self._emergency_active():
             return False
-        if self._on_pose is not None:
+        return self._pose_out(external_pose_packet(x, y, z, quaternion))
+
+    def _pose_out(self, packet: CRTPPacket) -> bool:
+        """Send a built pose packet; it counts for ``/diagnostics`` only once the Crazyflie took it (a pose
+        refused by the builder or lost on the radio must not make the pose look fresh)."""
+        taken = self.cf.link.send(packet)
+        if taken and self._on_pose is not None:
             self._on_pose()
-        return self.cf.link.send(external_pose_packet(x, y, z, quaternion))
+        return taken
 
     # -- high-level services --------------------------------------------------------------------
     def _refuse(self, what: str, group_mask: int) -> None:

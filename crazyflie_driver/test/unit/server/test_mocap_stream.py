@@ -139,3 +139,64 @@ def test_a_radio_s_bursts_keep_the_period_its_budget_allows_and_carry_the_newest
     times = [t for t, _ in bursts]
     assert times[0] == 0.001 and [round(b - a, 9) for a, b in zip(times, times[1:])] == [0.05] * 5
     assert [round(z, 3) for _, z in bursts] == [round(0.1 * k + 0.05, 3) for k in range(6)]
+
+
+def wire_ids(medium):
+    """Crazyflie ids of every packed pose on the air, in order (2 poses of 11 bytes per packet)."""
+    return [data[2 + 11 * k] for _, data in sent(medium) for k in range((len(data) - 2) // 11)]
+
+
+def test_one_out_of_range_pose_never_costs_its_radio_neighbours_their_poses(caplog):
+    """cf1 reports a ghost 100 m away every frame (beyond the packed format's +-32.767 m): cf2 and cf3 on
+    the same radio still get a pose in every burst, cf1's ghost never goes out, the swarm watch sees only
+    the poses that went out (cf1 goes stale and is landed), and the log names cf1 and the value once."""
+    from crazyflie_driver.server.swarm_watch import SwarmWatch
+
+    bc, medium = rig()
+    now = [0.0]
+    watch = SwarmWatch(URIS, stale_after=0.2, hold=0.5)
+    stream = MocapStream(URIS, bc.send_poses, clock=lambda: now[0], on_pose=watch.pose_seen)
+    stream.pose("cf1", (0.0, 0.0, 0.0), Q)          # one good pose first
+    stream.send_frame(stream.take_pending())
+    events = []
+    frames = 100                                     # 1 s at 100 Hz
+    for k in range(1, frames + 1):
+        now[0] = 0.01 * k
+        assert not stream.pose("cf1", (0.3, -0.2, 100.0), Q)
+        assert stream.pose("cf2", (0.5, 0.0, 0.0), Q) and stream.pose("cf3", (1.0, 0.0, 0.0), Q)
+        stream.send_frame(stream.take_pending())
+        events += [(e.name, e.kind) for e in watch.check(now[0])]
+    ids = wire_ids(medium)
+    assert ids.count(2) == frames and ids.count(3) == frames and ids.count(1) == 1
+    assert stream.sent_by_name == {"cf1": 1, "cf2": frames, "cf3": frames, "cf4": 0}
+    assert stream.refused["cf1"] == frames and "z = 100.0" in stream.last_refusal["cf1"]
+    assert events == [("cf1", "stale"), ("cf1", "land")]
+    assert watch.state("cf2", now[0]) == "ok" and watch.state("cf1", now[0]) == "landing"
+    lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+    assert len(lines) == 1 and "cf1" in lines[0] and "100.0" in lines[0]
+
+
+def test_a_bad_pose_inside_a_frame_is_left_out_and_nan_or_inf_are_refused_by_name(caplog):
+    bc, medium = rig()
+    stream = MocapStream(URIS, bc.send_poses, clock=lambda: 0.0)
+    frame = {"cf1": (0.0, (40.0, 0.0, 0.0), Q), "cf2": (0.0, (0.1, 0.0, 0.0), Q),
+             "cf3": (0.0, (-0.1, 0.0, 0.0), None)}
+    assert stream.send_frame(frame) == 2            # cf2's pose and cf3's position, cf1 left out
+    assert wire_ids(medium)[:1] == [2] and len(sent(medium)) == 2
+    for bad in ((math.nan, 0.0, 0.0), (0.0, math.inf, 0.0), (0.0, 0.0, -1e300)):
+        assert not stream.pose("cf4", bad, Q)
+    assert stream.refused == {"cf1": 1, "cf2": 0, "cf3": 0, "cf4": 3}
+    lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+    assert len(lines) == 2 and "cf1" in lines[0] and "x = 40.0" in lines[0] and "cf4" in lines[1]
+
+
+def test_refusals_are_logged_once_per_period_and_crazyflie_with_their_count(caplog):
+    bc, _ = rig()
+    now = [0.0]
+    stream = MocapStream(URIS, bc.send_poses, clock=lambda: now[0])
+    for k in range(1200):                           # 12 s of a 100 Hz ghost
+        now[0] = 0.01 * k
+        stream.pose("cf2", (0.0, 99.0, 0.0), Q)
+    lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+    assert len(lines) == 3                          # at 0 s, 5 s and 10 s
+    assert "500 since the last report" in lines[1] and "1001 refused in all" in lines[2]

@@ -89,6 +89,19 @@ def test_streaming_topics_become_port_7_packets_for_the_worker():
     assert len(streamed) == 4
 
 
+def test_a_pose_counts_for_diagnostics_only_once_the_crazyflie_took_it():
+    """A NaN pose (refused by the builder) and a pose the radio lost must not make the pose look fresh."""
+    cf = Crazyflie()
+    counted = []
+    commands = OnboardCommands(cf, lambda packet: True, lambda: False, "cf1", on_pose=lambda: counted.append(1))
+    assert commands.external_position(1.0, 2.0, 0.5)
+    with pytest.raises(CommandValueError):
+        commands.external_pose(math.nan, 2.0, 0.5, (0, 0, 0, 1))
+    cf.link.send = lambda packet: False          # not acknowledged: lost on the radio
+    assert commands.external_position(1.0, 2.0, 0.5) is False
+    assert len(counted) == 1
+
+
 def test_external_pose_goes_out_at_once_and_not_after_emergency():
     commands, cf, _, emergency = make()
     assert commands.external_pose(1.0, 2.0, 0.5, (0, 0, 0, 1))

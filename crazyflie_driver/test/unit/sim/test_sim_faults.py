@@ -64,11 +64,17 @@ def test_words_become_one_control_operation(words, op, args):
     ("battery cf1 7", "within 2.5..4.3 V"),
     ("battery cf1 full", "volts"),
     ("mocap cf1", "say what goes wrong"),
-    ("mocap cf1 --noise -1", ">= 0 m"),
-    ("mocap cf1 --noise lots", "--noise must be a number >= 0 m, got 'lots'"),
-    ("mocap cf1 --noise nan", ">= 0 m"),
-    ("mocap cf1 --rate 0", "> 0 Hz"),
-    ("mocap cf1 --rate fast", "--rate must be a number > 0 Hz, got 'fast'"),
+    ("mocap cf1 --noise -1", "from 0 to 100 m"),
+    ("mocap cf1 --noise lots", "--noise must be a number from 0 to 100 m, got 'lots'"),
+    ("mocap cf1 --noise nan", "from 0 to 100 m"),
+    ("mocap cf1 --noise inf", "--noise must be a number from 0 to 100 m, got 'inf'"),
+    ("mocap cf1 --noise 1e300", "from 0 to 100 m"),
+    ("mocap cf1 --latency 1e300", "--latency '1e300' is over 1 s"),
+    ("mocap cf1 --latency 2s", "is over 1 s"),
+    ("mocap cf1 --latency inf", "duration >= 0"),
+    ("mocap cf1 --rate 0", ">= 0.1 Hz"),
+    ("mocap cf1 --rate 1e-300", ">= 0.1 Hz"),
+    ("mocap cf1 --rate fast", "--rate must be a number >= 0.1 Hz, got 'fast'"),
     ("mocap cf1 --freeze -2", ">= 0"),
     ("unplug 0 'unclosed", "cannot read"),
 ])
@@ -165,6 +171,7 @@ def test_battery_drained_to_a_voltage_reads_it_and_the_firmware_reacts(served):
     ("set_battery", {"uri": "cf1", "voltage": 4.5}, "a battery reads"),
     ("set_battery", {"uri": "cf1", "charge": 2}, "'charge' must be a number in [0, 1]"),
     ("set_mocap_faults", {"uri": "cf1", "freeze_s": 1}, "no motion-capture system"),
+    ("set_mocap_faults", {"uri": "cf1", "noise_m": 1e300}, "no motion-capture system"),
     ("explode", {}, "unknown control operation 'explode'"),
 ])
 def test_bad_arguments_get_a_clear_error_and_change_nothing(served, op, args, says):
@@ -223,3 +230,56 @@ def test_mocap_hide_rate_latency_noise_dropout_per_body(served):
     apply(medium, "mocap cf2 --freeze")
     assert dict(map(tuple, apply(medium, "list")))["cf2"] == "mocap frozen for good"
     assert server.mocap.body_faults(1e9)["cf2"].freeze_until == math.inf
+
+
+@pytest.mark.parametrize("args, says", [
+    ({"noise_m": float("inf")}, "'noise_m' must be a number in [0, 100]"),
+    ({"noise_m": 1e300}, "'noise_m' must be a number in [0, 100]"),
+    ({"latency_s": 1e300}, "'latency_s' must be a number in [0, 1]"),
+    ({"rate_hz": 1e-300}, "'rate_hz' must be a number in [0.1, inf]"),
+])
+def test_the_world_refuses_mocap_faults_beyond_what_a_tracking_system_does(served, args, says):
+    """The bounds hold for any client of the world server, not only for the fault tool's words."""
+    world, server, medium = served
+    server.mocap = MocapModel(world, rate=100.0, latency=0.0, seed=2).attach()
+    with pytest.raises(CrazyflieError) as e:
+        medium.control("set_mocap_faults", uri="cf1", **args)
+    assert says in str(e.value)
+    assert medium.control("faults") == []
+    with pytest.raises(ValueError, match="finite"):
+        server.mocap.set_body_faults("cf1", 0.0, latency=math.inf)
+
+
+def delivered(model):
+    """Frames delivered since the last call, by body: [(stamp, delivered)]."""
+    out = {}
+    for f in model.pop_frames():
+        out.setdefault(f.name, []).append((f.stamp, f.delivered))
+    return out
+
+
+@pytest.mark.parametrize("ending", ["clear", "clear cf1", "mocap cf1 --clear", "mocap cf1 --latency 20ms"])
+def test_a_cleared_or_changed_latency_fault_never_stalls_any_body(served, ending):
+    """cf1 at 1 s of extra latency, then its fault ends (or shrinks): cf2's frames keep coming every
+    10 ms with the system's latency, and cf1's own frames stay in capture order (the ones in flight
+    that newer frames overtake are dropped, never delivered late)."""
+    world, server, medium = served
+    server.mocap = MocapModel(world, rate=100.0, position_noise=0.0, latency=0.008, seed=2).attach()
+    apply(medium, "mocap cf1 --latency 1")
+    world.step(1500)                                  # 1.5 s: cf1's pipeline holds 1 s of frames
+    before = delivered(server.mocap)
+    assert all(d - s == pytest.approx(1.008, abs=0.011) for s, d in before["cf1"])
+    apply(medium, ending)
+    ended = float(world.time)
+    got = {}
+    for _ in range(50):                               # 0.5 s, tick by tick of the capture period
+        world.step(10)
+        for name, frames in delivered(server.mocap).items():
+            got.setdefault(name, []).extend(frames)
+    cf2 = [s for s, _ in got["cf2"]]
+    assert len(cf2) >= 49 and max(np.diff(cf2)) == pytest.approx(0.01)
+    assert all(d - s < 0.02 for s, d in got["cf2"])
+    cf1 = [s for s, _ in before["cf1"] + got["cf1"]]
+    assert all(b > a for a, b in zip(cf1, cf1[1:]))   # in capture order: nothing old arrives late
+    assert max(cf1) > ended + 0.4                      # and its fresh frames come at once
+    assert server.mocap.frames_superseded > 0

@@ -20,6 +20,15 @@ import shlex
 from typing import Any, Dict, List, Mapping, NoReturn, Optional, Sequence, Tuple, Union
 
 MAX_RADIO_LATENCY_S = 1.0        # more than this is not a radio any more: a unit mistake
+#: Motion-capture faults of one body (``mocap VEHICLE ...``), bounded to what a tracking system can do:
+#: position noise σ (m): 100 m makes nearly every pose a far ghost (beyond the packed format's +-32.767 m),
+#: more only overflows;
+MAX_MOCAP_NOISE_M = 100.0
+#: extra latency (s): real systems deliver in milliseconds; 1 s is five times the swarm's stale threshold,
+#: so every reaction to a late pose can be exercised; more is a unit mistake;
+MAX_MOCAP_LATENCY_S = 1.0
+#: lowest rate (Hz): one frame every 10 s; slower is a hidden body (``--hide`` says so).
+MIN_MOCAP_RATE_HZ = 0.1
 BATTERY_VOLTS = (2.5, 4.3)       # what a 1S cell can read; anything outside is a mistake
 
 
@@ -57,14 +66,14 @@ def duration(what: str, text: Union[str, float]) -> float:
     return value
 
 
-def _number(flag: str, text: Union[str, float], unit: str, minimum: float, inclusive: bool = True) -> float:
-    """``text`` as a number of ``unit`` from ``minimum`` on (just above it with ``inclusive=False``)."""
-    bound = "%s %g %s" % (">=" if inclusive else ">", minimum, unit)
+def _number(flag: str, text: Union[str, float], unit: str, minimum: float, maximum: float) -> float:
+    """``text`` as a number of ``unit`` within ``minimum``..``maximum``."""
+    bound = ">= %g %s" % (minimum, unit) if maximum == math.inf else "from %g to %g %s" % (minimum, maximum, unit)
     try:
         value = float(text)
     except ValueError:
         raise FaultError("%s must be a number %s, got %r" % (flag, bound, text)) from None
-    if not (value >= minimum if inclusive else value > minimum):
+    if not minimum <= value <= maximum:
         raise FaultError("%s must be a number %s, got %r" % (flag, bound, text))
     return value
 
@@ -282,11 +291,14 @@ def _mocap_args(a: argparse.Namespace) -> Dict[str, Any]:
     if a.hide is not None:
         args["hide_s"] = _span("--hide", a.hide)
     if a.noise is not None:
-        args["noise_m"] = _number("--noise", a.noise, "m", 0.0)
+        args["noise_m"] = _number("--noise", a.noise, "m", 0.0, MAX_MOCAP_NOISE_M)
     if a.latency is not None:
         args["latency_s"] = duration("--latency", a.latency)
+        if args["latency_s"] > MAX_MOCAP_LATENCY_S:
+            raise FaultError("--latency %r is over %g s (motion capture delivers in milliseconds): give a unit, "
+                             "e.g. %sms" % (a.latency, MAX_MOCAP_LATENCY_S, a.latency))
     if a.rate is not None:
-        args["rate_hz"] = _number("--rate", a.rate, "Hz", 0.0, inclusive=False)
+        args["rate_hz"] = _number("--rate", a.rate, "Hz", MIN_MOCAP_RATE_HZ, math.inf)
     if a.dropout is not None:
         args["dropout"] = fraction("--dropout", a.dropout)
     if len(args) == 1:

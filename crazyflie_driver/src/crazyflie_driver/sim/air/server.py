@@ -24,7 +24,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air import server_framing as framing
-from crazyflie_driver.sim.air.faults import MAX_RADIO_LATENCY_S, ControlArgs, FaultError
+from crazyflie_driver.sim.air.faults import (MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M, MAX_RADIO_LATENCY_S,
+                                             MIN_MOCAP_RATE_HZ, ControlArgs, FaultError)
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
 from crazyflie_driver.sim.world import battery as battery_model
@@ -301,8 +302,9 @@ class WorldServer:
             mocap.clear_body_faults(name)
         now = float(self.world.time)
         try:
-            f = mocap.set_body_faults(name, now, noise=a.number("noise_m", None, 0.0),
-                                      latency=a.number("latency_s", None, 0.0), rate=a.number("rate_hz", None, 0.0),
+            f = mocap.set_body_faults(name, now, noise=a.number("noise_m", None, 0.0, MAX_MOCAP_NOISE_M),
+                                      latency=a.number("latency_s", None, 0.0, MAX_MOCAP_LATENCY_S),
+                                      rate=a.number("rate_hz", None, MIN_MOCAP_RATE_HZ),
                                       dropout=a.number("dropout", None, 0.0, 1.0), freeze=a.span("freeze_s"),
                                       hide=a.span("hide_s"))
         except ValueError as e:

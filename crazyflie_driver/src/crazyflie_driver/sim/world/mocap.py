@@ -11,6 +11,11 @@ position noise, extra latency, a lower rate, a dropout probability, a frozen pos
 with fresh stamps but the pose stays where it was, as a tracker that lost its markers and repeats the
 last solution) and hiding, the last two for a span of world time or for good. A body's extra latency
 is delivered with the next capture or delivery tick, so it rounds up to the capture period.
+
+Each body's frames wait in a queue of their own, so one body's latency never holds back another's
+frames, and a latency that is lowered or cleared takes effect with the next capture: the frames
+still in flight that a newer frame of the same body would overtake are dropped (``frames_superseded``),
+so every body's stream stays in capture order.
 """
 from __future__ import annotations
 
@@ -79,10 +84,11 @@ class MocapModel:
                  seed: Optional[int] = None, history: int = 1000) -> None:
         if not rate > 0:
             raise ValueError("mocap rate must be > 0 Hz, got %r" % (rate,))
-        if position_noise < 0 or orientation_noise < 0:
-            raise ValueError("mocap noise must be >= 0")
-        if latency < 0:
-            raise ValueError("mocap latency must be >= 0 s, got %r" % (latency,))
+        if not (0 <= position_noise < math.inf and 0 <= orientation_noise < math.inf):
+            raise ValueError("mocap noise must be a finite number >= 0, got %r and %r" % (position_noise,
+                                                                                       orientation_noise))
+        if not 0 <= latency < math.inf:
+            raise ValueError("mocap latency must be a finite number >= 0 s, got %r" % (latency,))
         if not 0.0 <= dropout <= 1.0:
             raise ValueError("mocap dropout must be a probability 0..1, got %r" % (dropout,))
         self.world = world
@@ -93,7 +99,7 @@ class MocapModel:
         self.dropout = float(dropout)
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
-        self._pending: Deque[MocapFrame] = deque()
+        self._pending: Dict[str, Deque[MocapFrame]] = {}      # per body, in capture and delivery order
         self._ready: Deque[MocapFrame] = deque(maxlen=history)
         self._latest: Dict[str, MocapFrame] = {}
         self._listeners: List[Callable[[List[MocapFrame]], None]] = []
@@ -103,9 +109,9 @@ class MocapModel:
         self._faults: Dict[str, BodyFaults] = {}      # replaced whole: the stepping thread reads it
         self._frozen: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}   # pose a frozen body keeps reporting
         self._next_body_sample: Dict[str, float] = {}                 # bodies with a lower rate
-        self._mixed_latency = False
         self.frames_captured = 0
         self.frames_dropped = 0
+        self.frames_superseded = 0      # in flight when a lower latency let a newer frame overtake them
 
     # --- driving -----------------------------------------------------------------------------
     def attach(self) -> "MocapModel":
@@ -157,8 +163,19 @@ class MocapModel:
         with self._lock:
             self.frames_captured += len(frames)
             self.frames_dropped += int(n - seen.sum())
-            self._pending.extend(frames)
+            for f in frames:
+                self._queue(f)
         return frames
+
+    def _queue(self, frame: MocapFrame) -> None:
+        """Into its body's queue (lock held); frames it would overtake (its latency fell) are dropped."""
+        q = self._pending.get(frame.name)
+        if q is None:
+            q = self._pending[frame.name] = deque()
+        while q and q[-1].delivered > frame.delivered:
+            q.pop()
+            self.frames_superseded += 1
+        q.append(frame)
 
     def _capture_with_faults(self, now: float, names: List[str], truth: np.ndarray, pos: np.ndarray,
                              quat: np.ndarray, seen: np.ndarray, hidden,
@@ -205,12 +222,12 @@ class MocapModel:
             raise KeyError("no vehicle called %r for motion capture to see" % (name,))
         f = self._faults.get(name, _NO_FAULTS)
         if noise is not None:
-            if not noise >= 0:
-                raise ValueError("mocap noise must be >= 0 m, got %r" % (noise,))
+            if not 0 <= noise < math.inf:
+                raise ValueError("mocap noise must be a finite number >= 0 m, got %r" % (noise,))
             f = replace(f, noise=float(noise))
         if latency is not None:
-            if not latency >= 0:
-                raise ValueError("mocap latency must be >= 0 s, got %r" % (latency,))
+            if not 0 <= latency < math.inf:
+                raise ValueError("mocap latency must be a finite number >= 0 s, got %r" % (latency,))
             f = replace(f, latency=float(latency))
         if rate is not None:
             if not 0 < rate <= self.rate:
@@ -233,7 +250,6 @@ class MocapModel:
         """Forget the faults of body ``name`` (every body when None); hiding by ``set_visible`` stays."""
         if name is None:
             self._faults = {}
-            self._mixed_latency = False
         else:
             self._set_faults(name, _NO_FAULTS)
 
@@ -251,21 +267,18 @@ class MocapModel:
             self._frozen.pop(name, None)
         if f.rate is None:
             self._next_body_sample.pop(name, None)
-        self._mixed_latency = self._mixed_latency or f.latency > 0
         self._faults = faults                 # replaced whole: the stepping thread reads it
 
     def deliver(self, now: float) -> List[MocapFrame]:
         """Release the frames whose latency has passed; listeners get them as one list."""
         out: List[MocapFrame] = []
         with self._lock:
-            if self._mixed_latency:         # bodies with latencies of their own: frames out of order
-                due = [f for f in self._pending if f.delivered <= now + 1e-9]
-                if due:
-                    self._pending = deque(f for f in self._pending if f.delivered > now + 1e-9)
-            else:
-                due = []
-                while self._pending and self._pending[0].delivered <= now + 1e-9:
-                    due.append(self._pending.popleft())
+            due = []
+            for q in self._pending.values():        # each body on its own: none waits behind another
+                while q and q[0].delivered <= now + 1e-9:
+                    due.append(q.popleft())
+            if len(due) > 1:
+                due.sort(key=lambda f: f.stamp)     # capture order across bodies, as one system delivers
             for f in due:
                 out.append(f)
                 self._ready.append(f)
