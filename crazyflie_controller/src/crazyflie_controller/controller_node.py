@@ -267,7 +267,8 @@ class ControllerNode:
             return
         self._no_pose_said = now
         rospy.logwarn("%s: still no pose of %s in %s after %.0f s, take-off is refused; tf knows %s%s. "
-                      "Is the motion capture running, and does the frame argument name the tracked body?",
+                      "Is the motion capture running, and does the frame argument name the tracked body? "
+                      "(rosrun crazyflie_demo view_frames prints the tf tree)",
                       node_label(), self.frame, self.world_frame, now - self._no_pose_since, self._known_frames(),
                       " (tf: %s)" % self._last_lookup_error.strip() if self._last_lookup_error else "")
 
