@@ -5,7 +5,11 @@ its stamp is the pose's age, so a motion-capture stream that stops is noticed (t
 the latest transform whatever its age). The state and the safety status ("Automatic: ok",
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).
 The server's ``status`` topic (its ``emergency`` value) puts it in "Idle: emergency stop ..." until the
-Crazyflie is added again; idle without a pose, it says so in the log every few seconds.
+Crazyflie is added again. At start-up the motion capture's first pose may come after the controller's
+first lookup: that is not worth a warning, so until the first pose it waits in silence and says so
+only if none came within NO_POSE_REPEAT_S (then again every NO_POSE_REPEAT_S, while idle without a
+pose); a pose lost after that is said at once. Every log line starts with the node's name
+(``crazyflie1/controller: ...``), so the lines of several controllers in one launch can be told apart.
 
 By default the command is computed by a free-running timer at ``~frequency`` (the chapter's 50 Hz),
 from the newest pose in the tf buffer: a motion-capture sample then waits up to one period before
@@ -117,6 +121,11 @@ def emergency_of(values) -> Optional[bool]:
     return None
 
 
+def node_label() -> str:
+    """The node's name without the leading '/' (``crazyflie1/controller``): which Crazyflie a line is about."""
+    return rospy.get_name().lstrip("/") or "controller"
+
+
 def newest_transform_of(transforms: Sequence[Any], frame: str) -> Optional[Any]:
     """The last transform whose child is ``frame`` (leading '/' ignored), should a tf message carry several."""
     found = None
@@ -143,6 +152,7 @@ class ControllerNode:
         self._lock = threading.Lock()
         self._status = ""
         self._last_lookup_error = ""
+        self._had_pose = False                   # a pose has been seen: a lookup that fails is news
         self._no_pose_since: Optional[float] = None
         self._no_pose_said = 0.0
         self._pose_stamp = rospy.Time()          # stamp of the newest pose the controller has seen
@@ -166,18 +176,19 @@ class ControllerNode:
 
     @staticmethod
     def _log(level: str, message: str) -> None:
-        {"info": rospy.loginfo, "warn": rospy.logwarn}.get(level, rospy.logerr)("controller: %s", message)
+        {"info": rospy.loginfo, "warn": rospy.logwarn}.get(level, rospy.logerr)("%s: %s", node_label(), message)
 
     def _lookup_pose(self) -> Optional[PoseSample]:
         try:
             tf = self.tf_buffer.lookup_transform(self.world_frame, self.frame, rospy.Time(0))
         except (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException) as e:
             text = str(e)
-            if text != self._last_lookup_error:
-                rospy.logwarn("controller: no pose %s -> %s: %s", self.world_frame, self.frame, text)
-                self._last_lookup_error = text
+            if text != self._last_lookup_error and self._had_pose:
+                rospy.logwarn("%s: no pose %s -> %s: %s", node_label(), self.world_frame, self.frame, text)
+            self._last_lookup_error = text
             return None
         self._last_lookup_error = ""
+        self._had_pose = True
         return self._pose_of(tf)
 
     @staticmethod
@@ -255,9 +266,11 @@ class ControllerNode:
         if now - self._no_pose_said < NO_POSE_REPEAT_S:
             return
         self._no_pose_said = now
-        rospy.logwarn("controller: still no pose of %s in %s after %.0f s, take-off is refused; tf knows %s. "
-                      "Is the motion capture running, and does the frame argument name the tracked body?",
-                      self.frame, self.world_frame, now - self._no_pose_since, self._known_frames())
+        rospy.logwarn("%s: still no pose of %s in %s after %.0f s, take-off is refused; tf knows %s%s. "
+                      "Is the motion capture running, and does the frame argument name the tracked body? "
+                      "(rosrun crazyflie_demo view_frames prints the tf tree)",
+                      node_label(), self.frame, self.world_frame, now - self._no_pose_since, self._known_frames(),
+                      " (tf: %s)" % self._last_lookup_error.strip() if self._last_lookup_error else "")
 
     def _known_frames(self) -> str:
         try:
@@ -275,8 +288,8 @@ class ControllerNode:
     def _on_goal(self, msg: PoseStamped) -> None:
         frame = msg.header.frame_id.lstrip("/")
         if frame and frame != self.world_frame.lstrip("/"):
-            rospy.logwarn_throttle(5.0, "controller: goal ignored: frame %r is not the world frame %r"
-                                   % (msg.header.frame_id, self.world_frame))
+            rospy.logwarn_throttle(5.0, "%s: goal ignored: frame %r is not the world frame %r"
+                                   % (node_label(), msg.header.frame_id, self.world_frame))
             return
         p, q = msg.pose.position, msg.pose.orientation
         yaw = yaw_from_quaternion(q.x, q.y, q.z, q.w) if (q.x, q.y, q.z, q.w) != (0, 0, 0, 0) else 0.0
@@ -315,6 +328,6 @@ def main() -> None:
     try:
         ControllerNode(params)
     except ConfigError as e:
-        rospy.logfatal("controller: %s", e)
+        rospy.logfatal("%s: %s", node_label(), e)
         sys.exit(1)
     rospy.spin()

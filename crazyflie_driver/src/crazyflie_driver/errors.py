@@ -22,6 +22,11 @@ class RadioUnplugged(CrazyflieError):
     """The dongle disappeared while in use."""
 
 
+class RadioMediumGone(CrazyflieError, ConnectionError):
+    """What carries a radio's packets went away: the simulated world behind a fake Crazyradio stopped.
+    (A real Crazyradio has no such thing; a pulled dongle is RadioUnplugged.)"""
+
+
 class RadioInUse(RadioAccessDenied):
     """Another program holds the dongle (one program at a time can use a Crazyradio)."""
 

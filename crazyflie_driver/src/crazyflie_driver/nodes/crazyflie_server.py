@@ -550,6 +550,8 @@ class CrazyflieServer:
                 self._land_all(reason)
 
     def _land_all(self, reason: str) -> None:
+        for worker in self.registry.workers():
+            worker.server_exiting()     # a simulated world stopped by the same Ctrl-C may now go first
         self.bring_down(self.registry.workers(), "server shutting down (%s)" % (reason or "shutdown"))
 
     def bring_down(self, workers: List[CrazyflieWorker], why: str) -> None:

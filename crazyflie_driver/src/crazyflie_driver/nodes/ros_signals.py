@@ -7,26 +7,46 @@ connection's lock that its own thread holds: the node hangs, ignores SIGTERM too
 running when roslaunch gives up on it. Here the handler only records the signal and a watcher
 thread runs ``rospy.signal_shutdown``, so the interrupted call finishes first. A second signal
 (roslaunch escalates with SIGTERM after 15 s) exits at once.
+
+Two more guards keep the exit itself prompt:
+
+* rospy raises its shutdown flag part-way through ``signal_shutdown``; a main loop that polls it
+  (``while not rospy.is_shutdown()``) then returns and the interpreter starts to finalise while the
+  watcher is still closing connections and unregistering. Daemon threads stop where they are once
+  finalisation begins, so rospy's shutdown was cut off mid-way with its locks held. At exit the
+  process therefore waits (up to SHUTDOWN_WAIT_S) for that shutdown to end.
+* Whatever still holds the process after that shutdown (a library thread that is not a daemon
+  and waits on a peer, or a lock left held in finalisation) must not hold it until roslaunch's
+  SIGTERM 15 s later: once the shutdown has ended the process has EXIT_GRACE_S to end; past that,
+  ``faulthandler`` prints every thread's stack (where it was held) and ends it with status 1. It
+  runs from a C thread, so it also ends a process stuck in finalisation.
 """
 from __future__ import annotations
 
+import atexit
+import faulthandler
 import os
 import signal
+import sys
 import threading
 from typing import Any
 
 import rospy
 
 HANDLED = (signal.SIGINT, signal.SIGTERM)
+SHUTDOWN_WAIT_S = 10.0      # at exit: wait this long for rospy's shutdown still running in the watcher
+EXIT_GRACE_S = 5.0          # after rospy's shutdown: the process ends within this, or is ended
 
 
 class ShutdownOnSignal:
     """Records the first signal for the watcher thread; exits the process on the second."""
 
-    def __init__(self) -> None:
+    def __init__(self, exit_grace_s: float = EXIT_GRACE_S) -> None:
         self._received = threading.Event()
+        self._finished = threading.Event()
         self._signum = 0
         self._count = 0
+        self.exit_grace_s = exit_grace_s
 
     def handle(self, signum: int, _frame: Any) -> None:
         self._count += 1
@@ -37,7 +57,25 @@ class ShutdownOnSignal:
 
     def watch(self) -> None:
         self._received.wait()
-        rospy.signal_shutdown("signal %d" % self._signum)
+        try:
+            rospy.signal_shutdown("signal %d" % self._signum)
+        finally:
+            self._finished.set()
+            self._end_within_grace()
+
+    def wait_for_shutdown(self) -> None:
+        """At exit (atexit, before rospy's own handler): let a shutdown begun by a signal finish."""
+        if self._received.is_set():
+            self._finished.wait(SHUTDOWN_WAIT_S)
+
+    def _end_within_grace(self) -> None:
+        stream = sys.__stderr__
+        if stream is None or self.exit_grace_s <= 0:
+            return
+        try:
+            faulthandler.dump_traceback_later(self.exit_grace_s, exit=True, file=stream)
+        except (ValueError, OSError, RuntimeError):
+            pass                          # no usable stderr: nothing to arm the timer on
 
 
 def init_node(name: str, **kwargs: Any) -> None:
@@ -46,6 +84,8 @@ def init_node(name: str, **kwargs: Any) -> None:
     for signum in HANDLED:
         signal.signal(signum, shutdown.handle)
     rospy.init_node(name, disable_signals=True, **kwargs)
+    # registered after rospy's (rospy.core registers at import), so it runs first: atexit is LIFO
+    atexit.register(shutdown.wait_for_shutdown)
     threading.Thread(target=shutdown.watch, name="shutdown-on-signal", daemon=True).start()
 
 

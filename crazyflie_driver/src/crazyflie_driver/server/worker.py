@@ -32,7 +32,8 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged, UnknownName
+from crazyflie_driver.errors import (CrazyflieError, LogConfigError, RadioMediumGone, RadioNotFound, RadioUnplugged,
+                                     UnknownName)
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.diagnostics import CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
@@ -158,6 +159,7 @@ class CrazyflieWorker:
         self._pending: Optional[Setpoint] = None
         self._send_lock = threading.Lock()       # a setpoint check-and-send vs. emergency
         self._emergency = False
+        self._server_exiting = False     # set by server_exiting(): a world that stops now is expected
         self._stopping = False
         self._ready = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -623,6 +625,21 @@ class CrazyflieWorker:
             self._cond.notify_all()
         return started
 
+    def server_exiting(self) -> None:
+        """The whole server is shutting down. A simulated world stopped by the same Ctrl-C may go first:
+        from now on that is expected (said at info level, and nothing is left to bring down), while a
+        world that stops while the server runs stays a lost link (an error)."""
+        self._server_exiting = True
+
+    def _medium_gone_at_exit(self, error: RadioMediumGone) -> None:
+        if self.state != WorkerState.RUNNING:
+            return
+        self.state = WorkerState.LOST
+        self._lost_at = self._clock()
+        with self._cond:
+            self._pending = None
+        LOG.info("%s: link closed: %s (it shuts down with the server)", self.uri, error)
+
     def safe_to_close(self) -> bool:
         return self._emergency or self.state != WorkerState.RUNNING or self.safety.finished(self._clock())
 
@@ -649,6 +666,12 @@ class CrazyflieWorker:
                 return acked
         except RadioUnplugged as e:
             self._mark_lost("%s: plug it back in (it is picked up again, nothing to restart)" % e)
+            return None
+        except RadioMediumGone as e:
+            if self._server_exiting:
+                self._medium_gone_at_exit(e)
+            else:
+                self._check_lost(self._clock(), str(e))
             return None
         except CrazyflieError as e:
             self._check_lost(self._clock(), str(e))

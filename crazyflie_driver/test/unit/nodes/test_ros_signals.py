@@ -157,3 +157,76 @@ def test_publishing_while_rospy_closes_the_topics_is_not_an_error(master_uri):
     assert "is_shutdown=False shutting_down=True" in out, out
     assert "plain=publish() to a closed topic" in out, out
     assert "helper=False" in out, out
+
+
+SLOW_SHUTDOWN = r"""
+import time
+import rospy
+from crazyflie_driver.nodes.ros_signals import init_node
+init_node("slow_shutdown_probe", anonymous=True)
+
+def slow_step(reason):
+    # one of rospy's own shutdown steps (they run after is_shutdown() turned true), taking as long
+    # as closing connections and unregistering from a busy master can
+    time.sleep(1.0)
+    print("shutdown finished", flush=True)
+
+rospy.core.add_shutdown_hook(slow_step)
+print("ready", flush=True)
+while not rospy.is_shutdown():      # the demo's loop: it returns as soon as the flag rises
+    time.sleep(0.01)
+print("main returned", flush=True)
+"""
+
+
+def test_the_process_does_not_finalise_in_the_middle_of_rospys_shutdown(master_uri):
+    """A main loop that polls is_shutdown() returns while rospy still closes and unregisters in the
+    signal's thread; the interpreter must not finalise (freezing that thread with its locks) first."""
+    child = start_child(SLOW_SHUTDOWN, master_uri)
+    try:
+        child.send_signal(signal.SIGINT)
+        out, _ = child.communicate(timeout=8.0)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    assert "main returned" in out, out
+    assert "shutdown finished" in out, "rospy's shutdown was cut off by the exit:\n" + out
+    assert child.returncode == 0, out
+
+
+
+HELD_EXIT = r"""
+import threading
+import time
+import rospy
+from crazyflie_driver.nodes.ros_signals import init_node
+init_node("held_exit_probe", anonymous=True)
+print("ready", flush=True)
+rospy.spin()
+
+def waits_for_a_peer():
+    time.sleep(60)       # a library's non-daemon thread waiting for a peer that never answers
+
+threading.Thread(target=waits_for_a_peer, name="waits_for_a_peer").start()
+print("spin returned", flush=True)
+"""
+
+
+def test_a_thread_left_waiting_cannot_hold_the_exit(master_uri):
+    """Once rospy's shutdown has ended the node ends within EXIT_GRACE_S, whatever thread the
+    interpreter would wait for; the stacks printed say where it was held."""
+    from crazyflie_driver.nodes.ros_signals import EXIT_GRACE_S
+    child = start_child(HELD_EXIT, master_uri)
+    try:
+        t0 = time.monotonic()
+        child.send_signal(signal.SIGINT)
+        out, _ = child.communicate(timeout=EXIT_GRACE_S + 10.0)
+        took = time.monotonic() - t0
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    assert "spin returned" in out, out
+    assert took < EXIT_GRACE_S + 3.0, "took %.1f s:\n%s" % (took, out)
+    assert child.returncode == 1 and "waits_for_a_peer" in out, out

@@ -401,3 +401,33 @@ def test_late_log_data_is_measured_from_onboard_stamps_and_said_once(caplog):
         assert len([r for r in caplog.records if "arrives" in r.getMessage()]) == 1
     finally:
         w.stop()
+
+
+def test_a_world_that_stops_is_a_lost_link_unless_the_server_is_exiting(caplog):
+    """A simulated world stopped by the same Ctrl-C as the server goes first: expected, no error. A
+    world that stops while the server runs stays an error."""
+    from crazyflie_driver.errors import RadioMediumGone
+    gone = RadioMediumGone("no simulated world at 127.0.0.1:1: Connection refused")
+    w, cf, rec = started(link_lost_timeout=0.1, lost_retry_period=0.1)
+    try:
+        with caplog.at_level("INFO"):
+            cf.inject = [gone] * 100000
+            assert wait_for(lambda: rec.lost, 1.0)
+        assert w.state == WorkerState.LOST
+        assert any(r.levelname == "ERROR" and "link lost: no simulated world" in r.getMessage()
+                   for r in caplog.records)
+    finally:
+        w.stop()
+    caplog.clear()
+    w, cf, rec = started(link_lost_timeout=0.1, lost_retry_period=0.1)
+    try:
+        with caplog.at_level("INFO"):
+            w.server_exiting()
+            cf.inject = [gone] * 100000
+            assert wait_for(lambda: w.state == WorkerState.LOST, 1.0)
+            time.sleep(0.3)                       # past link_lost_timeout: still no error
+        assert rec.lost == [] and w.safe_to_close()
+        assert [r.getMessage() for r in caplog.records if r.levelno >= 30] == []
+        assert any("link closed: no simulated world" in r.getMessage() for r in caplog.records)
+    finally:
+        w.stop()

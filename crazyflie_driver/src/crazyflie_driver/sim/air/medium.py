@@ -16,7 +16,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CrazyflieError, RadioMediumGone
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.sim.air import server_framing as framing
 
@@ -52,7 +52,7 @@ class RssiModel:
     noise_db: float = 2.0
 
 
-class WorldNotRunning(CrazyflieError, ConnectionError):
+class WorldNotRunning(RadioMediumGone):
     """No world server answers at the configured address."""
 
 
