@@ -20,6 +20,7 @@ from std_msgs.msg import Empty as EmptyMsg
 from std_srvs.srv import Empty
 
 from crazyflie_driver.errors import CommandRejected, CrazyflieError
+from crazyflie_driver.nodes import ros_signals
 from crazyflie_driver.msg import FullState, Position, TrajectoryPolynomialPiece, VelocityWorld
 from crazyflie_driver.protocol.trajectory import Piece
 from crazyflie_driver.srv import (GoTo, Land, NotifySetpointsStop, SetGroupMask, StartTrajectory, Stop, Takeoff,
@@ -43,8 +44,9 @@ CRAZYFLIE_SERVICES = {"takeoff": Takeoff, "land": Land, "stop": Stop, "go_to": G
 
 
 def init_node() -> None:
+    """Crazyswarm's node name; the stack's signal handling (Ctrl-C always ends the script)."""
     if not rospy.core.is_initialized():
-        rospy.init_node(NODE_NAME, anonymous=False, disable_signals=False)
+        ros_signals.init_node(NODE_NAME, anonymous=False)
 
 
 def pieces_msg(pieces: Sequence[Piece]) -> List[TrajectoryPolynomialPiece]:

@@ -36,6 +36,7 @@ HOVER_BOUND_M = 0.05              # hello world's hover height and place
 LANDED_Z_M = 0.08                 # landing target 4-6 cm above the floor, then motors off
 ON_GROUND_Z_M = 0.02
 CLIMB_EXCLUDED_M = 0.05           # below this under 1 m: still climbing (or landing), not on the figure-8's plane
+STREAM_HEIGHT_M = 0.5             # cmd_full_state.py's take-off height and figure-8 plane
 PATH_BOUND_M = 0.10               # every flown point near the planned figure-8, every planned point flown
 
 
@@ -120,14 +121,14 @@ class PycrazyswarmScripts(unittest.TestCase):
         print("hello_world: cf1 hovered at %.3f m (mean of %d samples), landed at %.3f m"
               % (hover[:, 2].mean(), len(hover), cf1[-1][2]))
 
-    def check_figure8(self, code, rec):
-        self.assertEqual(code, 0, "figure8_csv.py failed")
-        for name in NAMES:
+    def check_figure8(self, code, rec, script="figure8_csv.py", names=NAMES, height=HEIGHT_M, min_samples=200):
+        self.assertEqual(code, 0, "%s failed" % script)
+        for name in names:
             flown = rec.positions(name)
-            start = np.array(INITIAL[name]) + [0, 0, HEIGHT_M]
+            start = np.array(INITIAL[name]) + [0, 0, height]
             curve = figure8_curve(start)
-            high = flown[flown[:, 2] > HEIGHT_M - CLIMB_EXCLUDED_M]     # the figure-8, the hovers before and after
-            self.assertGreater(len(high), 200, "%s: too little flight at height" % name)     # 20 s of the 30 s
+            high = flown[flown[:, 2] > height - CLIMB_EXCLUDED_M]     # the figure-8, the hovers before and after
+            self.assertGreater(len(high), min_samples, "%s: too little flight at height" % name)
             off = np.min(np.linalg.norm(high[:, None, :] - curve[None, :, :], axis=2), axis=1)
             missed = np.min(np.linalg.norm(curve[:, None, :] - high[None, :, :], axis=2), axis=1)
             worst = int(np.argmax(off))
@@ -156,6 +157,45 @@ class PycrazyswarmScripts(unittest.TestCase):
         code, rec = run_and_record("hello_world.py", "--sim")
         self.check_hello_world(code, rec)
         self.assertFalse(self.world_gone(), "the joined world must keep running")
+
+
+    def test_4_a_csv_uploaded_by_the_tool_flies(self):
+        """upload_trajectory takeoff.csv to cf2, start it on cf2 alone (relative): it rises 1 m."""
+        if self.mode != "swarm":
+            return
+        from crazyflie_driver.srv import Land, StartTrajectory
+        tool = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts", "upload_trajectory")
+        takeoff_csv = os.path.join(SCRIPTS, "..", "..", "..", "trajectories", "takeoff.csv")
+        p = subprocess.run([sys.executable, tool, takeoff_csv, "cf2", "--id", "2"], stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, universal_newlines=True, timeout=60)
+        print(p.stdout)
+        self.assertEqual(p.returncode, 0, p.stdout)
+        duration = Trajectory().loadcsv(takeoff_csv).duration
+        probe = WorldProbe(rospy.get_param("~sim_address"))
+        track = Track(probe, ["cf2"], period=0.05)
+        try:
+            rospy.ServiceProxy("/cf2/start_trajectory", StartTrajectory)(0, 2, 1.0, False, True)
+            probe.sleep(duration + 1.0)
+            at_top = probe.position("cf2")
+            rospy.ServiceProxy("/cf2/land", Land)(0, 0.03, rospy.Duration(2.0))
+            probe.sleep(3.0)
+            landed = probe.position("cf2")
+        finally:
+            track.stop()
+        z = [s["position"][2] for _, s, _ in track.samples["cf2"]]
+        print("takeoff.csv on cf2: %.3f m after %.1f s (highest %.3f m), landed at %.3f m"
+              % (at_top[2], duration + 1.0, max(z), landed[2]))
+        self.assertLess(abs(at_top[2] - HEIGHT_M), HOVER_BOUND_M, "cf2 did not rise the file's 1 m")
+        self.assertLess(max(z), HEIGHT_M + HOVER_BOUND_M, "cf2 overshot the file's 1 m")
+        self.assertLess(np.abs(np.array(at_top[:2]) - INITIAL["cf2"][:2]).max(), HOVER_BOUND_M)
+        self.assertLess(landed[2], LANDED_Z_M)
+
+    def test_5_full_state_streaming(self):
+        """cmd_full_state.py streams the figure-8 at 30 Hz 0.5 m up, then notifySetpointsStop and land."""
+        if self.mode != "swarm":
+            return
+        code, rec = run_and_record("cmd_full_state.py")
+        self.check_figure8(code, rec, "cmd_full_state.py", names=("cf1",), height=STREAM_HEIGHT_M, min_samples=120)
 
 
 if __name__ == "__main__":
