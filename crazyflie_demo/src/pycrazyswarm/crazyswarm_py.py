@@ -24,10 +24,10 @@ class Crazyswarm:
             print("pycrazyswarm: WARNING: " + note, file=sys.stderr, flush=True)
         source = config.find(crazyflies_yaml, config.script_dir(sys.argv))
         entries = config.entries(source)
+        from pycrazyswarm import sim_world
         self.world = None
         if self.args.sim:
-            from pycrazyswarm.sim_world import SimWorld
-            self.world = SimWorld(source).start_or_join()
+            self.world = sim_world.SimWorld(source).start_or_join()
 
         from pycrazyswarm import ros_backend
         ros_backend.init_node()
@@ -36,4 +36,4 @@ class Crazyswarm:
         self.timeHelper = TimeHelper(clock)
         self.allcfs = CrazyflieServer([Crazyflie(e.id, e.initial_position, backend, "/" + e.tf_prefix)
                                        for e in entries], backend)
-        self.input = Input(self.timeHelper, simulated=bool(self.args.sim))
+        self.input = Input(self.timeHelper, simulated=bool(self.args.sim) or sim_world.world_running())

@@ -1,9 +1,9 @@
 """``swarm.input.waitUntilButtonPressed()``: the operator's go-ahead between a script's phases.
 
 Crazyswarm waits for a joystick button, or a key without a joystick. Here: Enter on the terminal.
-In a simulation without a terminal (a test, a batch run) it returns at once, as Crazyswarm's
-simulated runs are meant to go through unattended; without a terminal on a real swarm it refuses,
-because no one could press it.
+In a simulation without a terminal (a test, a batch run; ``--sim`` or a running simulated world) it
+returns at once, so simulated runs go through unattended; without a terminal on a real swarm it
+refuses, because no one could press it.
 """
 from __future__ import annotations
 

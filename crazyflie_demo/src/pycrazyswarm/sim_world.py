@@ -74,6 +74,12 @@ def _master_state():
     return nodes, {name for name, _ in services}
 
 
+def world_running() -> bool:
+    """Whether the ROS master knows our simulated world's node (a swarm.launch sim:=true)."""
+    state = _master_state()
+    return state is not None and WORLD_NODE in state[0]
+
+
 class SimWorld:
     """The world this script flies with --sim; ``stop()`` ends it if this script started it."""
 

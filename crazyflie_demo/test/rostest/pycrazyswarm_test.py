@@ -197,6 +197,21 @@ class PycrazyswarmScripts(unittest.TestCase):
         code, rec = run_and_record("cmd_full_state.py")
         self.check_figure8(code, rec, "cmd_full_state.py", names=("cf1",), height=STREAM_HEIGHT_M, min_samples=120)
 
+    def test_6_group_masks(self):
+        """group_mask.py: each broadcast reaches its group only."""
+        if self.mode != "swarm":
+            return
+        code, rec = run_and_record("group_mask.py")
+        self.assertEqual(code, 0, "group_mask.py failed")
+        cf1, cf2 = rec.positions("cf1"), rec.positions("cf2")
+        print("group masks: cf1 highest %.3f m, furthest x %.3f m; cf2 highest %.3f m, x range %.3f m; landed %.3f, "
+              "%.3f m" % (cf1[:, 2].max(), cf1[:, 0].max(), cf2[:, 2].max(), np.ptp(cf2[:, 0]), cf1[-1][2], cf2[-1][2]))
+        self.assertLess(abs(cf1[:, 2].max() - 0.5), HOVER_BOUND_M, "cf1 took group 2's takeoff (or none)")
+        self.assertLess(abs(cf2[:, 2].max() - 1.0), HOVER_BOUND_M, "cf2 did not take off with group 2")
+        self.assertLess(abs(cf1[:, 0].max() - 0.5), HOVER_BOUND_M, "cf1 did not move with group 1's goTo")
+        self.assertLess(np.ptp(cf2[:, 0]), HOVER_BOUND_M, "cf2 moved with group 1's goTo")
+        self.assertLess(max(cf1[-1][2], cf2[-1][2]), LANDED_Z_M, "the land for all did not land both")
+
 
 if __name__ == "__main__":
     rostest.rosrun("crazyflie_demo", "pycrazyswarm", PycrazyswarmScripts, sys.argv)
