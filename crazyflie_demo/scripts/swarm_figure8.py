@@ -1,47 +1,49 @@
 #!/usr/bin/env python3
 """Every Crazyflie of the swarm flies a figure-8, the Crazyswarm way: a template for your own scripts.
 
-Needs crazyflie_server in swarm mode (it streams the motion capture to the Crazyflies), e.g.
-    roslaunch crazyflie_demo swarm.launch sim:=true n:=9 demo:=false
-    rosrun crazyflie_demo swarm_figure8.py _swarm_file:=$(rospack find crazyflie_demo)/config/swarm9.yaml
-The trajectory is uploaded once to each Crazyflie, then one broadcast starts it on all of them,
-relative to where each one is. Group mask 0 addresses every Crazyflie.
+Written on the pycrazyswarm API, so it runs as a Crazyswarm script would:
+    rosrun crazyflie_demo swarm_figure8.py --sim                   # starts (or joins) a simulated swarm
+    roslaunch crazyflie_demo swarm.launch sim:=true n:=9 demo:=false &
+    rosrun crazyflie_demo swarm_figure8.py                         # drives the running swarm
+--swarm_file picks the Crazyflies (default: the package's config/swarm9.yaml), --height the hover
+height. The figure-8 (trajectories/figure8.csv) is uploaded once to each Crazyflie, then one broadcast
+starts it on all of them, relative to where each one is. Group mask 0 addresses every Crazyflie.
 """
-import rospy
+import argparse
+import os
 
-from crazyflie_demo.figure8 import figure8_pieces, trajectory_duration
-from crazyflie_driver.msg import TrajectoryPolynomialPiece
-from crazyflie_driver.nodes.ros_signals import init_node
-from crazyflie_driver.server.swarm_config import load_swarm_file
-from crazyflie_driver.srv import Land, StartTrajectory, Takeoff, UploadTrajectory
+import rospkg
 
-ALL = 0                 # group mask: every Crazyflie
-HEIGHT = 1.0            # m
+import uav_trajectory
+from pycrazyswarm import Crazyswarm
+
 TRAJECTORY_ID = 1
-
-
-def service(name, kind):
-    rospy.wait_for_service(name, timeout=120.0)
-    return rospy.ServiceProxy(name, kind)
+TAKEOFF_S = 2.5
+LAND_S = 2.5
+SETTLE_S = 1.0
 
 
 def main():
-    init_node("swarm_figure8")
-    swarm = load_swarm_file(rospy.get_param("~swarm_file"))
-    figure8 = figure8_pieces()
-    pieces = [TrajectoryPolynomialPiece(p.x, p.y, p.z, p.yaw, rospy.Duration.from_sec(p.duration)) for p in figure8]
-    for cf in swarm.crazyflies:
-        service("/%s/upload_trajectory" % cf.name, UploadTrajectory)(TRAJECTORY_ID, 0, pieces)
+    package = rospkg.RosPack().get_path("crazyflie_demo")
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--swarm_file", default=os.path.join(package, "config", "swarm9.yaml"),
+                        help="the Crazyflies to fly (a swarm file or Crazyswarm's crazyflies.yaml)")
+    parser.add_argument("--height", type=float, default=1.0, help="hover height [m]")
+    options, _ = parser.parse_known_args()
 
-    takeoff, land = service("/takeoff", Takeoff), service("/land", Land)
-    start_trajectory = service("/start_trajectory", StartTrajectory)
+    swarm = Crazyswarm(crazyflies_yaml=options.swarm_file, parent_parser=parser)
+    timeHelper, allcfs = swarm.timeHelper, swarm.allcfs
+    figure8 = uav_trajectory.Trajectory()
+    figure8.loadcsv(os.path.join(package, "trajectories", "figure8.csv"))
+    for cf in allcfs.crazyflies:
+        cf.uploadTrajectory(TRAJECTORY_ID, 0, figure8)
 
-    takeoff(ALL, HEIGHT, rospy.Duration(2.5))
-    rospy.sleep(3.5)
-    start_trajectory(ALL, TRAJECTORY_ID, 1.0, False, True)     # timescale 1, forwards, relative
-    rospy.sleep(trajectory_duration(figure8) + 1.0)
-    land(ALL, 0.0, rospy.Duration(2.5))
-    rospy.sleep(3.0)
+    allcfs.takeoff(targetHeight=options.height, duration=TAKEOFF_S)
+    timeHelper.sleep(TAKEOFF_S + SETTLE_S)
+    allcfs.startTrajectory(TRAJECTORY_ID)           # timescale 1, forwards, relative to each start
+    timeHelper.sleep(figure8.duration + SETTLE_S)
+    allcfs.land(targetHeight=0.04, duration=LAND_S)
+    timeHelper.sleep(LAND_S + SETTLE_S)
 
 
 if __name__ == "__main__":
