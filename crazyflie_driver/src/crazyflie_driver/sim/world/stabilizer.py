@@ -101,6 +101,8 @@ class OnboardStates(Rows):
         "sp": ((4,), float),                # roll, pitch, yaw rate, thrust
         "sp_time": ((), float),
         "thrust_locked": ((), bool),        # waits for a zero-thrust setpoint
+        "generic": ((), bool),              # the onboard position controller writes the setpoint row: the
+                                            # RPYT commander's thrust rules (< 1000 -> 0, cap 60000) do not apply
         "lock": ((), np.int8),              # LOCK_*: motors off until reboot (LOCK_TUMBLE: until crash recovery)
         "lock_time": ((), float),           # world time the present lock was set [s]
         # controller state
@@ -120,6 +122,16 @@ class OnboardStates(Rows):
         "motor_power_enable": ((), bool),
         "motor_power": ((4,), float),
     }
+
+    def reset_pids(self, rows, attitude: np.ndarray) -> None:
+        """The firmware PID controller's re-initialisation on a change of setpoint modes: the attitude
+        PIDs restart from ``attitude`` (n,3, deg, firmware convention; integrals 0, last measurement =
+        it) and the rate PIDs from rest (integrals 0, last measurement 0); the yaw setpoint and the
+        outputs of the last step are kept (unlike the motors-off reset)."""
+        self.att_integ[rows] = 0.0
+        self.att_prev[rows] = np.where(self.gen2016[rows, None], 0.0, -attitude)
+        self.rate_integ[rows] = 0.0
+        self.rate_prev[rows] = 0.0
 
     def add(self, firmware: str, now: float, yaw_deg: float = 0.0) -> int:
         i = self.append_row()
@@ -160,6 +172,7 @@ class OnboardController:
         s.sp_time[i] = now
         if vals[3] == 0.0:
             s.thrust_locked[i] = False
+        s.generic[i] = False
         self.dirty = True
 
     def lock(self, i: int, reason: int, now: Optional[float] = None) -> None:
@@ -240,6 +253,8 @@ class OnboardController:
 
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
+        if np.count_nonzero(s.generic):     # the position controller's thrust goes to the mixer as it is
+            thrust = np.where(s.generic, raw, thrust)
         off = s.thrust_locked | (s.lock != LOCK_NONE)
         if np.count_nonzero(off):
             thrust[off] = 0.0
