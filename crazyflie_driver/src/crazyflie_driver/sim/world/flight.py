@@ -15,7 +15,7 @@ from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_DISABLE, Setpoint
 from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, PREDICT_EVERY, Estimator
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
-from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
+from crazyflie_driver.sim.world.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS, MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import IDLE, Evaluation, Piece, Plan
 from crazyflie_driver.sim.world.stabilizer import firmware_attitude
@@ -31,6 +31,7 @@ def default_params() -> Dict[str, float]:
     """Parameters of the onboard estimator and position controller with the firmware's defaults."""
     out = dict(ESTIMATOR_DEFAULTS)
     out.update(control_defaults())
+    out.update(MELLINGER_ATTITUDE_DEFAULTS)          # kept in the stabilizer's rows, where the law runs
     out["hlCommander.groupmask"] = 0.0
     out["hlCommander.vtoff"] = DEFAULT_VELOCITY
     out["hlCommander.vland"] = DEFAULT_VELOCITY
@@ -211,9 +212,15 @@ class OnboardFlight:
                     yaw, stab.thrust > 0.0, body_z)
 
         # the yaw is the current one (the stabilizer's attitude row is from its last step)
-        rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp)
+        rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp, stab.mel_axes,
+                                   stab.mel_rate_sp)
         if not rows:
             return wrote
+        pid, mel = self.control.rows()
+        if mel:
+            stab.moment_law[mel] = True     # the Mellinger attitude law flies these rows
+        if pid and tick % POSITION_EVERY == 0:
+            stab.moment_law[pid] = False
         if len(rows) > 1:
             stab.thrust_locked[rows] = False
             stab.generic[rows] = True

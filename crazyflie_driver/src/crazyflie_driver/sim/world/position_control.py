@@ -259,12 +259,15 @@ class PositionControl:
 
     # --- the tick -----------------------------------------------------------------------------------
     def update(self, tick: int, row_inputs: Callable[[int], RowInputs], all_inputs: Callable[[], AllInputs],
-               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> List[int]:
+               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, mel_axes: np.ndarray,
+               mel_rate_sp: np.ndarray) -> List[int]:
         """New roll, pitch, yaw and thrust setpoints for the active rows of the stabilizer: PID rows at
         100 Hz, Mellinger rows at 500 Hz. Returns the rows it wrote.
 
         ``stab_sp`` (N,4: roll, pitch, yaw rate as the wire has it, thrust) and ``stab_yaw_sp`` (N,)
-        are the stabilizer's own setpoint arrays, written in place. ``row_inputs(i)`` gives one row's
+        are the stabilizer's own setpoint arrays, written in place; so are ``mel_axes`` (N,3,3) and
+        ``mel_rate_sp`` (N,3), the desired body axes and body rates the Mellinger rows hand to the
+        attitude law in the stabilizer. ``row_inputs(i)`` gives one row's
         estimated position and velocity, yaw (deg), whether its motors ran at the last tick (the
         firmware resets the PIDs when they did not) and its body z axis; ``all_inputs()`` the same
         as arrays over all rows, for the numpy pass (more than ``SCALAR_ROWS`` rows of a controller).
@@ -276,12 +279,9 @@ class PositionControl:
             pid = []
         if not pid and not mel:
             return []
-        arrays = all_inputs() if len(mel) > SCALAR_ROWS or len(pid) > SCALAR_ROWS else None
-        if len(mel) > SCALAR_ROWS:
-            self._update_mellinger(self._row_arrays[1], arrays, stab_sp, stab_yaw_sp)
-        else:
-            for i in mel:
-                self._mellinger_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
+        arrays = all_inputs() if mel or len(pid) > SCALAR_ROWS else None
+        if mel:
+            self._update_mellinger(self._row_arrays[1], arrays, stab_sp, stab_yaw_sp, mel_axes, mel_rate_sp)
         if len(pid) > SCALAR_ROWS:
             est_pos, est_vel, yaw_deg, thrust_on, _ = arrays
             self._update_pid(self._row_arrays[0], est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
@@ -290,36 +290,29 @@ class PositionControl:
                 self._pid_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
         return pid + mel if pid and mel else (pid or mel)
 
-    def _update_mellinger(self, rows: np.ndarray, arrays: AllInputs, stab_sp: np.ndarray,
-                          stab_yaw_sp: np.ndarray) -> None:
+    def _update_mellinger(self, rows: np.ndarray, arrays: AllInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray,
+                          mel_axes: np.ndarray, mel_rate_sp: np.ndarray) -> None:
+        """The Mellinger controller's position part for ``rows`` (its attitude law runs in the stabilizer)."""
         s = self.s
         est_pos, est_vel, yaw_deg, thrust_on, body_z = arrays
         s.mel_integ[rows[~thrust_on[rows]]] = 0.0
         modes = s.modes[rows]
-        yaw_des = np.radians(self._yaw_target(rows, yaw_deg[rows], _mel.DT))
-        roll, pitch, thrust, s.mel_integ[rows] = _mel.force_and_attitude(
+        yaw_now = yaw_deg[rows]
+        yaw_des = np.radians(self._yaw_target(rows, yaw_now, _mel.DT))
+        z_off = modes[:, M_Z] == MODE_DISABLE
+        manual = (modes[:, M_ROLL] == MODE_ABS) & (modes[:, M_PITCH] == MODE_ABS) & z_off
+        axes, thrust, s.mel_integ[rows] = _mel.desired_axes(
             s.mel_gains[rows], s.mel_integ[rows], est_pos[rows], est_vel[rows], s.pos[rows], s.vel[rows],
-            s.acc[rows], s.att[rows], modes[:, M_X] == MODE_ABS, modes[:, M_Z] == MODE_ABS, yaw_des, body_z[rows])
+            s.acc[rows], s.att[rows], s.thrust_sp[rows], modes[:, M_X] == MODE_ABS, manual, z_off, yaw_des,
+            np.radians(yaw_now), body_z[rows])
+        mel_axes[rows] = axes
+        mel_rate_sp[rows] = s.rate[rows]
+        # the desired roll and (legacy) pitch of those axes, for the record
+        roll = np.degrees(np.arctan2(axes[:, 2, 1], axes[:, 2, 2]))
+        pitch = np.degrees(np.arcsin(np.minimum(np.maximum(axes[:, 2, 0], -1.0), 1.0)))
         self._write(rows, roll, pitch, thrust, stab_sp, stab_yaw_sp)
 
-    # --- one row in Python floats (the numpy passes below, for one vehicle) ---------------------------
-    def _mellinger_row(self, i: int, inputs: RowInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
-        s = self.s
-        pos, vel, yaw_deg, thrust_on, body_z = inputs
-        modes = s.modes[i].tolist()
-        att, rate = s.att[i].tolist(), s.rate[i].tolist()
-        if modes[M_YAW] == MODE_ABS:
-            yaw_des = att[2]
-        elif modes[M_QUAT] == MODE_ABS:
-            yaw_des = float(s.quat_yaw[i])
-        else:
-            yaw_des = yaw_deg + rate[2] * _mel.DT
-        integ = s.mel_integ[i].tolist() if thrust_on else (0.0, 0.0, 0.0)
-        roll, pitch, thrust, s.mel_integ[i] = _mel.force_and_attitude_row(
-            s.mel_gains[i].tolist(), integ, pos, vel, s.pos[i].tolist(), s.vel[i].tolist(), s.acc[i].tolist(), att,
-            modes[M_X] == MODE_ABS, modes[M_Z] == MODE_ABS, math.radians(yaw_des), body_z)
-        self._write_row(i, modes, att, rate, roll, pitch, thrust, stab_sp, stab_yaw_sp)
-
+    # --- one row in Python floats (the numpy pass below, for one vehicle) -----------------------------
     def _pid_row(self, i: int, inputs: RowInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
         s = self.s
         (px, py, pz), (vx, vy, vz), yaw_deg, thrust_on, _ = inputs

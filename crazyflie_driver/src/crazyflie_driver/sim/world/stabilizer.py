@@ -20,6 +20,7 @@ import numpy as np
 
 from crazyflie_driver.crtp.firmware_limits import (MAX_THRUST, MIN_THRUST, SETPOINT_WATCHDOG_CUT_S,
                                                    SETPOINT_WATCHDOG_LEVEL_S)
+from crazyflie_driver.sim.world import mellinger as _mel
 from crazyflie_driver.sim.world.vehicle_rows import Rows
 from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
@@ -121,6 +122,13 @@ class OnboardStates(Rows):
         "upside_time": ((), float),
         "motor_power_enable": ((), bool),
         "motor_power": ((4,), float),
+        # the Mellinger controller's attitude law (rows flown by controller 2 with generic setpoints)
+        "moment_law": ((), bool),           # the roll, pitch, yaw commands come from the law, not the PIDs
+        "mel_axes": ((3, 3), float),        # desired body axes (columns x, y, z) from its position part
+        "mel_rate_sp": ((3,), float),       # the setpoint's body rates (deg/s)
+        "mel_gains": ((len(_mel.ATTITUDE_GAIN_ORDER),), float),
+        "mel_integ_m": ((3,), float),
+        "mel_prev": ((4,), float),          # last roll, pitch rate and their setpoints (rad/s)
     }
 
     def reset_pids(self, rows, attitude: np.ndarray) -> None:
@@ -152,6 +160,8 @@ class OnboardStates(Rows):
         self.thrust_locked[i] = True
         self.yaw_sp[i] = yaw_deg
         self.att_prev[i] = (0.0, 0.0, -yaw_deg)
+        self.mel_gains[i] = [_mel.ATTITUDE_DEFAULTS[n] for n in _mel.ATTITUDE_GAIN_ORDER]
+        self.mel_axes[i] = np.eye(3)
 
 
 class OnboardController:
@@ -173,6 +183,7 @@ class OnboardController:
         if vals[3] == 0.0:
             s.thrust_locked[i] = False
         s.generic[i] = False
+        s.moment_law[i] = False
         self.dirty = True
 
     def lock(self, i: int, reason: int, now: Optional[float] = None) -> None:
@@ -201,6 +212,9 @@ class OnboardController:
             if field in ("m1", "m2", "m3", "m4"):
                 s.motor_power[i, int(field[1]) - 1] = min(max(float(value), 0.0), 65535.0)
                 return True
+        elif name in _mel.ATTITUDE_DEFAULTS:
+            s.mel_gains[i, _mel.ATTITUDE_GAIN_ORDER.index(name)] = float(value)
+            return True
         elif name == "stabilizer.stop":
             if value:                       # an emergency stop: the supervisor locks until reboot
                 self.lock(i, LOCK_EMERGENCY)
@@ -268,6 +282,8 @@ class OnboardController:
             due = None if tick % (2 * CONTROL_TICKS) == 0 or not np.count_nonzero(s.gen2016) else ~s.gen2016
             self._attitude_loop(due, level)
             self._rate_loop(gyro_deg)
+            if np.count_nonzero(s.moment_law):
+                self._moment_law(body.quaternion, gyro_deg, level)
             idle = thrust <= 0.0
             if np.count_nonzero(idle):
                 self._reset(idle)
@@ -371,9 +387,27 @@ class OnboardController:
         out[:, 2] *= -1.0                                         # yaw output sign-flipped for the mixer
         s.rate_integ, s.rate_prev, s.rate_out = integ, src, out
 
+    def _moment_law(self, quaternion: np.ndarray, gyro_deg: np.ndarray, level) -> None:
+        """Rows flown by the Mellinger controller: its attitude law replaces the attitude and rate PIDs.
+        While the supervisor levels out (stale setpoints) the desired axes are level at the current
+        yaw, as the firmware's controller takes the level-out setpoint."""
+        s = self.s
+        rows = np.flatnonzero(s.moment_law)
+        axes = s.mel_axes[rows]
+        if level is not None and np.count_nonzero(level[rows]):
+            flat = level[rows]
+            yaw = np.radians(s.attitude[rows, 2])
+            up = np.zeros((len(rows), 3))
+            up[:, 2] = 1.0
+            axes = np.where(flat[:, None, None], _mel._axes_towards(up, yaw), axes)
+        s.rate_out[rows], s.mel_integ_m[rows], s.mel_prev[rows] = _mel.moments(
+            s.mel_gains[rows], s.mel_integ_m[rows], s.mel_prev[rows], quaternion[rows], axes, s.mel_rate_sp[rows],
+            gyro_deg[rows])
+
     def _reset(self, rows: np.ndarray) -> None:
         """Motors off: PID states cleared, yaw set-point re-seeded with the current yaw."""
         s = self.s
+        s.mel_integ_m[rows] = 0.0
         s.att_integ[rows] = 0.0
         s.rate_integ[rows] = 0.0
         s.rate_prev[rows] = 0.0
