@@ -11,7 +11,7 @@ gains: docs/simulation.md ("Onboard position control").
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, List, Sequence, Tuple
+from typing import Callable, Dict, List, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -140,7 +140,7 @@ class PositionControl:
         self._rows_version = -1
         self._rows: Tuple[List[int], List[int]] = ([], [])
         self._row_arrays: Tuple[np.ndarray, np.ndarray] = (np.zeros(0, int), np.zeros(0, int))
-        self.pending: set = set()         # rows given new modes since the last tick
+        self.pending: Set[int] = set()    # rows given a setpoint (and so modes) since the last tick
 
     def rows(self) -> Tuple[List[int], List[int]]:
         """(PID rows, Mellinger rows) among the active ones; recomputed only after a change."""
