@@ -5,7 +5,10 @@ Follows docs/simulation.md, "The onboard attitude and rate controllers": command
 until a zero-thrust setpoint, the yaw-rate negation, the legacy nose-up-positive pitch), the
 setpoint watchdog (level out after 0.5 s, motors off after 2 s), emergency stop, tumble detection
 (current firmware), attitude PID -> rate PID -> legacy X mixer with the clamping of each firmware
-generation. Battery compensation is taken as ideal: a command means the same thrust at any
+generation. Rows flown by the Mellinger controller (controller 2 with generic or high-level
+setpoints) take their roll, pitch and yaw commands from its attitude law (``mellinger.moments``)
+instead of the PIDs, and rows flown by onboard position control skip the RPYT commander's thrust
+rules. Battery compensation is taken as ideal: a command means the same thrust at any
 battery voltage (docs/simulation.md, "Battery"), so the battery only matters through its cut-off.
 
 Sign conventions of the firmware estimate used here and in the logs: roll right-hand about body x,
