@@ -1,5 +1,6 @@
-"""The world's per-vehicle float twins (physics substep, PID position controller, Mellinger) give the
-numbers of its numpy passes: the same flights with the twins forced off end in the same state."""
+"""The world's per-vehicle float twins (physics substep, PID position controller) give the numbers of
+its numpy passes: the same flights (a PID and a Mellinger vehicle) with the twins forced off end in the
+same state."""
 from __future__ import annotations
 
 import math

@@ -200,7 +200,9 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
        ParamVar("hlCommander", "vtoff", "float", 0.5, generations=_CUR),
        ParamVar("hlCommander", "vland", "float", 0.5, generations=_CUR)]
     + [ParamVar("ctrlMel", n, "float", 0.0, generations=_CUR)
-       for n in ("kp_xy", "kd_xy", "ki_xy", "i_range_xy", "kp_z", "kd_z", "ki_z", "i_range_z", "mass", "massThrust")]
+       for n in ("kp_xy", "kd_xy", "ki_xy", "i_range_xy", "kp_z", "kd_z", "ki_z", "i_range_z", "mass", "massThrust",
+                 "kR_xy", "kw_xy", "ki_m_xy", "i_range_m_xy", "kR_z", "kw_z", "ki_m_z", "i_range_m_z",
+                 "kd_omega_rp")]
     + [ParamVar("locSrv", "extPosStdDev", "float", 0.01, generations=_CUR),
        ParamVar("locSrv", "extQuatStdDev", "float", 4.5e-3, generations=_CUR)]
     # onboard estimator and position controller: the world's vehicle supplies the firmware's defaults

@@ -12,13 +12,15 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from crazyflie_driver.crtp.quaternion import compress_quaternion
-from crazyflie_driver.sim.firmware.setpoint_decode import Setpoint
+from crazyflie_driver.sim.firmware.setpoint_decode import MODE_DISABLE, Setpoint
 from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, PREDICT_EVERY, Estimator
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
-from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
+from crazyflie_driver.sim.world.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS, MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import IDLE, Evaluation, Piece, Plan
-from crazyflie_driver.sim.world.position_control import PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl
+from crazyflie_driver.sim.world.stabilizer import firmware_attitude
+from crazyflie_driver.sim.world.position_control import (CONTROLLER_PID, M_X, M_Y, NULL_MODES, POSITION_EVERY,
+                                                         PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl)
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
 
 assert PREDICT_EVERY % MELLINGER_EVERY == 0 and HL_RATE_EVERY % MELLINGER_EVERY == 0   # see OnboardFlight.step
@@ -29,6 +31,7 @@ def default_params() -> Dict[str, float]:
     """Parameters of the onboard estimator and position controller with the firmware's defaults."""
     out = dict(ESTIMATOR_DEFAULTS)
     out.update(control_defaults())
+    out.update(MELLINGER_ATTITUDE_DEFAULTS)          # kept in the stabilizer's rows, where the law runs
     out["hlCommander.groupmask"] = 0.0
     out["hlCommander.vtoff"] = DEFAULT_VELOCITY
     out["hlCommander.vland"] = DEFAULT_VELOCITY
@@ -89,7 +92,7 @@ class OnboardFlight:
         self.hl.relax(i)
 
     def _null_setpoint(self, i: int, stab, now: float) -> None:
-        self.control.release(i)
+        self.control.release(i, NULL_MODES)
         stab.sp[i] = 0.0
         stab.sp_time[i] = now
 
@@ -181,33 +184,82 @@ class OnboardFlight:
         """Before the stabilizer's tick: estimator prediction, then (100 Hz) the position controller.
 
         Returns True when it wrote new setpoints into the stabilizer's rows."""
-        if tick % MELLINGER_EVERY:          # every stage here runs on even ticks only
-            return False
-        self.estimator.update(tick, now, stab.thrust, bodies.position)
-        wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
+        wrote = False
+        if tick % MELLINGER_EVERY == 0:     # every stage here runs on even ticks only, but the mode check
+            self.estimator.update(tick, now, stab.thrust, bodies.position)
+            wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
+        if self.control.pending:            # every tick, before the controllers, as the firmware's
+            wrote = self._new_setpoints(tick, bodies, stab, ground_asl) or wrote
+        if tick % MELLINGER_EVERY:
+            return wrote
         est = self.estimator
 
         def row_inputs(i: int):
             q0, q1, q2, q3 = bodies.quaternion[i].tolist()
             body_z = (2.0 * (q0 * q2 + q3 * q1), 2.0 * (q1 * q2 - q3 * q0), 1.0 - 2.0 * (q0 * q0 + q1 * q1))
+            yaw = math.degrees(math.atan2(2.0 * (q3 * q2 + q0 * q1), 1.0 - 2.0 * (q1 * q1 + q2 * q2)))
             pos, vel = est.row_estimate(i, bodies.position[i].tolist(), bodies.velocity[i].tolist(), ground_asl)
-            return pos, vel, float(stab.attitude[i, 2]), bool(stab.thrust[i] > 0.0), body_z
+            return pos, vel, yaw, bool(stab.thrust[i] > 0.0), body_z
 
         def all_inputs():
             q = bodies.quaternion
             body_z = np.stack([2.0 * (q[:, 0] * q[:, 2] + q[:, 3] * q[:, 1]),
                                2.0 * (q[:, 1] * q[:, 2] - q[:, 3] * q[:, 0]),
                                1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)], axis=1)
+            yaw = np.degrees(np.arctan2(2.0 * (q[:, 3] * q[:, 2] + q[:, 0] * q[:, 1]),
+                                        1.0 - 2.0 * (q[:, 1] ** 2 + q[:, 2] ** 2)))
             return (est.positions(bodies.position, ground_asl), est.velocities(bodies.velocity),
-                    stab.attitude[:, 2], stab.thrust > 0.0, body_z)
+                    yaw, stab.thrust > 0.0, body_z)
 
-        rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp)
+        # the yaw is the current one (the stabilizer's attitude row is from its last step)
+        rows = self.control.update(tick, row_inputs, all_inputs, stab.sp, stab.yaw_sp, stab.mel_axes,
+                                   stab.mel_rate_sp)
         if not rows:
             return wrote
+        pid, mel = self.control.rows()
+        if mel:
+            stab.moment_law[mel] = True     # the Mellinger attitude law flies these rows
+        if pid and tick % POSITION_EVERY == 0:
+            stab.moment_law[pid] = False
         if len(rows) > 1:
             stab.thrust_locked[rows] = False
+            stab.generic[rows] = True
         else:
             stab.thrust_locked[rows[0]] = False
+            stab.generic[rows[0]] = True
+        return True
+
+    def _new_setpoints(self, tick: int, bodies: BodyStates, stab, ground_asl: float) -> bool:
+        """Setpoints that came since the last tick, for the rows the PID controller flies. When the
+        setpoint's modes differ from the last tick's it re-initialises all its PIDs (position and
+        velocity here, attitude and rate in the stabilizer's rows) and its desired roll and pitch become
+        the current attitude until its position controller's next step (when x and y are not
+        disabled). Between position steps, the parts it takes at 500 Hz (yaw; roll, pitch and thrust
+        of disabled axes) are written at once. True when it changed a stabilizer row."""
+        control = self.control
+        pending, changed = control.take_pending()
+        s = control.s
+        wrote = False
+        if tick % POSITION_EVERY:
+            for i in pending:
+                if s.active[i] and s.controller[i] == CONTROLLER_PID:
+                    control.write_direct(i, stab.sp, stab.yaw_sp)
+                    stab.thrust_locked[i] = False
+                    stab.generic[i] = True
+                    wrote = True
+        rows = [i for i in changed if s.controller[i] == CONTROLLER_PID]
+        if not rows:
+            return wrote
+        attitude = firmware_attitude(bodies.quaternion[rows])
+        est = self.estimator
+        positions = np.array([est.row_estimate(i, bodies.position[i].tolist(), bodies.velocity[i].tolist(),
+                                               ground_asl)[0] for i in rows], dtype=float)
+        control.reset_pids(rows, positions)
+        stab.reset_pids(rows, attitude)
+        for k, i in enumerate(rows):
+            modes = s.modes[i]
+            if s.active[i] and modes[M_X] != MODE_DISABLE and modes[M_Y] != MODE_DISABLE:
+                stab.sp[i, 0:2] = attitude[k, 0:2]
         return True
 
     # --- log variables ---------------------------------------------------------------------------------

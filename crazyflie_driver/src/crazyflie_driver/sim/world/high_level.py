@@ -17,7 +17,7 @@ import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, Setpoint
 from crazyflie_driver.sim.world.planner import (AXES, DISABLED, FLYING, IDLE, LANDING, N_COEFFS, Evaluation, Piece,
-                                                Plan, online_piece, poly7_nojerk, shortest_angle, wrap_angle)
+                                                Plan, normalize_radians, online_piece, poly7_nojerk, yaw_turn)
 
 HL_RATE_EVERY = 10                 # ticks: the high-level commander runs at 100 Hz
 HL_SETPOINT_KIND = 100             # not a port-7 type: marks setpoints of the high-level commander
@@ -115,8 +115,9 @@ class HighLevelPlans:
             goal = goal + start.pos
             yaw = yaw + start.yaw
         if linear and duration > 0:
+            # constant velocity and yaw rate at both ends; the yaw turns the short way
             v = (goal - start.pos) / duration
-            yaw_rate = (yaw - start.yaw) / duration
+            yaw_rate = yaw_turn(start.yaw, yaw)[1] / duration
             begin = Evaluation(start.pos, v, np.zeros(3), start.yaw, yaw_rate)
             piece = online_piece(duration, begin, goal, yaw, v, yaw_rate)
         else:
@@ -129,10 +130,7 @@ class HighLevelPlans:
             return ENOEXEC
         plan = Plan(FLYING, list(pieces), now, timescale if timescale > 0 else 1.0, bool(reversed_))
         if relative_position:
-            first = plan.evaluate(now)
-            plan.shift[:3] = start.pos - first.pos
-            if relative_yaw:
-                plan.shift[3] = shortest_angle(wrap_angle(first.yaw), wrap_angle(start.yaw))
+            plan.shifted_to(start, relative_yaw)
         return self._begin(i, plan)
 
     def spiral(self, i: int, start: Evaluation, sideways: bool, clockwise: bool, angle: float, r0: float, rf: float,
@@ -149,7 +147,7 @@ class HighLevelPlans:
             omega = np.float64(-sense * angle) / duration
             climb = np.float64(ascent) / duration
             dr = np.float64(rf - r0) / duration
-        phi0 = wrap_angle(start.yaw)
+        phi0 = normalize_radians(start.yaw)
         phi_f = phi0 - sense * angle
 
         def point(phi: float, r: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -198,12 +196,14 @@ class HighLevelPlans:
             return None
         ev = plan.evaluate(now)
         if ev is None or not (ev.pos[0] == ev.pos[0] and ev.pos[1] == ev.pos[1] and ev.pos[2] == ev.pos[2]):
-            self.plans[i] = Plan(DISABLED, plan.pieces, plan.t_begin, plan.timescale, plan.reversed, plan.shift)
+            self.plans[i] = Plan(DISABLED, plan.pieces, plan.t_begin, plan.timescale, plan.reversed, plan.shift,
+                                 plan.rotation)
             return None
         return Setpoint(HL_SETPOINT_KIND, MODE_ABS, MODE_ABS, MODE_ABS, mode_yaw=MODE_ABS,
                         position=tuple(ev.pos), velocity=tuple(ev.vel), acceleration=tuple(ev.acc),
                         attitude=(0.0, 0.0, math.degrees(ev.yaw)),
-                        attitude_rate=(0.0, 0.0, math.degrees(ev.yaw_rate)))
+                        attitude_rate=(math.degrees(ev.omega_xy[0]), math.degrees(ev.omega_xy[1]),
+                                       math.degrees(ev.yaw_rate)))
 
     def current(self, i: int, now: float) -> Optional[Evaluation]:
         plan = self.plans[i]

@@ -19,6 +19,7 @@ N_COEFFS = DEGREE + 1
 AXES = 4                                   # x, y, z, yaw
 
 IDLE, FLYING, LANDING, DISABLED = 0, 1, 3, 4
+GRAVITY = 9.81                             # m/s², the planner's value for the body-rate feed-forward
 
 
 @dataclass
@@ -35,7 +36,8 @@ class Evaluation:
     vel: np.ndarray            # (3,) m/s
     acc: np.ndarray            # (3,) m/s²
     yaw: float                 # rad
-    yaw_rate: float            # rad/s
+    yaw_rate: float            # rad/s: the body z rate (the yaw derivative times the body z axis' z)
+    omega_xy: Tuple[float, float] = (0.0, 0.0)     # rad/s: body x and y rates the plan asks for
 
 
 def _basis(t: float, derivative: int) -> np.ndarray:
@@ -60,36 +62,74 @@ def poly7_nojerk(duration: float, start: Sequence[float], end: Sequence[float]) 
     return np.linalg.solve(a, b)
 
 
+_N = np.arange(N_COEFFS)
+
+
 def evaluate(piece: Piece, t: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Position, velocity and acceleration (each (4,): x, y, z, yaw) of a piece at t (clamped)."""
-    t = min(max(t, 0.0), piece.duration)
-    powers = t ** np.arange(N_COEFFS)
-    c = piece.coeffs
-    n = np.arange(N_COEFFS)
-    p = c @ powers
-    v = c[:, 1:] @ (n[1:] * powers[:-1])
-    a = c[:, 2:] @ (n[2:] * (n[2:] - 1) * powers[:-2])
+    p, v, a, _ = evaluate_with_jerk(piece, t)
     return p, v, a
 
 
-def wrap_angle(rad: float) -> float:
-    """The angle in [-pi, pi)."""
-    return (rad + math.pi) % (2.0 * math.pi) - math.pi
+def evaluate_with_jerk(piece: Piece, t: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``evaluate`` and the third derivative (4,)."""
+    t = min(max(t, 0.0), piece.duration)
+    powers = t ** _N
+    c = piece.coeffs
+    n = _N
+    p = c @ powers
+    v = c[:, 1:] @ (n[1:] * powers[:-1])
+    a = c[:, 2:] @ (n[2:] * (n[2:] - 1) * powers[:-2])
+    j = c[:, 3:] @ (n[3:] * (n[3:] - 1) * (n[3:] - 2) * powers[:-3])
+    return p, v, a, j
+
+
+def body_rates(acc: Sequence[float], jerk: Sequence[float], yaw: float, yaw_rate: float) -> Tuple[float, float, float]:
+    """The body rates (rad/s) of a differentially flat quadrotor following the plan (Mellinger & Kumar
+    2011): the body z axis along acc + g, the jerk's part across it over the thrust per mass gives the
+    x/y rates; the z rate is the yaw derivative times the body z axis' vertical component."""
+    tx, ty, tz = float(acc[0]), float(acc[1]), float(acc[2]) + GRAVITY
+    norm = math.sqrt(tx * tx + ty * ty + tz * tz)
+    zx, zy, zz = tx / norm, ty / norm, tz / norm
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    # y_body = normalize(z_body x (cos yaw, sin yaw, 0)); x_body = y_body x z_body
+    yx, yy, yz = -zz * sy, zz * cy, zx * sy - zy * cy
+    yn = math.sqrt(yx * yx + yy * yy + yz * yz)
+    yx, yy, yz = yx / yn, yy / yn, yz / yn
+    xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
+    jx, jy, jz = float(jerk[0]), float(jerk[1]), float(jerk[2])
+    along = jx * zx + jy * zy + jz * zz
+    hx, hy, hz = (jx - along * zx) / norm, (jy - along * zy) / norm, (jz - along * zz) / norm
+    return -(hx * yx + hy * yy + hz * yz), hx * xx + hy * xy + hz * xz, zz * yaw_rate
+
+
+def normalize_radians(rad: float) -> float:
+    """The firmware's angle normalisation: a truncating remainder after adding pi with the angle's sign,
+    so positive angles land in [-pi, pi) and negative ones in (-pi, pi]."""
+    signed_pi = math.copysign(math.pi, rad)
+    return math.fmod(rad + signed_pi, 2.0 * math.pi) - signed_pi
 
 
 def shortest_angle(from_rad: float, to_rad: float) -> float:
     return (to_rad - from_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def yaw_turn(start_yaw: float, goal_yaw: float) -> Tuple[float, float]:
+    """(start yaw normalised, the shortest signed turn to the goal): both ends of an online plan's yaw."""
+    start = normalize_radians(start_yaw)
+    return start, shortest_angle(start, normalize_radians(goal_yaw))
+
+
 def online_piece(duration: float, start: Evaluation, goal_pos: Sequence[float], goal_yaw: float,
                  goal_vel: Sequence[float] = (0.0, 0.0, 0.0), goal_yaw_rate: float = 0.0) -> Piece:
-    """One piece from ``start`` (its velocity and acceleration kept) to the goal; yaw the short way."""
-    yaw_goal = start.yaw + shortest_angle(start.yaw, goal_yaw)
+    """One piece from ``start`` (its velocity, acceleration and yaw rate kept) to the goal. The yaw
+    starts from the start yaw normalised to about [-pi, pi] and turns the short way."""
+    yaw0, turn = yaw_turn(start.yaw, goal_yaw)
     coeffs = np.zeros((AXES, N_COEFFS))
     for k in range(3):
         coeffs[k] = poly7_nojerk(duration, (start.pos[k], start.vel[k], start.acc[k]),
                                  (goal_pos[k], goal_vel[k], 0.0))
-    coeffs[3] = poly7_nojerk(duration, (start.yaw, start.yaw_rate, 0.0), (yaw_goal, goal_yaw_rate, 0.0))
+    coeffs[3] = poly7_nojerk(duration, (yaw0, start.yaw_rate, 0.0), (yaw0 + turn, goal_yaw_rate, 0.0))
     return Piece(max(duration, 0.0), coeffs)
 
 
@@ -102,7 +142,20 @@ class Plan:
     t_begin: float = 0.0
     timescale: float = 1.0
     reversed: bool = False
-    shift: np.ndarray = field(default_factory=lambda: np.zeros(4))     # added to x, y, z, yaw
+    shift: np.ndarray = field(default_factory=lambda: np.zeros(3))     # m, added to x, y, z
+    rotation: float = 0.0      # rad: a forward plan is turned about the world z axis by this, then shifted
+
+    def shifted_to(self, start: Evaluation, relative_yaw: bool) -> None:
+        """Relative start: the shift that moves the plan's first point to ``start``; with
+        ``relative_yaw`` also the rotation by the shortest angle from the plan's first yaw to the
+        start yaw. As the firmware does, the rotation turns the plan about the world origin and the
+        shift is taken from the unrotated first point (the two agree when the plan starts above the
+        origin), and only a forward plan is rotated."""
+        self.shift, self.rotation = np.zeros(3), 0.0
+        first = self.evaluate(self.t_begin)
+        self.shift = np.asarray(start.pos, dtype=float) - first.pos
+        if relative_yaw:
+            self.rotation = shortest_angle(normalize_radians(first.yaw), normalize_radians(start.yaw))
 
     @property
     def duration(self) -> float:
@@ -114,7 +167,7 @@ class Plan:
             return None
         total = sum(p.duration for p in self.pieces)
         t = (now - self.t_begin) / self.timescale
-        ended = t >= total
+        ended = t > total                  # at the very end: still the last piece, as the firmware
         t = min(max(t, 0.0), total)
         if self.reversed:
             t = total - t
@@ -122,14 +175,24 @@ class Plan:
             if t <= piece.duration or piece is self.pieces[-1]:
                 break
             t -= piece.duration
-        p, v, a = evaluate(piece, t)
-        scale = -1.0 if self.reversed else 1.0
-        v = v * scale / self.timescale
-        a = a / (self.timescale ** 2)
+        p, v, a, j = evaluate_with_jerk(piece, t)
         if ended:
+            rates = (0.0, 0.0, 0.0)
             v, a = np.zeros(4), np.zeros(4)
-        p = p + self.shift
-        return Evaluation(p[:3].copy(), v[:3].copy(), a[:3].copy(), float(p[3]), float(v[3]))
+        else:
+            scale = -1.0 if self.reversed else 1.0
+            v = v * scale / self.timescale
+            a = a / (self.timescale ** 2)
+            j = j * scale / (self.timescale ** 3)
+            rates = body_rates(a, j, float(p[3]), float(v[3]))
+        pos, vel, acc, yaw = p[:3], v[:3], a[:3], float(p[3])
+        if self.rotation and not self.reversed:
+            angle = normalize_radians(self.rotation)
+            c, s = math.cos(angle), math.sin(angle)
+            turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            pos, vel, acc = turn @ pos, turn @ vel, turn @ acc
+            yaw += angle
+        return Evaluation(pos + self.shift, vel.copy(), acc.copy(), yaw, rates[2], (rates[0], rates[1]))
 
     def finished(self, now: float) -> bool:
         return bool(self.pieces) and now - self.t_begin >= self.duration

@@ -11,7 +11,7 @@ gains: docs/simulation.md ("Onboard position control").
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, List, Sequence, Tuple
+from typing import Callable, Dict, List, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -30,6 +30,9 @@ VZ_OUTPUT_LIMIT = 65535 / 2 / THRUST_SCALE
 UINT16_MAX = 65535.0
 M_X, M_Y, M_Z, M_ROLL, M_PITCH, M_YAW, M_QUAT = range(7)
 PRIORITY_HIGH_LEVEL, PRIORITY_CRTP = 1, 2
+# the modes of a legacy RPYT setpoint (x, y, z off; roll, pitch angles; yaw rate) and of the null setpoint
+RPYT_MODES = (MODE_DISABLE, MODE_DISABLE, MODE_DISABLE, MODE_ABS, MODE_ABS, MODE_VELOCITY, MODE_DISABLE)
+NULL_MODES = (MODE_DISABLE,) * 7
 CONTROLLER_PID, CONTROLLER_MELLINGER = 1, 2
 TERMS = ("Kp", "Ki", "Kd")
 SCALAR_ROWS = 3                     # up to this many rows of a controller: Python floats, row by row (faster
@@ -89,7 +92,7 @@ class PositionStates(Rows):
         "priority": ((), np.int8),        # commander priority: 1 high-level, 2 low-level (CRTP)
         "kind": ((), np.int8),            # setpoint type that set the modes
         "modes": ((7,), np.int8),         # x, y, z, roll, pitch, yaw, quat
-        "prev_modes": ((7,), np.int8),
+        "prev_modes": ((7,), np.int8),    # the modes at the last tick (a change resets every PID)
         "pos": ((3,), float),
         "vel": ((3,), float),
         "acc": ((3,), float),
@@ -106,7 +109,7 @@ class PositionStates(Rows):
         "rp_limit": ((2,), float),
         "vel_max": ((3,), float),
         "pos_integ": ((3,), float),
-        "pos_prev": ((3,), float),
+        "pos_prev": ((3,), float),        # previous measurement (the derivative is on the measurement)
         "vel_integ": ((3,), float),
         "vel_prev": ((3,), float),
         "vel_target": ((3,), float),      # velocity setpoint of the velocity PID (body x, y; world z)
@@ -137,6 +140,7 @@ class PositionControl:
         self._rows_version = -1
         self._rows: Tuple[List[int], List[int]] = ([], [])
         self._row_arrays: Tuple[np.ndarray, np.ndarray] = (np.zeros(0, int), np.zeros(0, int))
+        self.pending: Set[int] = set()    # rows given a setpoint (and so modes) since the last tick
 
     def rows(self) -> Tuple[List[int], List[int]]:
         """(PID rows, Mellinger rows) among the active ones; recomputed only after a change."""
@@ -188,6 +192,7 @@ class PositionControl:
             s.version += 1
         s.kind[i] = sp.kind
         s.modes[i] = (sp.mode_x, sp.mode_y, sp.mode_z, sp.mode_roll, sp.mode_pitch, sp.mode_yaw, sp.mode_quat)
+        self.pending.add(i)
         s.pos[i], s.vel[i], s.acc[i] = sp.position, sp.velocity, sp.acceleration
         s.att[i], s.rate[i], s.quat[i] = sp.attitude, sp.attitude_rate, sp.quaternion
         x, y, z, w = sp.quaternion
@@ -195,20 +200,74 @@ class PositionControl:
         s.thrust_sp[i] = sp.thrust
         s.vbody[i] = sp.velocity_body
 
-    def release(self, i: int) -> None:
-        """The legacy path (RPYT) drives this vehicle again."""
-        if self.s.active[i]:
-            self.s.active[i] = False
-            self.s.version += 1
+    def release(self, i: int, modes: Sequence[int] = RPYT_MODES) -> None:
+        """The legacy path (RPYT, or the null setpoint with ``NULL_MODES``) drives this vehicle again;
+        its setpoint modes count for the reset on a mode change."""
+        s = self.s
+        if s.active[i]:
+            s.active[i] = False
+            s.version += 1
+        s.modes[i] = modes
+        self.pending.add(i)
+
+    def take_pending(self) -> Tuple[List[int], List[int]]:
+        """(rows given a setpoint since the last tick, those of them whose modes differ from the last
+        tick's: the firmware's PID controller then re-initialises every PID, position, velocity,
+        attitude and rate). The modes are remembered for the next tick."""
+        s, rows, changed = self.s, [], []
+        for i in self.pending:
+            if i >= len(s):
+                continue
+            rows.append(i)
+            if s.modes[i].tolist() != s.prev_modes[i].tolist():
+                s.prev_modes[i] = s.modes[i]
+                changed.append(i)
+        self.pending.clear()
+        return rows, changed
+
+    def write_direct(self, i: int, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
+        """What the firmware's PID controller takes from a new setpoint at its next attitude step
+        (500 Hz), before its position controller's next step (100 Hz): the yaw rate or yaw angle, and
+        for disabled axes roll and pitch, or thrust, straight from the setpoint."""
+        s = self.s
+        modes = s.modes[i].tolist()
+        att = s.att[i].tolist()
+        if modes[M_X] == MODE_DISABLE or modes[M_Y] == MODE_DISABLE:
+            stab_sp[i, 0], stab_sp[i, 1] = att[0], att[1]
+        if modes[M_Z] == MODE_DISABLE:
+            stab_sp[i, 3] = s.thrust_sp[i]
+        yaw_mode = modes[M_YAW]
+        stab_sp[i, 2] = -s.rate[i, 2] if yaw_mode == MODE_VELOCITY else 0.0
+        if yaw_mode == MODE_ABS:
+            target = att[2]
+        elif modes[M_QUAT] == MODE_ABS:
+            target = float(s.quat_yaw[i])
+        else:
+            return
+        if target == target:
+            stab_yaw_sp[i] = (target + 180.0) % 360.0 - 180.0
+
+    def reset_pids(self, rows: Sequence[int], positions: np.ndarray) -> None:
+        """The position and velocity PIDs of ``rows`` as the firmware resets them: integrals 0, the
+        position PIDs' last measurement = the estimated world position (N,3) (though they measure in
+        the yaw-rotated frame), the velocity PIDs' = 0."""
+        s = self.s
+        s.pos_integ[rows] = 0.0
+        s.pos_prev[rows] = positions
+        s.vel_integ[rows] = 0.0
+        s.vel_prev[rows] = 0.0
 
     # --- the tick -----------------------------------------------------------------------------------
     def update(self, tick: int, row_inputs: Callable[[int], RowInputs], all_inputs: Callable[[], AllInputs],
-               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> List[int]:
+               stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, mel_axes: np.ndarray,
+               mel_rate_sp: np.ndarray) -> List[int]:
         """New roll, pitch, yaw and thrust setpoints for the active rows of the stabilizer: PID rows at
         100 Hz, Mellinger rows at 500 Hz. Returns the rows it wrote.
 
         ``stab_sp`` (N,4: roll, pitch, yaw rate as the wire has it, thrust) and ``stab_yaw_sp`` (N,)
-        are the stabilizer's own setpoint arrays, written in place. ``row_inputs(i)`` gives one row's
+        are the stabilizer's own setpoint arrays, written in place; so are ``mel_axes`` (N,3,3) and
+        ``mel_rate_sp`` (N,3), the desired body axes and body rates the Mellinger rows hand to the
+        attitude law in the stabilizer. ``row_inputs(i)`` gives one row's
         estimated position and velocity, yaw (deg), whether its motors ran at the last tick (the
         firmware resets the PIDs when they did not) and its body z axis; ``all_inputs()`` the same
         as arrays over all rows, for the numpy pass (more than ``SCALAR_ROWS`` rows of a controller).
@@ -220,12 +279,9 @@ class PositionControl:
             pid = []
         if not pid and not mel:
             return []
-        arrays = all_inputs() if len(mel) > SCALAR_ROWS or len(pid) > SCALAR_ROWS else None
-        if len(mel) > SCALAR_ROWS:
-            self._update_mellinger(self._row_arrays[1], arrays, stab_sp, stab_yaw_sp)
-        else:
-            for i in mel:
-                self._mellinger_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
+        arrays = all_inputs() if mel or len(pid) > SCALAR_ROWS else None
+        if mel:
+            self._update_mellinger(self._row_arrays[1], arrays, stab_sp, stab_yaw_sp, mel_axes, mel_rate_sp)
         if len(pid) > SCALAR_ROWS:
             est_pos, est_vel, yaw_deg, thrust_on, _ = arrays
             self._update_pid(self._row_arrays[0], est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
@@ -234,43 +290,35 @@ class PositionControl:
                 self._pid_row(i, row_inputs(i), stab_sp, stab_yaw_sp)
         return pid + mel if pid and mel else (pid or mel)
 
-    def _update_mellinger(self, rows: np.ndarray, arrays: AllInputs, stab_sp: np.ndarray,
-                          stab_yaw_sp: np.ndarray) -> None:
+    def _update_mellinger(self, rows: np.ndarray, arrays: AllInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray,
+                          mel_axes: np.ndarray, mel_rate_sp: np.ndarray) -> None:
+        """The Mellinger controller's position part for ``rows`` (its attitude law runs in the stabilizer)."""
         s = self.s
         est_pos, est_vel, yaw_deg, thrust_on, body_z = arrays
         s.mel_integ[rows[~thrust_on[rows]]] = 0.0
         modes = s.modes[rows]
-        yaw_des = np.radians(self._yaw_target(rows, yaw_deg[rows], _mel.DT))
-        roll, pitch, thrust, s.mel_integ[rows] = _mel.force_and_attitude(
+        yaw_now = yaw_deg[rows]
+        yaw_des = np.radians(self._yaw_target(rows, yaw_now, _mel.DT))
+        z_off = modes[:, M_Z] == MODE_DISABLE
+        manual = (modes[:, M_ROLL] == MODE_ABS) & (modes[:, M_PITCH] == MODE_ABS) & z_off
+        axes, thrust, s.mel_integ[rows] = _mel.desired_axes(
             s.mel_gains[rows], s.mel_integ[rows], est_pos[rows], est_vel[rows], s.pos[rows], s.vel[rows],
-            s.acc[rows], s.att[rows], modes[:, M_X] == MODE_ABS, modes[:, M_Z] == MODE_ABS, yaw_des, body_z[rows])
+            s.acc[rows], s.att[rows], s.thrust_sp[rows], modes[:, M_X] == MODE_ABS, manual, z_off, yaw_des,
+            np.radians(yaw_now), body_z[rows])
+        mel_axes[rows] = axes
+        mel_rate_sp[rows] = s.rate[rows]
+        # the desired roll and (legacy) pitch of those axes, for the record
+        roll = np.degrees(np.arctan2(axes[:, 2, 1], axes[:, 2, 2]))
+        pitch = np.degrees(np.arcsin(np.minimum(np.maximum(axes[:, 2, 0], -1.0), 1.0)))
         self._write(rows, roll, pitch, thrust, stab_sp, stab_yaw_sp)
 
-    # --- one row in Python floats (the numpy passes below, for one vehicle) ---------------------------
-    def _mellinger_row(self, i: int, inputs: RowInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
-        s = self.s
-        pos, vel, yaw_deg, thrust_on, body_z = inputs
-        modes = s.modes[i].tolist()
-        att, rate = s.att[i].tolist(), s.rate[i].tolist()
-        if modes[M_YAW] == MODE_ABS:
-            yaw_des = att[2]
-        elif modes[M_QUAT] == MODE_ABS:
-            yaw_des = float(s.quat_yaw[i])
-        else:
-            yaw_des = yaw_deg + rate[2] * _mel.DT
-        integ = s.mel_integ[i].tolist() if thrust_on else (0.0, 0.0, 0.0)
-        roll, pitch, thrust, s.mel_integ[i] = _mel.force_and_attitude_row(
-            s.mel_gains[i].tolist(), integ, pos, vel, s.pos[i].tolist(), s.vel[i].tolist(), s.acc[i].tolist(), att,
-            modes[M_X] == MODE_ABS, modes[M_Z] == MODE_ABS, math.radians(yaw_des), body_z)
-        self._write_row(i, modes, att, rate, roll, pitch, thrust, stab_sp, stab_yaw_sp)
-
+    # --- one row in Python floats (the numpy pass below, for one vehicle) -----------------------------
     def _pid_row(self, i: int, inputs: RowInputs, stab_sp: np.ndarray, stab_yaw_sp: np.ndarray) -> None:
         s = self.s
         (px, py, pz), (vx, vy, vz), yaw_deg, thrust_on, _ = inputs
         modes = s.modes[i].tolist()
-        if modes != s.prev_modes[i].tolist() or not thrust_on:
-            s.pos_integ[i] = s.pos_prev[i] = s.vel_integ[i] = s.vel_prev[i] = 0.0
-            s.prev_modes[i] = modes
+        if not thrust_on:
+            self.reset_pids([i], np.array([[px, py, pz]]))
         yaw = math.radians(yaw_deg)
         c, sn = safe_cos(yaw), safe_sin(yaw)
         (sx, sy, sz), (svx, svy, svz) = s.pos[i].tolist(), s.vel[i].tolist()
@@ -330,14 +378,9 @@ class PositionControl:
                     stab_sp: np.ndarray, stab_yaw_sp: np.ndarray, thrust_on: np.ndarray) -> None:
         s = self.s
         modes = s.modes[rows]
-        changed = (modes != s.prev_modes[rows]).any(axis=1) | ~thrust_on[rows]
-        if changed.any():
-            reset = rows[changed]
-            s.pos_integ[reset] = 0.0
-            s.pos_prev[reset] = 0.0
-            s.vel_integ[reset] = 0.0
-            s.vel_prev[reset] = 0.0
-        s.prev_modes[rows] = modes
+        off = ~thrust_on[rows]
+        if off.any():
+            self.reset_pids(rows[off], est_pos[rows[off]])
 
         yaw = np.radians(yaw_deg[rows])
         c, sn = np.cos(yaw), np.sin(yaw)
@@ -393,17 +436,18 @@ class PositionControl:
 
     def _pid(self, rows: np.ndarray, desired: np.ndarray, measured: np.ndarray, gains: np.ndarray, which: str,
              limit: np.ndarray, run: np.ndarray) -> np.ndarray:
-        """The firmware's PID update (D on error, integral limit, output limit) where ``run`` is True."""
+        """The firmware's PID update (derivative on the measurement, integral limit, output limit) where
+        ``run`` is True."""
         s = self.s
         integ_name, prev_name = which + "_integ", which + "_prev"
         integ_all, prev_all = getattr(s, integ_name), getattr(s, prev_name)
         err = desired - measured
         integ = np.minimum(np.maximum(integ_all[rows] + err * DT, -INTEGRATION_LIMIT), INTEGRATION_LIMIT)
-        deriv = (err - prev_all[rows]) / DT
+        deriv = (prev_all[rows] - measured) / DT
         out = gains[:, :, 0] * err + gains[:, :, 1] * integ + gains[:, :, 2] * deriv + gains[:, :, 3] * desired
         out = np.minimum(np.maximum(out, -limit), limit)
         integ_all[rows] = np.where(run, integ, integ_all[rows])
-        prev_all[rows] = np.where(run, err, prev_all[rows])
+        prev_all[rows] = np.where(run, measured, prev_all[rows])
         return out
 
     def targets(self, i: int) -> Dict[str, float]:
@@ -422,10 +466,10 @@ def _pid_step_row(desired: Sequence[float], measured: Sequence[float], gains: Li
     for k in range(3):
         err = desired[k] - measured[k]
         new_integ = clamp(integ[k] + err * DT, -INTEGRATION_LIMIT, INTEGRATION_LIMIT)
-        deriv = (err - prev[k]) / DT
+        deriv = (prev[k] - measured[k]) / DT
         g = gains[k]
         out.append(clamp(g[0] * err + g[1] * new_integ + g[2] * deriv + g[3] * desired[k], -limit[k], limit[k]))
         if run[k]:
-            integ[k], prev[k] = new_integ, err
+            integ[k], prev[k] = new_integ, measured[k]
     integ_all[i], prev_all[i] = integ, prev
     return out

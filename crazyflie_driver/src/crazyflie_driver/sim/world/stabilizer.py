@@ -5,7 +5,10 @@ Follows docs/simulation.md, "The onboard attitude and rate controllers": command
 until a zero-thrust setpoint, the yaw-rate negation, the legacy nose-up-positive pitch), the
 setpoint watchdog (level out after 0.5 s, motors off after 2 s), emergency stop, tumble detection
 (current firmware), attitude PID -> rate PID -> legacy X mixer with the clamping of each firmware
-generation. Battery compensation is taken as ideal: a command means the same thrust at any
+generation. Rows flown by the Mellinger controller (controller 2 with generic or high-level
+setpoints) take their roll, pitch and yaw commands from its attitude law (``mellinger.moments``)
+instead of the PIDs, and rows flown by onboard position control skip the RPYT commander's thrust
+rules. Battery compensation is taken as ideal: a command means the same thrust at any
 battery voltage (docs/simulation.md, "Battery"), so the battery only matters through its cut-off.
 
 Sign conventions of the firmware estimate used here and in the logs: roll right-hand about body x,
@@ -20,6 +23,7 @@ import numpy as np
 
 from crazyflie_driver.crtp.firmware_limits import (MAX_THRUST, MIN_THRUST, SETPOINT_WATCHDOG_CUT_S,
                                                    SETPOINT_WATCHDOG_LEVEL_S)
+from crazyflie_driver.sim.world import mellinger as _mel
 from crazyflie_driver.sim.world.vehicle_rows import Rows
 from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
@@ -101,6 +105,8 @@ class OnboardStates(Rows):
         "sp": ((4,), float),                # roll, pitch, yaw rate, thrust
         "sp_time": ((), float),
         "thrust_locked": ((), bool),        # waits for a zero-thrust setpoint
+        "generic": ((), bool),              # the onboard position controller writes the setpoint row: the
+                                            # RPYT commander's thrust rules (< 1000 -> 0, cap 60000) do not apply
         "lock": ((), np.int8),              # LOCK_*: motors off until reboot (LOCK_TUMBLE: until crash recovery)
         "lock_time": ((), float),           # world time the present lock was set [s]
         # controller state
@@ -119,7 +125,24 @@ class OnboardStates(Rows):
         "upside_time": ((), float),
         "motor_power_enable": ((), bool),
         "motor_power": ((4,), float),
+        # the Mellinger controller's attitude law (rows flown by controller 2 with generic setpoints)
+        "moment_law": ((), bool),           # the roll, pitch, yaw commands come from the law, not the PIDs
+        "mel_axes": ((3, 3), float),        # desired body axes (columns x, y, z) from its position part
+        "mel_rate_sp": ((3,), float),       # the setpoint's body rates (deg/s)
+        "mel_gains": ((len(_mel.ATTITUDE_GAIN_ORDER),), float),
+        "mel_integ_m": ((3,), float),
+        "mel_prev": ((4,), float),          # last roll, pitch rate and their setpoints (rad/s)
     }
+
+    def reset_pids(self, rows, attitude: np.ndarray) -> None:
+        """The firmware PID controller's re-initialisation on a change of setpoint modes: the attitude
+        PIDs restart from ``attitude`` (n,3, deg, firmware convention; integrals 0, last measurement =
+        it) and the rate PIDs from rest (integrals 0, last measurement 0); the yaw setpoint and the
+        outputs of the last step are kept (unlike the motors-off reset)."""
+        self.att_integ[rows] = 0.0
+        self.att_prev[rows] = np.where(self.gen2016[rows, None], 0.0, -attitude)
+        self.rate_integ[rows] = 0.0
+        self.rate_prev[rows] = 0.0
 
     def add(self, firmware: str, now: float, yaw_deg: float = 0.0) -> int:
         i = self.append_row()
@@ -140,6 +163,8 @@ class OnboardStates(Rows):
         self.thrust_locked[i] = True
         self.yaw_sp[i] = yaw_deg
         self.att_prev[i] = (0.0, 0.0, -yaw_deg)
+        self.mel_gains[i] = [_mel.ATTITUDE_DEFAULTS[n] for n in _mel.ATTITUDE_GAIN_ORDER]
+        self.mel_axes[i] = np.eye(3)
 
 
 class OnboardController:
@@ -160,6 +185,8 @@ class OnboardController:
         s.sp_time[i] = now
         if vals[3] == 0.0:
             s.thrust_locked[i] = False
+        s.generic[i] = False
+        s.moment_law[i] = False
         self.dirty = True
 
     def lock(self, i: int, reason: int, now: Optional[float] = None) -> None:
@@ -188,6 +215,9 @@ class OnboardController:
             if field in ("m1", "m2", "m3", "m4"):
                 s.motor_power[i, int(field[1]) - 1] = min(max(float(value), 0.0), 65535.0)
                 return True
+        elif name in _mel.ATTITUDE_DEFAULTS:
+            s.mel_gains[i, _mel.ATTITUDE_GAIN_ORDER.index(name)] = float(value)
+            return True
         elif name == "stabilizer.stop":
             if value:                       # an emergency stop: the supervisor locks until reboot
                 self.lock(i, LOCK_EMERGENCY)
@@ -240,6 +270,8 @@ class OnboardController:
 
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
+        if np.count_nonzero(s.generic):     # the position controller's thrust goes to the mixer as it is
+            thrust = np.where(s.generic, raw, thrust)
         off = s.thrust_locked | (s.lock != LOCK_NONE)
         if np.count_nonzero(off):
             thrust[off] = 0.0
@@ -253,6 +285,8 @@ class OnboardController:
             due = None if tick % (2 * CONTROL_TICKS) == 0 or not np.count_nonzero(s.gen2016) else ~s.gen2016
             self._attitude_loop(due, level)
             self._rate_loop(gyro_deg)
+            if np.count_nonzero(s.moment_law):
+                self._moment_law(body.quaternion, gyro_deg, level)
             idle = thrust <= 0.0
             if np.count_nonzero(idle):
                 self._reset(idle)
@@ -356,9 +390,27 @@ class OnboardController:
         out[:, 2] *= -1.0                                         # yaw output sign-flipped for the mixer
         s.rate_integ, s.rate_prev, s.rate_out = integ, src, out
 
+    def _moment_law(self, quaternion: np.ndarray, gyro_deg: np.ndarray, level) -> None:
+        """Rows flown by the Mellinger controller: its attitude law replaces the attitude and rate PIDs.
+        While the supervisor levels out (stale setpoints) the desired axes are level at the current
+        yaw, as the firmware's controller takes the level-out setpoint."""
+        s = self.s
+        rows = np.flatnonzero(s.moment_law)
+        axes = s.mel_axes[rows]
+        if level is not None and np.count_nonzero(level[rows]):
+            flat = level[rows]
+            yaw = np.radians(s.attitude[rows, 2])
+            up = np.zeros((len(rows), 3))
+            up[:, 2] = 1.0
+            axes = np.where(flat[:, None, None], _mel._axes_towards(up, yaw), axes)
+        s.rate_out[rows], s.mel_integ_m[rows], s.mel_prev[rows] = _mel.moments(
+            s.mel_gains[rows], s.mel_integ_m[rows], s.mel_prev[rows], quaternion[rows], axes, s.mel_rate_sp[rows],
+            gyro_deg[rows])
+
     def _reset(self, rows: np.ndarray) -> None:
         """Motors off: PID states cleared, yaw set-point re-seeded with the current yaw."""
         s = self.s
+        s.mel_integ_m[rows] = 0.0
         s.att_integ[rows] = 0.0
         s.rate_integ[rows] = 0.0
         s.rate_prev[rows] = 0.0
