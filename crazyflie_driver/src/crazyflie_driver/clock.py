@@ -104,6 +104,10 @@ class FollowingClock:
                 return True
 
 
+MANUAL_POLL_S = 0.01
+"""Wall seconds [s] a wait on a ``ManualClock`` blocks at a time before it looks at the time and its event again."""
+
+
 class ManualClock:
     """A clock for tests: time moves only by ``advance`` (or by ``sleep`` when ``sleep_advances``).
 
@@ -132,7 +136,8 @@ class ManualClock:
             return self._t
 
     def wall_bound(self, seconds: float) -> float:
-        return max(0.0, seconds)
+        # Its time jumps when a test advances it: a waiter looks again within MANUAL_POLL_S.
+        return min(max(0.0, seconds), MANUAL_POLL_S)
 
     def sleep(self, seconds: float) -> None:
         self.sleeps.append(seconds)
@@ -154,5 +159,5 @@ class ManualClock:
             while self._t < deadline:
                 if event is not None and event.is_set():
                     return True
-                self._cond.wait(0.01)       # an event set by another thread is seen within 10 ms
+                self._cond.wait(MANUAL_POLL_S)      # an event set by another thread is seen this soon
         return event.is_set() if event is not None else False
