@@ -71,14 +71,18 @@ class FollowingClock:
     ``max_speed``: how many of its seconds may pass per wall second at most (1.0: the followed
     time never runs faster than real time, as a world slowed down for a busy machine). Waits
     sleep ``remaining / max_speed`` wall seconds at a time and re-read the time.
+    ``stopped``: true once the followed time is heard no more (a ROS node shutting down); a wait
+    then ends after what is left of it in wall seconds, so no loop hangs on a time that stands still.
     """
 
-    def __init__(self, now: Callable[[], float], max_speed: float = 1.0) -> None:
+    def __init__(self, now: Callable[[], float], max_speed: float = 1.0,
+                 stopped: Optional[Callable[[], bool]] = None) -> None:
         if not max_speed > 0:
             raise ValueError("max_speed must be > 0 (seconds of followed time per wall second), got %r"
                              % (max_speed,))
         self._now = now
         self.max_speed = float(max_speed)
+        self._stopped = stopped if stopped is not None else (lambda: False)
 
     def now(self) -> float:
         return float(self._now())
@@ -92,6 +96,9 @@ class FollowingClock:
             left = deadline - self.now()
             if left <= 0:
                 return
+            if self._stopped():
+                time.sleep(left / self.max_speed)
+                return
             time.sleep(max(MIN_SLICE_S, left / self.max_speed))
 
     def wait(self, event: threading.Event, seconds: float) -> bool:
@@ -100,6 +107,8 @@ class FollowingClock:
             left = deadline - self.now()
             if left <= 0:
                 return event.is_set()
+            if self._stopped():
+                return event.wait(left / self.max_speed)
             if event.wait(max(MIN_SLICE_S, left / self.max_speed)):
                 return True
 
