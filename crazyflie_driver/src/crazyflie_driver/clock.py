@@ -64,6 +64,9 @@ WALL = WallClock()
 MIN_SLICE_S = 0.0005
 """Shortest wall-clock slice [s] a ``FollowingClock`` waits for at a time (bounds its polling cost)."""
 
+MANUAL_POLL_S = 0.01
+"""Wall seconds [s] a wait on a ``ManualClock`` blocks at a time before it looks at the time and its event again."""
+
 
 class FollowingClock:
     """A clock that reads its time from ``now`` (e.g. ``rospy.get_time`` under ``/use_sim_time``).
@@ -111,10 +114,6 @@ class FollowingClock:
                 return event.wait(left / self.max_speed)
             if event.wait(max(MIN_SLICE_S, left / self.max_speed)):
                 return True
-
-
-MANUAL_POLL_S = 0.01
-"""Wall seconds [s] a wait on a ``ManualClock`` blocks at a time before it looks at the time and its event again."""
 
 
 class ManualClock:

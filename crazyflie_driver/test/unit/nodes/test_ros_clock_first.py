@@ -1,4 +1,4 @@
-"""ros_clock: the wall clock without /use_sim_time (hardware, unchanged), ROS time (the world's /clock) with it."""
+"""ros_clock waits for the first /clock: no timeout is computed from time 0, and none at all is a clear error."""
 from __future__ import annotations
 
 import threading
@@ -8,7 +8,7 @@ import pytest
 
 rospy = pytest.importorskip("rospy")
 
-from crazyflie_driver.clock import WALL, FollowingClock  # noqa: E402
+from crazyflie_driver.clock import FollowingClock  # noqa: E402
 from crazyflie_driver.nodes import ros_clock as rc  # noqa: E402
 
 
@@ -17,11 +17,6 @@ def fake_ros(monkeypatch, sim_time: bool, ros_time):
                         else default)
     monkeypatch.setattr(rc.rospy, "get_time", lambda: ros_time[0])
     monkeypatch.setattr(rc.rospy, "is_shutdown", lambda: False)
-
-
-def test_without_use_sim_time_every_decision_is_on_the_wall_clock(monkeypatch):
-    fake_ros(monkeypatch, False, [1234.5])
-    assert rc.ros_clock() is WALL
 
 
 def test_under_use_sim_time_it_follows_ros_time_once_the_first_clock_came(monkeypatch):
