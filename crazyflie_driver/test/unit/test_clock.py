@@ -96,4 +96,3 @@ def test_manual_clock_blocks_waiters_until_advanced():
 def test_manual_clock_refuses_to_go_back():
     with pytest.raises(ValueError, match="does not go back"):
         ManualClock().advance(-1.0)
-
