@@ -376,10 +376,9 @@ class CrazyflieWorker:
             self._close()
             return False
         self.restarts += 1
-        resume_at = self._clock() + RESTART_DELAY
         with self._cond:
-            while not self._stopping and self._clock() < resume_at:
-                self._cond.wait(self.clock.wall_bound(resume_at - self._clock()))
+            if not self._stopping:      # a pause of at most RESTART_DELAY of the clock (a setpoint ends it)
+                self._cond.wait(self.clock.wall_bound(RESTART_DELAY))
         if self.state == WorkerState.RESTARTING:
             self.state = WorkerState.RUNNING
         return True
