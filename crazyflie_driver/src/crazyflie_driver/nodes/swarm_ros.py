@@ -76,7 +76,7 @@ def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int
 def count_dongles(wait_s: float) -> int:
     """Crazyradios present (the simulated world's once it answers, waiting up to ``wait_s``).
 
-    Wall seconds: until the world answers, its clock may not run yet."""
+    Wall seconds: finding USB devices (or the world's fake ones) is a matter of the host, as on hardware."""
     deadline = time.monotonic() + wait_s
     while True:
         try:
