@@ -5,9 +5,9 @@ and the packets an :class:`~crazyflie_driver.server.safety.Action` becomes (the 
 from __future__ import annotations
 
 import logging
+import time
 from typing import Any, Callable, Optional, Tuple
 
-from crazyflie_driver.clock import WALL
 from crazyflie_driver.crtp.packet import PORT_GENERIC_SETPOINT, CRTPPacket
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.protocol import high_level, setpoints
@@ -73,7 +73,7 @@ class ObservedOnboardCommands(OnboardCommands):
     estimator and the high-level commands it accepted (to choose how to land it)."""
 
     def __init__(self, cf, stream, emergency_active, label: str, monitor: SafetyMonitor,
-                 clock: Callable[[], float] = WALL.now, on_pose: Optional[Callable[[], None]] = None,
+                 clock: Callable[[], float] = time.monotonic, on_pose: Optional[Callable[[], None]] = None,
                  low_level_sent: Optional[Callable[[], int]] = None) -> None:
         super().__init__(cf, stream, emergency_active, label, on_pose=on_pose, low_level_sent=low_level_sent)
         self._monitor = monitor

@@ -218,7 +218,7 @@ class CrazyflieWorker:
             self._cond.notify_all()
         t = self._thread
         if t is not None and t is not threading.current_thread():
-            t.join(timeout)     # wall seconds: how long the caller lends the thread to end its exchange
+            t.join(timeout)
             if t.is_alive():
                 # it closes the link itself when its current radio exchange ends
                 if timeout > 0:
