@@ -21,7 +21,7 @@ class FakeJoystick:
         self.axes = [0] * axes
         self.buttons = [0] * buttons
         self._fd: Optional[int] = None
-        self._t0 = time.monotonic()
+        self._t0 = time.monotonic()       # the kernel's event times: wall clock, as a real device's
         if create and not os.path.exists(path):
             os.mkfifo(path)
 

@@ -207,6 +207,8 @@ class Joystick:
     """Reads one joystick and says when a Joy message is due; no thread, the caller polls.
 
     ``poll(timeout)`` waits at most ``timeout`` seconds and returns the state to publish, or None.
+    A device's timing (waits on its file, autorepeat, reopen attempts) is on the wall clock, as the
+    kernel's; the messages are stamped with ROS time by the node.
     """
 
     def __init__(self, dev: str = "/dev/input/js0", deadzone: float = 0.05,

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from typing import Optional
 
 import rospy
@@ -15,6 +14,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.rosutil import make_goal
+from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 #: The longest time one step integrates [s]: after a stall the goal moves on, it does not jump.
@@ -62,11 +62,12 @@ def main() -> None:
     pub = rospy.Publisher(name, PoseStamped, queue_size=1)
     r = rospy.Rate(rate)
     seq = 0
-    stepped_at = time.monotonic()
+    clock = ros_clock()     # the goal moves at the stick's speed in the world's seconds
+    stepped_at = clock.now()
     while not rospy.is_shutdown():
         with lock:
             axes: Optional[list] = last["axes"]
-        now = time.monotonic()
+        now = clock.now()
         # the time that passed, so the goal moves at the stick's speed also when this loop runs late
         # (one period per loop, as the original node did, slows the goal down on a busy machine)
         dt, stepped_at = min(now - stepped_at, MAX_STEP_S), now

@@ -7,22 +7,23 @@ Crazyflie (``/<cf>/upload_trajectory``, several at once), then: ``/takeoff`` (on
 ``~phase`` (std_msgs/String, JSON, see ``swarm_flight.Phase``) just before its command, for monitors
 and tests.
 
-Waits follow ``~clock_topic`` when set (the simulated world's ``/clock``: phases keep their length
-in world time even when the world runs behind real time), else the wall clock, as on hardware.
+Waits follow ROS time (``ros_clock``: the world's under ``/use_sim_time``), or ``~clock_topic`` when set
+without it (the simulated world's ``/clock``): phases keep their length in world time even when the
+world runs behind real time; else the wall clock, as on hardware.
 ``~height`` (1.0 m), ``~timeout`` (s to wait for the server's services, default 120).
 """
 from __future__ import annotations
 
-import threading
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict
 
 import rospy
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from crazyflie_demo.figure8 import figure8_pieces, trajectory_duration
 from crazyflie_demo.swarm_flight import (FORMATION_S, LAND_S, SETTLE_S, TAKEOFF_HEIGHT_M, TAKEOFF_S, TRAJECTORY_ID,
                                          Phase, pyramid_goals)
+from crazyflie_driver.clock import Clock
+from crazyflie_driver.nodes.ros_clock import ros_clock, topic_clock
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 from crazyflie_driver.server.swarm_config import load_swarm_file
 
@@ -30,34 +31,15 @@ from crazyflie_driver.server.swarm_config import load_swarm_file
 PARALLEL_CALLS = 16
 
 
-class WorldClock:
-    """Sleeps on a /clock topic's time (the simulated world's), or on the wall clock without one."""
-
-    def __init__(self, topic: str = "") -> None:
-        self._now: Optional[float] = None
-        self._cond = threading.Condition()
-        self._sub = rospy.Subscriber(topic, Clock, self._on_clock, queue_size=1) if topic else None
-
-    def _on_clock(self, msg) -> None:
-        with self._cond:
-            self._now = msg.clock.to_sec()
-            self._cond.notify_all()
-
-    def sleep(self, seconds: float) -> bool:
-        """False when the node shuts down first."""
-        if self._sub is None:
-            try:
-                rospy.sleep(seconds)
-                return True
-            except rospy.ROSInterruptException:
-                return False
-        with self._cond:
-            while self._now is None and not shutting_down():
-                self._cond.wait(0.1)
-            end = (self._now or 0.0) + seconds
-            while (self._now or 0.0) < end and not shutting_down():
-                self._cond.wait(0.1)
-        return not shutting_down()
+def pause(clock: Clock, seconds: float) -> bool:
+    """``seconds`` of ``clock``'s time; False when the node shuts down first (looked at every 0.1 s)."""
+    end = clock.now() + seconds
+    while not shutting_down():
+        left = end - clock.now()
+        if left <= 0:
+            return True
+        clock.sleep(min(left, 0.1))
+    return False
 
 
 def _pieces_msg():
@@ -72,7 +54,7 @@ def _pieces_msg():
     return out
 
 
-def fly(names, initial: Dict[str, tuple], announce: Callable[[Phase], None], clock: WorldClock,
+def fly(names, initial: Dict[str, tuple], announce: Callable[[Phase], None], clock: Clock,
         timeout: float, height: float = TAKEOFF_HEIGHT_M) -> bool:
     """The whole flight; False (logged) when a service is missing or refuses."""
     from crazyflie_driver.srv import GoTo, Land, StartTrajectory, Takeoff, UploadTrajectory
@@ -97,24 +79,24 @@ def fly(names, initial: Dict[str, tuple], announce: Callable[[Phase], None], clo
 
         announce(Phase("takeoff", TAKEOFF_S, height))
         rospy.ServiceProxy("/takeoff", Takeoff)(0, height, rospy.Duration.from_sec(TAKEOFF_S))
-        if not clock.sleep(TAKEOFF_S + SETTLE_S):
+        if not pause(clock, TAKEOFF_S + SETTLE_S):
             return False
 
         announce(Phase("figure8", duration))
         rospy.ServiceProxy("/start_trajectory", StartTrajectory)(0, TRAJECTORY_ID, 1.0, False, True)
-        if not clock.sleep(duration + SETTLE_S):
+        if not pause(clock, duration + SETTLE_S):
             return False
 
         goals = pyramid_goals({n: (initial[n][0], initial[n][1], height) for n in names}, height)
         announce(Phase("formation", FORMATION_S, goals=goals))
         each(names, lambda n: rospy.ServiceProxy("/%s/go_to" % n, GoTo)(
             0, False, _point(goals[n]), 0.0, rospy.Duration.from_sec(FORMATION_S)))
-        if not clock.sleep(FORMATION_S + SETTLE_S):
+        if not pause(clock, FORMATION_S + SETTLE_S):
             return False
 
         announce(Phase("land", LAND_S, 0.0))
         rospy.ServiceProxy("/land", Land)(0, 0.0, rospy.Duration.from_sec(LAND_S))
-        if not clock.sleep(LAND_S + SETTLE_S):
+        if not pause(clock, LAND_S + SETTLE_S):
             return False
     except (rospy.ServiceException, rospy.ROSException) as e:
         if not shutting_down():
@@ -156,7 +138,12 @@ def main() -> None:
                       " (%.1f s)" % phase.duration if phase.duration else "")
         pub.publish(String(phase.to_json()))
 
-    clock = WorldClock(str(rospy.get_param("~clock_topic", "")))
+    topic = str(rospy.get_param("~clock_topic", ""))
+    try:
+        clock = topic_clock(topic) if topic else ros_clock()
+    except RuntimeError as e:       # no /clock from the world
+        rospy.logfatal("swarm_demo: %s", e)
+        raise SystemExit(1)
     ok = fly(names, initial, announce, clock, float(rospy.get_param("~timeout", 120.0)),
              float(rospy.get_param("~height", TAKEOFF_HEIGHT_M)))
     if not ok and not shutting_down():

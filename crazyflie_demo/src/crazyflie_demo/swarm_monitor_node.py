@@ -6,7 +6,8 @@ time it hears of it and then at the world time each Crazyflie's commander began 
 every Crazyflie's true position with its plan (``swarm_flight.Flight``). At ``done``: a summary line
 per phase on the console, the plot (``~plot``, PNG) and ``ok`` or the reason in ``~result_file``;
 then it exits, which ends the launch (it is the required node of ``swarm.launch monitor:=true``).
-``~timeout`` (s) bounds the whole flight; ``~stats_file``: the figures as JSON too (benchmarks).
+``~timeout`` (s) bounds the whole flight; ``~stats_file``: the figures as JSON too (benchmarks). Its
+pacing and timeout are in ROS time (``ros_clock``: the world's under ``/use_sim_time``).
 
 Verdict: every Crazyflie above 80 % of the takeoff height when the takeoff has settled, the
 figure-8's swarm-mean tracking error below ``~max_figure8_error`` (m, 0.05), every Crazyflie back on
@@ -16,13 +17,14 @@ from __future__ import annotations
 
 import json
 import threading
-import time
 from typing import Dict, List, Optional
 
 import rospy
 from std_msgs.msg import String
 
 from crazyflie_demo.swarm_flight import Flight, Phase, plot_flight
+from crazyflie_driver.clock import WALL, Clock
+from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 from crazyflie_driver.server.swarm_config import load_swarm_file
 
@@ -31,15 +33,18 @@ START_READ_DELAY_S = 1.0        # world time after an announcement when every Cr
 
 
 class SwarmRecorder:
-    """World truth → ``Flight``; usable from a test (no ROS in the constructor but the subscriber)."""
+    """World truth → ``Flight``; usable from a test (no ROS in the constructor but the subscriber).
+    ``clock`` paces the polls and the waits."""
 
-    def __init__(self, initial: Dict[str, tuple], sim_address: str, phase_topic: str, rate: float = 50.0) -> None:
+    def __init__(self, initial: Dict[str, tuple], sim_address: str, phase_topic: str, rate: float = 50.0,
+                 clock: Clock = WALL) -> None:
         from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address
 
         host, port = parse_address(sim_address)
         self.medium = RemoteMedium(host, port)
         self.flight = Flight(initial)
         self.rate = float(rate)
+        self.clock = clock
         self.lock = threading.Lock()
         self.phases: List[Phase] = []
         self.done = threading.Event()
@@ -60,7 +65,7 @@ class SwarmRecorder:
             index = self.flight.phase(phase, anchor)
             self.phases.append(phase)
         if phase.name == "done":
-            self.starts_known.wait(5.0)
+            self.clock.wait(self.starts_known, 5.0)
             self.done.set()
         else:
             self.starts_known.clear()
@@ -70,7 +75,7 @@ class SwarmRecorder:
         """Once the command had time to arrive: when each Crazyflie's commander began it (world time)."""
         try:
             while self._world_time() < anchor + START_READ_DELAY_S and not self._stop.is_set():
-                time.sleep(0.05)
+                self.clock.sleep(0.05)
             for name in list(self.flight.tracks):
                 begin = float(self.medium.control("vehicle_state", uri=name)["plan_begin"])
                 if begin >= anchor - 1e-3:           # else the command never reached it: the anchor stays
@@ -85,18 +90,18 @@ class SwarmRecorder:
     def _poll(self) -> None:
         period = 1.0 / self.rate
         while not self._stop.is_set():
-            t0 = time.monotonic()
+            t0 = self.clock.now()
             try:
                 poses = self.medium.control("poses")
             except Exception as e:           # the world went away: the flight is over for us
                 if not self._stop.is_set() and not shutting_down():
                     rospy.logwarn_throttle(5.0, "swarm_monitor: cannot read the world: %s" % e)
-                self._stop.wait(0.5)
+                self.clock.wait(self._stop, 0.5)
                 continue
             with self.lock:
                 self.last_poses = poses
                 self.flight.sample(poses["time"], dict(zip(poses["names"], poses["positions"])))
-            self._stop.wait(max(0.0, period - (time.monotonic() - t0)))
+            self.clock.wait(self._stop, max(0.0, period - (self.clock.now() - t0)))
 
     def stop(self) -> None:
         self._stop.set()
@@ -138,18 +143,19 @@ def main() -> None:
     initial = {cf.name: cf.initial_position for cf in config.crazyflies}
     recorder = SwarmRecorder(initial, str(rospy.get_param("~sim_address", "127.0.0.1:19840")),
                              str(rospy.get_param("~phase_topic", "/swarm_demo/phase")),
-                             float(rospy.get_param("~rate", 50.0)))
+                             float(rospy.get_param("~rate", 50.0)), ros_clock())
     timeout = float(rospy.get_param("~timeout", 300.0))
     plot = str(rospy.get_param("~plot", ""))
     result_file = str(rospy.get_param("~result_file", ""))
-    started = time.monotonic()
-    while not recorder.done.wait(0.5):
+    clock = recorder.clock
+    started = clock.now()
+    while not clock.wait(recorder.done, 0.5):
         if shutting_down():
             recorder.stop()
             return
-        if time.monotonic() - started > timeout:
+        if clock.now() - started > timeout:
             break
-    time.sleep(0.5)                # the last samples after touchdown
+    clock.sleep(0.5)                # the last samples after touchdown
     recorder.stop()
     result = recorder.verdict(float(rospy.get_param("~height", 1.0)),
                               float(rospy.get_param("~max_figure8_error", 0.05))) \

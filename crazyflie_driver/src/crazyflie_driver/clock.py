@@ -64,6 +64,9 @@ WALL = WallClock()
 MIN_SLICE_S = 0.0005
 """Shortest wall-clock slice [s] a ``FollowingClock`` waits for at a time (bounds its polling cost)."""
 
+MANUAL_POLL_S = 0.01
+"""Wall seconds [s] a wait on a ``ManualClock`` blocks at a time before it looks at the time and its event again."""
+
 
 class FollowingClock:
     """A clock that reads its time from ``now`` (e.g. ``rospy.get_time`` under ``/use_sim_time``).
@@ -71,14 +74,18 @@ class FollowingClock:
     ``max_speed``: how many of its seconds may pass per wall second at most (1.0: the followed
     time never runs faster than real time, as a world slowed down for a busy machine). Waits
     sleep ``remaining / max_speed`` wall seconds at a time and re-read the time.
+    ``stopped``: true once the followed time is heard no more (a ROS node shutting down); a wait
+    then ends after what is left of it in wall seconds, so no loop hangs on a time that stands still.
     """
 
-    def __init__(self, now: Callable[[], float], max_speed: float = 1.0) -> None:
+    def __init__(self, now: Callable[[], float], max_speed: float = 1.0,
+                 stopped: Optional[Callable[[], bool]] = None) -> None:
         if not max_speed > 0:
             raise ValueError("max_speed must be > 0 (seconds of followed time per wall second), got %r"
                              % (max_speed,))
         self._now = now
         self.max_speed = float(max_speed)
+        self._stopped = stopped if stopped is not None else (lambda: False)
 
     def now(self) -> float:
         return float(self._now())
@@ -92,6 +99,9 @@ class FollowingClock:
             left = deadline - self.now()
             if left <= 0:
                 return
+            if self._stopped():
+                time.sleep(left / self.max_speed)
+                return
             time.sleep(max(MIN_SLICE_S, left / self.max_speed))
 
     def wait(self, event: threading.Event, seconds: float) -> bool:
@@ -100,6 +110,8 @@ class FollowingClock:
             left = deadline - self.now()
             if left <= 0:
                 return event.is_set()
+            if self._stopped():
+                return event.wait(left / self.max_speed)
             if event.wait(max(MIN_SLICE_S, left / self.max_speed)):
                 return True
 
@@ -132,7 +144,8 @@ class ManualClock:
             return self._t
 
     def wall_bound(self, seconds: float) -> float:
-        return max(0.0, seconds)
+        # Its time jumps when a test advances it: a waiter looks again within MANUAL_POLL_S.
+        return min(max(0.0, seconds), MANUAL_POLL_S)
 
     def sleep(self, seconds: float) -> None:
         self.sleeps.append(seconds)
@@ -154,5 +167,5 @@ class ManualClock:
             while self._t < deadline:
                 if event is not None and event.is_set():
                     return True
-                self._cond.wait(0.01)       # an event set by another thread is seen within 10 ms
+                self._cond.wait(MANUAL_POLL_S)      # an event set by another thread is seen this soon
         return event.is_set() if event is not None else False

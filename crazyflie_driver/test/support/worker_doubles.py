@@ -193,10 +193,10 @@ def wait_for(cond, timeout=2.0):
     return cond()
 
 
-def started(cf=None, config=None, listener=None, **kw):
+def started(cf=None, config=None, listener=None, ready_timeout=2.0, **kw):
     cf = cf or FakeCrazyflie()
     listener = listener or Recorder()
     w = CrazyflieWorker(config or WorkerConfig(uri=cf.uri, tf_prefix="cf1"), cf, listener, **kw)
     w.start()
-    w.wait_ready(2.0)
+    w.wait_ready(ready_timeout)
     return w, cf, listener

@@ -54,6 +54,23 @@ def test_following_clock_refuses_a_speed_that_is_not_positive():
         FollowingClock(lambda: 0.0, max_speed=0.0)
 
 
+def test_following_clock_waits_out_on_the_wall_clock_once_its_time_is_heard_no_more():
+    """A node shutting down hears no /clock: a sleep or wait ends after its wall seconds, never hangs."""
+    shut = threading.Event()
+    clock = FollowingClock(lambda: 7.0, stopped=shut.is_set)     # the followed time stands still
+    ev = threading.Event()
+    threading.Timer(0.05, shut.set).start()
+    t0 = time.monotonic()
+    assert clock.wait(ev, 0.2) is False
+    clock.sleep(0.2)
+    assert 0.35 <= time.monotonic() - t0 < 1.0                  # each wait its 0.2 s, not forever
+
+
+def test_manual_clock_waiters_on_their_own_condition_look_again_within_a_slice():
+    clock = ManualClock()
+    assert clock.wall_bound(5.0) <= 0.01 and clock.wall_bound(-1.0) == 0.0
+
+
 def test_manual_clock_sleep_advances_and_records():
     clock = ManualClock(start=10.0)
     clock.sleep(0.25)

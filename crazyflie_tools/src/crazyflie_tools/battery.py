@@ -19,7 +19,7 @@ def _battery(args) -> int:
         samples = []
         block = cf.log.create_block([VBAT], PERIOD_MS, lambda ts, values: samples.append(values[0]))
         wait = max(args.timeout, 3 * PERIOD_MS / 1000.0)
-        deadline = time.monotonic() + wait
+        deadline = time.monotonic() + wait      # wall clock: a tool without ROS, timed for the person waiting
         while not samples and time.monotonic() < deadline:
             cf.send_keepalive()
             time.sleep(0.002)

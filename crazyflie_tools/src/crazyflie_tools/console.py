@@ -25,7 +25,7 @@ def _console(args) -> int:
     cf.console.on_text(_write)   # before connect: the boot text arrives right away
     cf.connect()
     try:
-        deadline = time.monotonic() + args.seconds
+        deadline = time.monotonic() + args.seconds      # wall clock: the person's --seconds (no ROS here)
         while time.monotonic() < deadline:
             cf.send_keepalive()
             time.sleep(POLL_PAUSE_S)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
+from crazyflie_driver.clock import WALL
 from crazyflie_driver.mocap import vrpn_protocol as vp
 from crazyflie_driver.mocap.frames import (quaternion_to_rotation_vector, y_up_to_z_up_quaternion, y_up_to_z_up_vector)
 from crazyflie_driver.mocap.names import clean_tracker_name, frame_name
@@ -124,7 +124,7 @@ class TwistOut:
 class VrpnBridge:
     """Turns client reports into publish-ready records; thread safe for one reader thread."""
 
-    def __init__(self, config: VrpnNodeConfig, clock: Callable[[], float] = time.monotonic,
+    def __init__(self, config: VrpnNodeConfig, clock: Callable[[], float] = WALL.now,
                  log: Optional[LogFn] = None) -> None:
         self.config = config
         self.clock = clock

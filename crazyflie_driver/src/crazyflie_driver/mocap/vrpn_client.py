@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
+from crazyflie_driver.clock import WALL
 from crazyflie_driver.mocap import vrpn_protocol as vp
 
 LogFn = Callable[[int, str], None]
@@ -246,7 +247,7 @@ class VrpnSession:
             self._warn("callback", "VRPN: callback %s failed: %r" % (getattr(fn, "__name__", fn), e))
 
     def _warn(self, key: str, text: str, period: float = 5.0) -> None:
-        now = time.monotonic()
+        now = time.monotonic()      # wall clock: how often a person is told
         if now >= self._warned_at.get(key, 0.0):
             self._warned_at[key] = now + period
             self._log(logging.WARNING, text)
@@ -259,7 +260,9 @@ class VrpnClient:
     Server absent, refusing, closing or sending a broken stream: the connection is closed, the
     id maps are cleared and the client connects again after a delay that doubles from
     ``retry_min`` up to ``retry_max`` (back to ``retry_min`` after a connection that lasted
-    ``stable_after`` s). It never raises out of its thread. ``clock`` stamps ``receive_time``.
+    ``stable_after`` s). It never raises out of its thread. ``clock`` stamps ``receive_time`` (the time
+    staleness is judged on: ROS time in a node); the connection's timeouts and back-off are network
+    matters, on the wall clock.
     """
 
     def __init__(self, host: str = "localhost", port: int = vp.DEFAULT_PORT,
@@ -270,7 +273,7 @@ class VrpnClient:
                  on_text: Optional[Callable[[str, int, str], None]] = None,
                  log: LogFn = _default_log, connect_timeout: float = 3.0,
                  retry_min: float = 0.5, retry_max: float = 8.0, stable_after: float = 2.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = WALL.now) -> None:
         if not 0 < int(port) < 65536:
             raise ValueError("VRPN port must be 1..65535, got %r" % (port,))
         self.host = host
@@ -346,7 +349,7 @@ class VrpnClient:
                           "there?); retrying in %.2f s" % (self.address, self.last_error, delay))
                 delay = self._wait(delay)
                 continue
-            started = time.monotonic()
+            started = time.monotonic()      # wall clock, as the back-off: a network matter
             self.connections += 1
             self._log(logging.INFO, "VRPN: connected to %s (server version %s)"
                       % (self.address, self.server_version))

@@ -34,6 +34,7 @@ from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCrazyflie,
                                   RemoveCrazyflieResponse, UpdateParams, UpdateParamsResponse)
 
+from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
 from crazyflie_driver.errors import UnknownName
@@ -49,6 +50,7 @@ from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.swarm_ros import start_swarm
+from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.server.onboard_commands import OnboardCommands, known_group_mask
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
@@ -59,6 +61,9 @@ GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
 XMLRPC_INT_MAX = 2 ** 31 - 1
 DIAGNOSTICS_PERIOD = 1.0        # s between /diagnostics messages
+#: Wall seconds [s] the clock may stand still while the shutdown waits for landings: a simulated world
+#: that stopped publishing /clock (it was shut down first) lands nothing more.
+CLOCK_STALL_S = 2.0
 
 
 def namespace(tf_prefix: str) -> str:
@@ -141,7 +146,7 @@ class RosCrazyflie(WorkerListener):
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
         self._onboard = RosOnboardCommands(self.ns, config.uri, ObservedOnboardCommands(
             worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri, worker.safety,
-            on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent,
+            clock=worker.clock.now, on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent,
             group_mask=known_group_mask(worker.param_values)))
         self.publish_status()
 
@@ -347,10 +352,12 @@ def config_from_request(req) -> WorkerConfig:
 
 
 class CrazyflieServer:
-    """The services of the server and the ROS objects of each Crazyflie."""
+    """The services of the server and the ROS objects of each Crazyflie. ``clock``: the one the
+    registry's workers run on (``ros_clock()``), which also times the diagnostics and the shutdown."""
 
-    def __init__(self, registry: CrazyflieRegistry, add_timeout: float) -> None:
+    def __init__(self, registry: CrazyflieRegistry, add_timeout: float, clock: Clock = WALL) -> None:
         self.registry = registry
+        self.clock = clock
         self.add_timeout = add_timeout
         # An empty tf_prefix makes every name of that Crazyflie global: only when asked for.
         self.allow_empty_tf_prefix = bool(rospy.get_param("~allow_empty_tf_prefix", False))
@@ -418,7 +425,7 @@ class CrazyflieServer:
                 arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, hardware_id=key, message=(
                     "diagnostics failed: %r" % e), name="crazyflie_server: %s" % (ros.config.tf_prefix or key)))
             by_dongle.setdefault(parse_uri(key).index, []).append((key, ros))
-        now = time.monotonic()
+        now = self.clock.now()
         for index in sorted(set(by_dongle) | set(broadcasts)):
             members = by_dongle.get(index, [])
             window = self._radio_windows.setdefault(index, CounterWindow())
@@ -435,7 +442,7 @@ class CrazyflieServer:
 
     def _diagnostics_loop(self) -> None:
         while not shutting_down():
-            time.sleep(DIAGNOSTICS_PERIOD)
+            self.clock.sleep(DIAGNOSTICS_PERIOD)
             try:
                 with self._lock:
                     served = list(self._ros.values())
@@ -563,9 +570,16 @@ class CrazyflieServer:
             return
         rospy.logwarn("crazyflie_server: %s: bringing down %s within %.1f s"
                       % (why, ", ".join(w.uri for w in flying), budget))
-        deadline = time.monotonic() + budget
-        while time.monotonic() < deadline and not all(w.safe_to_close() for w in flying):
-            time.sleep(0.02)
+        deadline = self.clock.now() + budget
+        seen, moved_at = self.clock.now(), time.monotonic()     # wall clock: is the clock still moving?
+        while self.clock.now() < deadline and not all(w.safe_to_close() for w in flying):
+            time.sleep(self.clock.wall_bound(0.02))     # a slice at most: a stopped clock must not block here
+            if self.clock.now() != seen:
+                seen, moved_at = self.clock.now(), time.monotonic()
+            elif time.monotonic() - moved_at > CLOCK_STALL_S:
+                rospy.logerr("crazyflie_server: the clock stopped for %.0f s (the simulated world is gone?): "
+                             "not waiting for the landings any longer" % CLOCK_STALL_S)
+                break
         left = [w.uri for w in flying if not w.safe_to_close()]
         if left:
             rospy.logerr("crazyflie_server: %s still descending when the shutdown budget ran out" % ", ".join(left))
@@ -575,8 +589,8 @@ class CrazyflieServer:
         self.registry.shutdown()
 
 
-def make_factory(timeout: float):
-    """Crazyflies sharing one RadioManager (one SharedRadio per dongle)."""
+def make_factory(timeout: float, clock: Clock = WALL):
+    """Crazyflies sharing one RadioManager (one SharedRadio per dongle), their request timeouts on ``clock``."""
     from crazyflie_driver.protocol.crazyflie import Crazyflie
     from crazyflie_driver import usb_choice
 
@@ -584,7 +598,7 @@ def make_factory(timeout: float):
     cache_dir = os.environ.get("CRAZYFLIE_TOC_CACHE") or None
 
     def factory(uri: str):
-        return Crazyflie(uri, radio_manager=manager, cache_dir=cache_dir, timeout=timeout)
+        return Crazyflie(uri, radio_manager=manager, cache_dir=cache_dir, timeout=timeout, clock=clock)
     return factory
 
 
@@ -598,9 +612,11 @@ def forward_library_log() -> None:
 
 
 def start_server(timeout: float, add_timeout: float) -> CrazyflieServer:
-    """The services and the diagnostics of a server in this (already initialised) node."""
+    """The services and the diagnostics of a server in this (already initialised) node, timed on ROS time
+    (``ros_clock``: the world's in a simulation under /use_sim_time, else the wall clock)."""
     forward_library_log()
-    server = CrazyflieServer(CrazyflieRegistry(make_factory(timeout)), add_timeout)
+    clock = ros_clock()
+    server = CrazyflieServer(CrazyflieRegistry(make_factory(timeout, clock), {"clock": clock}), add_timeout, clock)
     # before rospy's shutdown flag rises: rospy.spin() keeps the process alive while they land
     rospy.core.add_preshutdown_hook(server.land_all)
     rospy.on_shutdown(server.shutdown)

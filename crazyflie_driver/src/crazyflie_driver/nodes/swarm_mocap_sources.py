@@ -8,16 +8,16 @@
   ``/vrpn_client_node/{name}/pose``, as vrpn_client_ros publishes).
 
 Each pose is handed to ``on_pose(name, position, orientation, received)`` with the arrival time on
-the monotonic clock.
+the server's clock (ROS time: the world's in a simulation).
 """
 from __future__ import annotations
 
-import time
 from typing import Callable, Dict, List
 
 import rospy
 from geometry_msgs.msg import PoseStamped
 
+from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.mocap.vrpn_client import PoseReport, VrpnClient, parse_server
 from crazyflie_driver.server.swarm_options import SwarmOptions
 
@@ -25,7 +25,7 @@ OnPose = Callable[..., bool]
 
 
 class _VrpnSource:
-    def __init__(self, server: str, names: Dict[str, str], on_pose: OnPose) -> None:
+    def __init__(self, server: str, names: Dict[str, str], on_pose: OnPose, clock: Clock) -> None:
         host, port = parse_server(server)
 
         def report(r: PoseReport) -> None:
@@ -33,7 +33,7 @@ class _VrpnSource:
             if name is not None:
                 on_pose(name, r.position, r.orientation, r.receive_time)
 
-        self.client = VrpnClient(host, port, trackers=list(names), on_pose=report,
+        self.client = VrpnClient(host, port, trackers=list(names), on_pose=report, clock=clock.now,
                                  log=lambda level, text: rospy.logwarn("swarm mocap: %s", text) if level >= 30
                                  else rospy.logdebug("swarm mocap: %s", text)).start()
 
@@ -42,14 +42,14 @@ class _VrpnSource:
 
 
 class _TfSource:
-    def __init__(self, world_frame: str, names: Dict[str, str], on_pose: OnPose) -> None:
+    def __init__(self, world_frame: str, names: Dict[str, str], on_pose: OnPose, clock: Clock) -> None:
         from tf2_msgs.msg import TFMessage
 
         frames = {f.strip("/"): n for f, n in names.items()}
         world = world_frame.strip("/")
 
         def on_tf(msg) -> None:
-            now = time.monotonic()
+            now = clock.now()
             for t in msg.transforms:
                 name = frames.get(t.child_frame_id.strip("/"))
                 if name is not None and t.header.frame_id.strip("/") == world:
@@ -63,11 +63,11 @@ class _TfSource:
 
 
 class _TopicSource:
-    def __init__(self, names: Dict[str, str], on_pose: OnPose) -> None:
+    def __init__(self, names: Dict[str, str], on_pose: OnPose, clock: Clock) -> None:
         def callback(name: str):
             def on_msg(msg: PoseStamped) -> None:
                 p, q = msg.pose.position, msg.pose.orientation
-                on_pose(name, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), time.monotonic())
+                on_pose(name, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), clock.now())
             return on_msg
 
         self.subs: List[rospy.Subscriber] = [
@@ -79,10 +79,11 @@ class _TopicSource:
             s.unregister()
 
 
-def start(options: SwarmOptions, names: Dict[str, str], on_pose: OnPose):
-    """The source ``options.mocap`` asks for; ``names``: source name (tracker, frame, topic) -> Crazyflie."""
+def start(options: SwarmOptions, names: Dict[str, str], on_pose: OnPose, clock: Clock = WALL):
+    """The source ``options.mocap`` asks for; ``names``: source name (tracker, frame, topic) -> Crazyflie;
+    ``clock`` stamps each pose's arrival."""
     if options.mocap == "vrpn":
-        return _VrpnSource(options.vrpn_server, names, on_pose)
+        return _VrpnSource(options.vrpn_server, names, on_pose, clock)
     if options.mocap == "tf":
-        return _TfSource(options.world_frame, names, on_pose)
-    return _TopicSource(names, on_pose)
+        return _TfSource(options.world_frame, names, on_pose, clock)
+    return _TopicSource(names, on_pose, clock)

@@ -10,6 +10,7 @@ and on ``/diagnostics``.
 """
 from __future__ import annotations
 
+import functools
 import math
 import statistics
 import threading
@@ -22,6 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver import usb_choice
+from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import CommandValueError, CrazyflieError
 from crazyflie_driver.nodes import swarm_mocap_sources
@@ -72,7 +74,9 @@ def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int
 
 
 def count_dongles(wait_s: float) -> int:
-    """Crazyradios present (the simulated world's once it answers, waiting up to ``wait_s``)."""
+    """Crazyradios present (the simulated world's once it answers, waiting up to ``wait_s``).
+
+    Wall seconds: finding USB devices (or the world's fake ones) is a matter of the host, as on hardware."""
     deadline = time.monotonic() + wait_s
     while True:
         try:
@@ -89,10 +93,11 @@ def count_dongles(wait_s: float) -> int:
 
 
 class RosSwarm:
-    """Swarm mode inside a running ``CrazyflieServer``."""
+    """Swarm mode inside a running ``CrazyflieServer``, timed on the server's clock."""
 
     def __init__(self, server, options: SwarmOptions, config: SwarmConfig) -> None:
         self.server = server
+        self.clock: Clock = getattr(server, "clock", WALL)
         self.options = options
         self.config = config
         self.members: List[SwarmMember] = []
@@ -109,7 +114,7 @@ class RosSwarm:
         self._link_ok: Dict[str, bool] = {}
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self._first_fixes: Optional[ThreadPoolExecutor] = None
-        self.placement = estimator_placement.EstimatorPlacement()
+        self.placement = estimator_placement.EstimatorPlacement(self.clock)
         self._placement_attempts: Dict[str, int] = {}      # failed initial-position writes, per Crazyflie
         self.heartbeat: Optional[Heartbeat] = None
         self._pose_periods: Dict[str, int] = {}
@@ -118,7 +123,7 @@ class RosSwarm:
     def start(self) -> None:
         if not rospy.has_param("~budget_setpoint_rate"):
             self.server.budget_setpoint_rate = 0.0     # nothing streams setpoints in swarm mode
-        t0 = time.monotonic()
+        t0 = self.clock.now()
         by_name = {cf.tf_prefix: cf for cf in self.config.crazyflies}
         self._pose_periods = pose_periods(self.config, self.options)
         for period in sorted(set(self._pose_periods.values())):
@@ -127,7 +132,7 @@ class RosSwarm:
                           " (radio budget)" if self.options.pose_period_ms is None else "")
         with ThreadPoolExecutor(max_workers=max(1, min(64, len(by_name)))) as pool:
             results = list(pool.map(self._add, self.config.crazyflies))
-        self.connect_s = time.monotonic() - t0
+        self.connect_s = self.clock.now() - t0
         for cf, (member, error) in zip(self.config.crazyflies, results):
             if member is not None:
                 self.members.append(member)
@@ -142,12 +147,14 @@ class RosSwarm:
         version = min(m.worker.cf.protocol_version for m in self.members)
         self.broadcaster = SwarmBroadcaster([m.uri for m in self.members], version, usb_choice.radio_manager(),
                                             repeats=self.options.broadcast_repeats,
-                                            interval_s=self.options.broadcast_interval)
+                                            interval_s=self.options.broadcast_interval, sleep=self.clock.sleep)
         self.broadcaster.open()
-        self.commands = SwarmCommands(self.live_members, self.broadcaster, observe=observe_in_safety,
-                                      refusal=refusal_in_safety, height=height_in_safety)
+        self.commands = SwarmCommands(self.live_members, self.broadcaster,
+                                      observe=functools.partial(observe_in_safety, clock=self.clock),
+                                      refusal=functools.partial(refusal_in_safety, clock=self.clock),
+                                      height=functools.partial(height_in_safety, clock=self.clock))
         if self.options.emergency_watchdog:
-            self.heartbeat = Heartbeat(self.broadcaster.watchdog).start()
+            self.heartbeat = Heartbeat(self.broadcaster.watchdog, clock=self.clock).start()
         self._advertise()
         self._start_mocap({m.name: m.uri for m in self.members})
         threading.Thread(target=self._watch_loop, name="swarm watch", daemon=True).start()
@@ -276,7 +283,8 @@ class RosSwarm:
         self.stream = MocapStream(uris, self.broadcaster.send_poses, self.options.position_only,
                                   on_first_fix=self._first_fix, on_pose=self._pose_seen,
                                   radio_of=lambda uri: parse_uri(uri).index,
-                                  frame_periods={b.dongle: 1.0 / b.frames_hz for b in plan}).start()
+                                  frame_periods={b.dongle: 1.0 / b.frames_hz for b in plan},
+                                  clock=self.clock.now, sleep=self.clock.sleep).start()
         names = {self.options.mocap_pattern.format(name=name): name for name in uris}
         monitors = {m.name: m.worker.safety for m in self.members}
         stream = self.stream
@@ -285,9 +293,9 @@ class RosSwarm:
             taken = stream.pose(name, position, orientation, received)
             monitor = monitors.get(name)
             if taken and monitor is not None:     # the height a safety landing starts from
-                monitor.note_pose(time.monotonic(), position[2])
+                monitor.note_pose(self.clock.now(), position[2])
             return taken
-        self._sources.append(swarm_mocap_sources.start(self.options, names, pose))
+        self._sources.append(swarm_mocap_sources.start(self.options, names, pose, self.clock))
 
     def _pose_seen(self, name: str, now: float) -> None:
         with self._watch_lock:
@@ -326,9 +334,9 @@ class RosSwarm:
     # -- watching -----------------------------------------------------------------------------------
     def _watch_loop(self) -> None:
         while not shutting_down():
-            time.sleep(WATCH_PERIOD_S)
+            self.clock.sleep(WATCH_PERIOD_S)
             try:
-                self._check(time.monotonic())
+                self._check(self.clock.now())
             except Exception as e:      # never let bookkeeping end the watch
                 rospy.logerr_throttle(5.0, "swarm: watch failed: %r" % (e,))
 
@@ -380,7 +388,7 @@ class RosSwarm:
                     rospy.loginfo("swarm: %s: land not needed: %s", member.name, e)
                     return
                 rospy.logwarn_throttle(2.0, "swarm: %s: land (%s) not delivered yet: %s" % (member.name, reason, e))
-            time.sleep(0.1)
+            self.clock.sleep(0.1)
 
     # -- diagnostics --------------------------------------------------------------------------------
     def diagnostics(self, now: float) -> DiagnosticArray:
@@ -434,9 +442,9 @@ class RosSwarm:
 
     def _diagnostics_loop(self) -> None:
         while not shutting_down():
-            time.sleep(DIAGNOSTICS_PERIOD_S)
+            self.clock.sleep(DIAGNOSTICS_PERIOD_S)
             try:
-                publish_unless_shutting_down(self._diag_pub, self.diagnostics(time.monotonic()))
+                publish_unless_shutting_down(self._diag_pub, self.diagnostics(self.clock.now()))
             except Exception as e:
                 rospy.logerr_throttle(10.0, "swarm: diagnostics failed: %r" % (e,))
 
@@ -456,22 +464,22 @@ class RosSwarm:
             self.broadcaster.close()
 
 
-def observe_in_safety(targets, what: str, duration: float) -> None:
+def observe_in_safety(targets, what: str, duration: float, clock: Clock = WALL) -> None:
     """Each addressed Crazyflie's safety monitor learns of a swarm command (it flies, or lands by itself),
     so that a reaction (battery, shutdown) knows it is in the air and never lands it twice."""
-    now = time.monotonic()
+    now = clock.now()
     for m in targets:
         m.worker.safety.note_high_level(now, what, duration)
 
 
-def refusal_in_safety(member: SwarmMember, what: str) -> Optional[str]:
+def refusal_in_safety(member: SwarmMember, what: str, clock: Clock = WALL) -> Optional[str]:
     """Why a swarm command must not reach this Crazyflie now (a landing under way), from its safety monitor."""
-    return member.worker.safety.refusal(time.monotonic(), what)
+    return member.worker.safety.refusal(clock.now(), what)
 
 
-def height_in_safety(member: SwarmMember) -> Optional[float]:
+def height_in_safety(member: SwarmMember, clock: Clock = WALL) -> Optional[float]:
     """The height of the Crazyflie's last fresh pose, as its safety monitor knows it (None: unknown)."""
-    return member.worker.safety.current_height(time.monotonic())
+    return member.worker.safety.current_height(clock.now())
 
 
 def initial_position_params(position) -> Dict[str, Any]:

@@ -11,7 +11,8 @@ Publishes ``~<tracker>/pose`` (geometry_msgs/PoseStamped), ``~<tracker>/twist``
 (with broadcast_tf) and ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz: the connection
 and each tracker's age of last pose, STALE level past stale_timeout). A tracker going stale is
 logged as a warning at once and every 5 s while it stays stale. Network errors never end the
-node: it reconnects with back-off.
+node: it reconnects with back-off. Ages and staleness are counted on ROS time (``ros_clock``: the
+world's in a simulation under /use_sim_time); the network's timeouts and back-off on the wall clock.
 """
 from __future__ import annotations
 
@@ -19,7 +20,6 @@ import logging
 import math
 import sys
 import threading
-import time
 from typing import Any, Dict
 
 import rospy
@@ -27,8 +27,10 @@ import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped, TwistStamped
 
+from crazyflie_driver.clock import Clock
 from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, VrpnConfigError, VrpnNodeConfig, config_from_params
 from crazyflie_driver.mocap.vrpn_client import PoseReport, TwistReport, VrpnClient
+from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 
 DIAGNOSTICS_PERIOD = 1.0
@@ -54,9 +56,10 @@ def private_params() -> Dict[str, Any]:
 class VrpnClientNode:
     """Thin glue: VrpnClient reports -> VrpnBridge records -> messages."""
 
-    def __init__(self, config: VrpnNodeConfig) -> None:
+    def __init__(self, config: VrpnNodeConfig, clock: Clock) -> None:
         self.config = config
-        self.bridge = VrpnBridge(config, log=ros_log)
+        self.clock = clock
+        self.bridge = VrpnBridge(config, clock=clock.now, log=ros_log)
         self._lock = threading.Lock()
         self._pose_pubs: Dict[str, rospy.Publisher] = {}
         self._twist_pubs: Dict[str, rospy.Publisher] = {}
@@ -64,7 +67,8 @@ class VrpnClientNode:
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=2)
         wanted = None if config.auto_discover else config.trackers
         self.client = VrpnClient(config.host, config.port, trackers=wanted, on_pose=self._on_pose,
-                                 on_twist=self._on_twist, on_tracker=self._on_tracker, log=ros_log)
+                                 on_twist=self._on_twist, on_tracker=self._on_tracker, log=ros_log,
+                                 clock=clock.now)
         if not config.auto_discover and not config.trackers:
             rospy.logwarn("vrpn_client_node: ~trackers is empty and ~refresh_tracker_frequency is 0: "
                           "nothing will be published (set one of them)")
@@ -126,10 +130,10 @@ class VrpnClientNode:
     # -- staleness and diagnostics (own thread) ---------------------------------------------------
     def watch(self) -> None:
         period = min(0.05, self.config.stale_timeout / 2.0)
-        next_diag = time.monotonic()
+        next_diag = self.clock.now()
         while not rospy.is_shutdown():
-            time.sleep(period)
-            now = time.monotonic()
+            self.clock.sleep(period)
+            now = self.clock.now()
             try:
                 for ev in self.bridge.staleness.check(now):
                     if ev.kind == "stale":
@@ -188,7 +192,7 @@ def run() -> int:
     except VrpnConfigError as e:
         rospy.logerr("vrpn_client_node: %s", e)
         return 1
-    VrpnClientNode(config).run()
+    VrpnClientNode(config, ros_clock()).run()
     return 0
 
 

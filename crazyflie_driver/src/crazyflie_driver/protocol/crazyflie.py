@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from typing import Optional, Union
 
+from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.protocol.commander import Commander
 from crazyflie_driver.protocol.console import Console
 from crazyflie_driver.protocol.high_level import HighLevelCommander
@@ -32,13 +33,14 @@ class Crazyflie:
     """Facade composing link, platform, params, log, console and commander."""
 
     def __init__(self, uri: Union[str, RadioUri], radio_manager: Optional[RadioManager] = None,
-                 cache_dir: Optional[str] = None, timeout: float = 1.0, link=None) -> None:
-        """``link`` replaces the radio link altogether (tests, other transports)."""
+                 cache_dir: Optional[str] = None, timeout: float = 1.0, link=None, clock: Clock = WALL) -> None:
+        """``link`` replaces the radio link altogether (tests, other transports); ``clock`` times the
+        radio link's request timeouts (``timeout`` s of its time)."""
         if timeout <= 0:
             raise ValueError("timeout must be > 0, got %r" % (timeout,))
         self.uri: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
         self.timeout = timeout
-        self.link = link if link is not None else RadioLink(self.uri, radio_manager)
+        self.link = link if link is not None else RadioLink(self.uri, radio_manager, clock=clock)
         self.cache = TocCache(cache_dir)
         self.protocol_version = -1
         self.connected = False

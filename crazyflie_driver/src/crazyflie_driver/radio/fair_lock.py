@@ -54,6 +54,8 @@ class FairLock:
         self._urgent: deque = deque()          # (waiter, capped)
         self._background: deque = deque()      # (waiter, queued at)
         self.capped_share = capped_share
+        # Shares of the dongle's busy time (held in turns of well under a millisecond): the wall clock by
+        # default, which resolves them; a share is the same ratio on any clock that runs steadily.
         self._clock = clock
         self._granted_at = 0.0
         self._holder_capped = False

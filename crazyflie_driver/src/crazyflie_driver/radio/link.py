@@ -12,6 +12,7 @@ import threading
 import time
 from typing import Callable, Dict, Optional, Tuple, Union
 
+from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, LinkTimeout
@@ -20,7 +21,9 @@ from crazyflie_driver.radio.shared_radio import RadioManager, SharedRadio, defau
 from crazyflie_driver.radio.statistics import DEFAULT_LOST_THRESHOLD, LinkStatistics
 
 _log = logging.getLogger(__name__)
-_now = time.perf_counter      # times each round trip for the link statistics
+# Times each round trip for the link statistics: host and USB time of one exchange, on the wall
+# clock (a round trip lasts well under a millisecond; a clock following /clock cannot resolve it).
+_now = time.perf_counter
 
 SAFELINK_ON = b"\xff\x05\x01"
 NULL_PACKET = b"\xff"
@@ -50,14 +53,16 @@ class RadioLink:
     mode an unacked packet is re-sent with the same sequence bit up to ``safelink_resends`` times;
     if it still fails, the next packet first redoes the handshake so both sides agree again.
     Thread-safe: round trips of one link are serialised, so its downlink is dispatched in order.
+    ``clock`` times the requests' timeouts (the world's time in a simulation).
     """
 
     def __init__(self, uri: Union[str, RadioUri], manager: Optional[RadioManager] = None,
                  safelink: bool = True, safelink_attempts: int = 10, safelink_resends: int = 10,
-                 lost_threshold: int = DEFAULT_LOST_THRESHOLD):
+                 lost_threshold: int = DEFAULT_LOST_THRESHOLD, clock: Clock = WALL):
         self.uri: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
         self.manager = manager if manager is not None else default_manager()
         self.stats = LinkStatistics(lost_threshold)
+        self.clock = clock
         self.downlink_packets = 0       # non-empty downlink packets received (progress of a request)
         self.use_safelink = safelink
         self.safelink_attempts = safelink_attempts
@@ -271,7 +276,7 @@ class RadioLink:
             waiter = _Waiter(match)
             self._waiter = waiter
             try:
-                start = time.monotonic()
+                start = self.clock.now()
                 sent0, acked0 = self.stats.sent, self.stats.acked
                 first_packet = self.downlink_packets
                 seen, last_data = first_packet, start
@@ -280,7 +285,7 @@ class RadioLink:
                 while waiter.result is None:
                     if waiter.error is not None:
                         raise waiter.error
-                    now = time.monotonic()
+                    now = self.clock.now()
                     if self.downlink_packets != seen:
                         seen, last_data = self.downlink_packets, now
                     drained = seen - first_packet

@@ -81,6 +81,7 @@ class SharedRadio:
 
     def _drop(self) -> None:
         radio, self.radio = self.radio, None
+        # wall clock: how often the USB device is looked for again is a matter of the host's kernel
         self._dropped_at = time.monotonic()
         self._next_reopen = self._dropped_at + self._reopen_interval
         if radio is not None:

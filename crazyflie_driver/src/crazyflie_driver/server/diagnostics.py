@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
+from crazyflie_driver.clock import WALL
 from crazyflie_driver.protocol.supervisor import decode_state
 from crazyflie_driver.server import diagnostic_thresholds as T
 from crazyflie_driver.server.log_plan import BATTERY_TOPIC, POWER_STATE_TOPIC, RADIO_RSSI_TOPIC, SUPERVISOR_TOPIC
@@ -117,7 +117,7 @@ class CrazyflieHealth:
     """The latest samples of one Crazyflie that the diagnostics show; fed from the worker's thread
     (log packets) and the command paths (setpoints, poses). Times are ``clock()`` seconds."""
 
-    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, clock: Callable[[], float] = WALL.now) -> None:
         self.clock = clock
         self.vbat: Optional[float] = None
         self.pm_state: Optional[int] = None

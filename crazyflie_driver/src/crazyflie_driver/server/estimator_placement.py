@@ -8,17 +8,20 @@ So a swarm takeoff waits a moment for the placements it needs and is refused for
 from __future__ import annotations
 
 import threading
-import time
 from typing import Iterable, List
+
+from crazyflie_driver.clock import WALL, Clock
 
 #: How long a takeoff waits for the first fixes of the Crazyflies it addresses [s].
 PLACEMENT_WAIT_S = 5.0
 
 
 class EstimatorPlacement:
-    """Thread-safe record of the Crazyflies placed (``placed``) and a bounded wait for some (``missing``)."""
+    """Thread-safe record of the Crazyflies placed (``placed``) and a bounded wait for some (``missing``),
+    timed on ``clock``."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock = WALL) -> None:
+        self._clock = clock
         self._placed = set()
         self._cond = threading.Condition()
 
@@ -35,14 +38,14 @@ class EstimatorPlacement:
     def missing(self, names: Iterable[str], wait_s: float = PLACEMENT_WAIT_S) -> List[str]:
         """Those of ``names`` still not placed after waiting up to ``wait_s`` for them (in their order)."""
         wanted = list(names)
-        deadline = time.monotonic() + max(0.0, wait_s)
+        deadline = self._clock.now() + max(0.0, wait_s)
         with self._cond:
             while True:
                 left = [n for n in wanted if n not in self._placed]
-                remaining = deadline - time.monotonic()
+                remaining = deadline - self._clock.now()
                 if not left or remaining <= 0:
                     return left
-                self._cond.wait(remaining)
+                self._cond.wait(self._clock.wall_bound(remaining))
 
 
 def refusal(missing: List[str], wait_s: float = PLACEMENT_WAIT_S) -> str:

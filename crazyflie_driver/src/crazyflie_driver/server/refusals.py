@@ -29,7 +29,7 @@ class RefusalThrottle:
 
     def __init__(self, period: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
         self.period = period
-        self._clock = clock
+        self._clock = clock         # the wall clock by default: how often a person reads the same refusal
         self._lock = threading.Lock()
         self._said: Dict[Tuple[str, ...], Tuple[float, int]] = {}    # key -> (said at, unsaid since)
 

@@ -14,6 +14,8 @@ import logging
 import threading
 from typing import Callable, Optional
 
+from crazyflie_driver.clock import WALL, Clock
+
 LOG = logging.getLogger("crazyflie_driver.server.swarm")
 
 #: s between two keep-alives: four chances within the firmware's 1 s watchdog period.
@@ -22,13 +24,15 @@ PERIOD_S = 0.25
 
 class Heartbeat:
     """Calls ``send()`` (the keep-alive on every radio; it raises when one failed, after trying all)
-    every ``period_s`` in a thread of its own until ``stop()``."""
+    every ``period_s`` of ``clock``'s time (the world's in a simulation, whose firmware counts its
+    watchdog second on it) in a thread of its own until ``stop()``."""
 
-    def __init__(self, send: Callable[[], object], period_s: float = PERIOD_S) -> None:
+    def __init__(self, send: Callable[[], object], period_s: float = PERIOD_S, clock: Clock = WALL) -> None:
         if period_s <= 0:
             raise ValueError("period_s must be > 0, got %r" % (period_s,))
         self._send = send
         self.period_s = period_s
+        self._clock = clock
         self._stopped = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self.sent = 0
@@ -60,4 +64,4 @@ class Heartbeat:
                 self.errors += 1
                 if self.errors == 1 or self.errors % 100 == 0:
                     LOG.error("swarm: emergency-stop watchdog keep-alive failed (%d times so far): %s", self.errors, e)
-            self._stopped.wait(self.period_s)
+            self._clock.wait(self._stopped, self.period_s)

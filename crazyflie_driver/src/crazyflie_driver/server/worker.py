@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import (CrazyflieError, LogConfigError, RadioMediumGone, RadioNotFound, RadioUnplugged,
                                      UnknownName)
@@ -127,7 +127,7 @@ class CrazyflieWorker:
                  keepalive_period: float = 0.010, link_lost_timeout: float = 1.0,
                  lost_retry_period: float = 0.25, quality_warning_interval: float = 5.0,
                  rssi_period: float = 0.1, device_retry_window: float = 10.0,
-                 clock: Callable[[], float] = time.monotonic, safety: Optional[SafetyConfig] = None) -> None:
+                 clock: Clock = WALL, safety: Optional[SafetyConfig] = None) -> None:
         self.config = config
         self.cf = crazyflie
         self.listener = listener or WorkerListener()
@@ -137,7 +137,8 @@ class CrazyflieWorker:
         self.quality_warning_interval = quality_warning_interval
         self.rssi_period = rssi_period
         self.device_retry_window = device_retry_window
-        self._clock = clock
+        self.clock = clock                       # every time and wait of the worker (world time in a simulation)
+        self._clock = clock.now
 
         self.state = WorkerState.CONNECTING
         self.error: Optional[BaseException] = None
@@ -152,7 +153,7 @@ class CrazyflieWorker:
         self.param_values: Dict[str, Any] = {}   # as read after connecting and written since
         self.topic_timing: Dict[str, TopicTiming] = {}   # per log topic: age, rate, lost packets
         self.log_late = False                    # log data currently arrives late
-        self.health = CrazyflieHealth(clock)     # latest battery/supervisor samples, last setpoint and pose
+        self.health = CrazyflieHealth(clock.now)     # latest battery/supervisor samples, last setpoint and pose
         self.reports = Reports()                 # entries other parts add to /diagnostics and the status
 
         self._cond = threading.Condition()
@@ -170,7 +171,7 @@ class CrazyflieWorker:
         self._rssi_sent_at = -1e9
         self._blocks: List[Any] = []
         self._downlink_packets = 0
-        self._pacer = PollPacer(self.keepalive_period, now=clock(),
+        self._pacer = PollPacer(self.keepalive_period, now=clock.now(),
                                 margin=PollPacer.SPARSE_MARGIN if config.keepalive_period else PollPacer.MARGIN)
         self._log_plan: List[PlannedBlock] = []
         self._error_times: List[float] = []
@@ -204,8 +205,9 @@ class CrazyflieWorker:
         self._thread.start()
 
     def wait_ready(self, timeout: float) -> None:
-        """Block until the connect sequence finished. Raises its error, or TimeoutError."""
-        if not self._ready.wait(timeout):
+        """Block until the connect sequence finished (``timeout`` s of the worker's clock). Raises its
+        error, or TimeoutError."""
+        if not self.clock.wait(self._ready, timeout):
             raise TimeoutError("Crazyflie %s did not finish connecting within %.1f s (is it switched on, "
                                "on this channel and address, and in range?)" % (self.uri, timeout))
         if self.error is not None:
@@ -378,8 +380,8 @@ class CrazyflieWorker:
             return False
         self.restarts += 1
         with self._cond:
-            if not self._stopping:
-                self._cond.wait(RESTART_DELAY)
+            if not self._stopping:      # a pause of at most RESTART_DELAY of the clock (a setpoint ends it)
+                self._cond.wait(self.clock.wall_bound(RESTART_DELAY))
         if self.state == WorkerState.RESTARTING:
             self.state = WorkerState.RUNNING
         return True
@@ -416,7 +418,7 @@ class CrazyflieWorker:
                     raise
                 LOG.info("%s: radio not available yet (%s); retrying", self.uri, e)
                 with self._cond:
-                    self._cond.wait(0.5)
+                    self._cond.wait(self.clock.wall_bound(0.5))
 
     def _plan_logging(self, types: Dict[str, str]) -> List[PlannedBlock]:
         """Fixed topics (skipping those this Crazyflie lacks) + custom ones; errors for custom ones."""
@@ -569,7 +571,7 @@ class CrazyflieWorker:
                     wait = next_due - now
                     if wait <= 0:
                         break
-                    self._cond.wait(wait)
+                    self._cond.wait(self.clock.wall_bound(wait))
                 if self._stopping:
                     return
                 setpoint = self._pending

@@ -6,6 +6,7 @@ import time
 
 import pytest
 
+from crazyflie_driver.clock import ManualClock
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, LinkTimeout, RadioUnplugged
 from crazyflie_driver.radio.fair_lock import FairLock
@@ -165,28 +166,26 @@ def test_request_returns_the_matching_reply():
     assert peer.received == [b"\xd1\x00"]
 
 
-class SteppingClock:
-    """A monotonic clock that advances ``step`` s per reading: the request loop's schedule, free of the host's load."""
+class SteppingClock(ManualClock):
+    """A clock that advances ``step`` s per reading: the request loop's schedule, free of the host's load."""
 
     def __init__(self, step: float):
-        self.now, self.step = 0.0, step
+        super().__init__()
+        self.step = step
 
-    def monotonic(self) -> float:
-        self.now += self.step
-        return self.now
+    def now(self) -> float:
+        return self.advance(self.step)
 
 
 @pytest.mark.parametrize("safelink, sends", [
     pytest.param(False, 5, id="plain acks: first send + one per 50 ms (0.05, 0.10, 0.15, 0.20)"),
     pytest.param(True, 1, id="safelink: sent (and delivered) once"),
 ])
-def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink(monkeypatch, safelink, sends):
-    import crazyflie_driver.radio.link as link_module
+def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink(safelink, sends):
     clock = SteppingClock(0.001)
-    monkeypatch.setattr(link_module, "time", clock)
     peer = NrfPeer(safelink_capable=safelink)
     medium, backend, manager = setup(peer)
-    link = open_link(URI, manager)
+    link = open_link(URI, manager, clock=clock)
     assert link.safelink == safelink
     with pytest.raises(LinkTimeout) as info:
         link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.25, resend_interval=0.05,
@@ -195,6 +194,24 @@ def test_request_timeout_names_uri_and_what_and_resends_only_without_safelink(mo
     assert "within 0.25 s" in str(info.value)            # gave up after 0.25 s of silence, on the clock it reads
     handshake = b"\xf3\x05\x01"                         # the safelink greetings a plain peer hears
     assert [r for r in peer.received if r != handshake] == [b"\x20\x03"] * sends
+
+
+def test_request_timeout_is_counted_on_the_links_clock_not_the_wall_clock():
+    """A world running at a tenth of real time: 1 s of its time is 10 s of wall time. The request waits
+    for the world's second (1 ms of world time per reading here), not for one wall second."""
+    world = SteppingClock(0.0001)
+    peer = NrfPeer()
+    medium, backend, manager = setup(peer)
+    link = open_link(URI, manager, clock=world)
+    with pytest.raises(LinkTimeout) as info:
+        link.request(CRTPPacket(2, 0, b"\x03"), lambda p: False, timeout=0.05, what="param TOC info")
+    assert "within 0.05 s" in str(info.value)
+    assert 0.05 <= world.now() < 0.06               # it gave up once 50 ms of the world had passed
+    # and an answer that takes longer than the timeout in wall time still arrives within the world's
+    peer.on_packet = lambda data: (time.sleep(0.1), peer.queue.append(bytes([0xDD, 0x00, 0x0C])))
+    started = time.monotonic()
+    reply = link.request(CRTPPacket(13, 1, b"\x00"), lambda p: p.port == 13, timeout=0.05, what="version")
+    assert reply == CRTPPacket(13, 1, b"\x00\x0c") and time.monotonic() - started >= 0.1
 
 
 class SlowAir(Air):

@@ -3,7 +3,6 @@ firmware's lock calls for, and again only after the Crazyflie could fly again.""
 from __future__ import annotations
 
 import logging
-import threading
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.protocol import setpoints
@@ -12,6 +11,7 @@ from crazyflie_driver.protocol.supervisor import decode_state
 from crazyflie_driver.server.setpoint import Setpoint
 from crazyflie_driver.server.status import ERROR, WARN, worker_status
 from crazyflie_driver.server.watchdog_notice import WatchdogNotice, asks_for_thrust, cut_message
+from crazyflie_driver.clock import ManualClock
 from crazyflie_driver.server.worker import WorkerState
 
 from support.worker_doubles import FakeCrazyflie, started, wait_for
@@ -20,18 +20,9 @@ UP = Setpoint(0.0, 0.0, 0.0, 40000)
 ZERO = Setpoint(0.0, 0.0, 0.0, 0)
 
 
-class ManualClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-        self.lock = threading.Lock()
-
-    def __call__(self) -> float:
-        with self.lock:
-            return self.t
-
-    def advance(self, s: float) -> None:
-        with self.lock:
-            self.t += s
+def step(clock: ManualClock, seconds: float = 0.001) -> None:
+    """Move the worker's clock on a little (None: a wait_for condition goes on to its own test)."""
+    clock.advance(seconds)
 
 
 def test_which_setpoints_ask_for_thrust():
@@ -103,7 +94,7 @@ def worker_with(protocol_version: int, supervisor=None):
     cf.protocol_version = protocol_version
     if supervisor is not None:
         cf.supervisor = supervisor
-    clock = ManualClock()
+    clock = ManualClock(100.0, sleep_advances=False)
     w, cf, rec = started(cf=cf, clock=clock, lost_retry_period=0.01)
     return w, cf, rec, clock
 
@@ -168,17 +159,17 @@ def test_radio_lost_while_flying_says_what_the_firmware_does(caplog):
         w.set_setpoint(UP)
         assert wait_for(lambda: any(p[1] == "setpoint" and p[2][3] == 40000 for p in cf.packets))
         cf.unplugged = True
-        assert wait_for(lambda: clock.advance(0.001) or rec.lost)     # the worker's clock moves on
+        assert wait_for(lambda: step(clock) or rec.lost)     # the worker's clock moves on
         assert "plug it back in" in rec.lost[0] and "it was flying" in rec.lost[0]
         for _ in range(7):                   # the pilot keeps asking for thrust: none of it goes out
             w.set_setpoint(UP)
-            assert wait_for(lambda: clock.advance(0.001) or w._pending is None)
+            assert wait_for(lambda: step(clock) or w._pending is None)
             clock.advance(0.3)
         assert wait_for(lambda: watchdog_lines(caplog))
         assert "radio link is down" in watchdog_lines(caplog)[0].getMessage()
         clock.advance(0.9)
         cf.unplugged = False
-        assert wait_for(lambda: clock.advance(0.001) or (rec.restored == 1 and w.state == WorkerState.RUNNING))
+        assert wait_for(lambda: step(clock) or (rec.restored == 1 and w.state == WorkerState.RUNNING))
         restored = [r.getMessage() for r in caplog.records if "link restored" in r.getMessage()]
         assert len(restored) == 1 and restored[0].startswith("%s: link restored after 3." % cf.uri)
         assert len(watchdog_lines(caplog)) == 1 and w.watchdog.locked_until_restart
