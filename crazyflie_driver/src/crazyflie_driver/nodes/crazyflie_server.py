@@ -36,8 +36,7 @@ from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCraz
 
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
-from crazyflie_driver.errors import UnknownName
-from crazyflie_driver.protocol.toc import check_toc_name
+from crazyflie_driver.server.param_names import param_values
 from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.refusals import RefusalThrottle
 from crazyflie_driver.server.diagnostics import (CounterWindow, CrazyflieDiagnostics, Entry, RadioFigures,
@@ -72,6 +71,14 @@ def param_server_value(value: Any) -> Any:
     if isinstance(value, int) and not -XMLRPC_INT_MAX - 1 <= value <= XMLRPC_INT_MAX:
         return float(value)
     return value
+
+
+def ros_param_or_none(name: str) -> Any:
+    """The ROS parameter ``name``, None when it is not set (``server.param_names.Lookup``)."""
+    try:
+        return rospy.get_param(name)
+    except KeyError:
+        return None
 
 
 def diagnostic_status(status: CrazyflieStatus, tf_prefix: str, uri: str) -> DiagnosticStatus:
@@ -216,24 +223,8 @@ class RosCrazyflie(WorkerListener):
         return EmptyResponse()
 
     def _on_update_params(self, req) -> UpdateParamsResponse:
-        values: Dict[str, Any] = {}
-        errors: List[str] = []
-        for p in req.params:
-            ros_name = "%s/%s" % (self.ns, p.strip("/"))
-            if "/" not in p.strip("/"):
-                errors.append("%r: not of the form group/name" % p)
-                continue
-            try:       # NUL, control characters...: refused before the ROS parameter server (XML-RPC) sees them
-                name = check_toc_name(p.strip("/").replace("/", "."), "parameter")
-            except UnknownName as e:
-                errors.append("%r: %s" % (p, e))
-                continue
-            try:
-                values[name] = rospy.get_param(ros_name)
-            except KeyError:
-                errors.append("%s: ROS parameter %s is not set" % (p, ros_name))
-            except Exception as e:      # the parameter server's own refusal, named
-                errors.append("%r: the ROS parameter server refused %s: %s" % (p, ros_name, e))
+        # names checked before the ROS parameter server (XML-RPC) sees them, as the swarm's /update_params does
+        values, errors = param_values(req.params, (self.ns,), ros_param_or_none)
         written, write_errors = self.worker.update_params(values)
         errors.extend(write_errors)
         for name in written:

@@ -18,6 +18,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
 from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive
+from crazyflie_driver.server.param_names import Lookup, param_values
 
 LOG = logging.getLogger("crazyflie_driver.server.swarm")
 
@@ -143,26 +144,12 @@ class SwarmCommands:
 ALL_CFS_NAMESPACE = "/allcfs"
 
 
-def update_param_values(names: Sequence[str], cf_name: str, lookup: Callable[[str], Any]) -> Tuple[Dict[str, Any],
-                                                                                                   List[str]]:
-    """The values ``/update_params`` writes to one Crazyflie: each ``group/name`` from
-    ``/allcfs/group/name`` or else ``/<cf_name>/group/name`` (``lookup(ros_name)`` returns None when
-    unset). Returns ({"group.name": value}, errors naming what is missing or malformed)."""
-    values: Dict[str, Any] = {}
-    errors: List[str] = []
-    for raw in names:
-        p = raw.strip("/")
-        if p.count("/") != 1 or not all(p.split("/")):
-            errors.append("%s: not of the form group/name" % raw)
-            continue
-        for ns in (ALL_CFS_NAMESPACE, "/" + cf_name):
-            value = lookup(ns + "/" + p)
-            if value is not None:
-                values[p.replace("/", ".")] = value
-                break
-        else:
-            errors.append("%s: neither %s/%s nor /%s/%s is set" % (cf_name, ALL_CFS_NAMESPACE, p, cf_name, p))
-    return values, errors
+def update_param_values(names: Sequence[str], cf_name: str, lookup: Lookup) -> Tuple[Dict[str, Any], List[str]]:
+    """The values ``/update_params`` writes to one Crazyflie: each ``group/name`` (checked as every service
+    checks parameter names, ``server.param_names``) from ``/allcfs/group/name`` or else
+    ``/<cf_name>/group/name`` (``lookup(ros_name)`` returns None when unset). Returns ({"group.name": value},
+    errors naming what is missing or malformed)."""
+    return param_values(names, (ALL_CFS_NAMESPACE, "/" + cf_name), lookup)
 
 
 def _uploaded(member: SwarmMember) -> Dict[int, Any]:
