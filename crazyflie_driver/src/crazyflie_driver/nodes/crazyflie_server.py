@@ -476,7 +476,7 @@ class CrazyflieServer:
             rospy.logerr(msg)
             raise rospy.ServiceException(msg)
         rospy.loginfo("adding %s as %r", key, config.tf_prefix)
-        ros = None
+        ros = worker = None
         try:
             safety = SafetyConfig.from_params(lambda name, default: rospy.get_param(
                 namespace(config.tf_prefix) + "/" + name, rospy.get_param("~" + name, default)))
@@ -488,6 +488,8 @@ class CrazyflieServer:
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
             worker.safety.configure(safety)
         except Exception as e:
+            if worker is not None:      # added, then its safety configuration failed: never left running
+                self.registry.remove(key)
             if ros is not None:
                 ros.detach()
             msg = "could not add %s: %s" % (key, e)
