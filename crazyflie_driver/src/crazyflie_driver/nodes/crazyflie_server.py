@@ -21,7 +21,7 @@ import math
 import os
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -39,8 +39,10 @@ from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC
 from crazyflie_driver.server.param_names import param_values
 from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.refusals import RefusalThrottle
-from crazyflie_driver.server.diagnostics import (CounterWindow, CrazyflieDiagnostics, Entry, RadioFigures,
-                                                 radio_entry)
+from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
+from crazyflie_driver.server.diagnostics import (UNKNOWN_BOTTLENECK, BottleneckFigures, CounterWindow,
+                                                 CrazyflieDiagnostics, Entry, RadioFigures, bottleneck_entry,
+                                                 radio_entry, world_speed_share)
 from crazyflie_driver.server import radio_budget
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.server.registry import CrazyflieRegistry
@@ -58,6 +60,7 @@ GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
 XMLRPC_INT_MAX = 2 ** 31 - 1
 DIAGNOSTICS_PERIOD = 1.0        # s between /diagnostics messages
+SIM_HARDWARE_ID = "crazyflie_sim"   # the simulated world's /diagnostics entries (nodes/sim_node.py)
 
 
 def namespace(tf_prefix: str) -> str:
@@ -100,9 +103,11 @@ def entry_status(entry: Entry, label: str, hardware_id: str) -> DiagnosticStatus
 class RosCrazyflie(WorkerListener):
     """The ROS face of one Crazyflie: publishers, the cmd_vel subscriber, its services."""
 
-    def __init__(self, config: WorkerConfig, on_gave_up: Optional[Callable[[], None]] = None) -> None:
+    def __init__(self, config: WorkerConfig, on_gave_up: Optional[Callable[[], None]] = None,
+                 late_cause: Optional[Callable[[], str]] = None) -> None:
         self.config = config
         self._on_gave_up = on_gave_up       # the server removes a Crazyflie whose worker gave up
+        self._late_cause = late_cause       # the server's bottleneck judgement, for the late-data message
         self.ns = namespace(config.tf_prefix)
         self.frame_id = (config.tf_prefix.strip("/") + "/base_link") if config.tf_prefix.strip("/") else "base_link"
         self.worker: Optional[CrazyflieWorker] = None
@@ -296,6 +301,9 @@ class RosCrazyflie(WorkerListener):
     def on_log_late(self, message: str, late: bool) -> None:
         self.publish_status()
 
+    def late_cause(self) -> str:
+        return self._late_cause() if self._late_cause is not None else super().late_cause()
+
     def on_emergency(self) -> None:
         self.publish_status()
 
@@ -355,7 +363,12 @@ class CrazyflieServer:
         self.budget_pose_rate = float(rospy.get_param("~budget_pose_rate", 0.0))
         self._landing_lock = threading.Lock()
         self._landed = False
+        self._loop_lag_s: Optional[float] = None        # how late the diagnostics timer woke (host CPU)
+        self._world: Optional[Tuple[float, float]] = None   # (simulated world's speed share, when heard)
+        self._bottleneck = UNKNOWN_BOTTLENECK
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        if os.environ.get("CRAZYFLIE_BACKEND") == "sim":     # the world's real-time factor, on its /diagnostics
+            rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=5)
         rospy.Service("/add_crazyflie", AddCrazyflie, self._on_add)
         rospy.Service("/remove_crazyflie", RemoveCrazyflie, self._on_remove)
         threading.Thread(target=self._diagnostics_loop, name="diagnostics", daemon=True).start()
@@ -386,6 +399,17 @@ class CrazyflieServer:
                 rospy.logwarn("radio budget: %s", b.message())
         return budget
 
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.hardware_id == SIM_HARDWARE_ID:
+                share = world_speed_share({kv.key: kv.value for kv in st.values})
+                if share is not None:
+                    self._world = (share, time.monotonic())
+
+    def late_cause(self) -> str:
+        """The bottleneck the last /diagnostics named (said where a Crazyflie's log data arrives late)."""
+        return self._bottleneck
+
     def _replan_quietly(self) -> None:
         """The budget without the Crazyflie that left (its radio entry's planned load follows)."""
         try:
@@ -409,6 +433,7 @@ class CrazyflieServer:
                     "diagnostics failed: %r" % e), name="crazyflie_server: %s" % (ros.config.tf_prefix or key)))
             by_dongle.setdefault(parse_uri(key).index, []).append((key, ros))
         now = time.monotonic()
+        loads: List[Tuple[int, float]] = []
         for index in sorted(set(by_dongle) | set(broadcasts)):
             members = by_dongle.get(index, [])
             window = self._radio_windows.setdefault(index, CounterWindow())
@@ -421,11 +446,19 @@ class CrazyflieServer:
                 radio_budget.capacity_per_s([parse_uri(key) for key, _ in members]),
                 planned.load if planned else None, "; ".join(planned.advice) if planned else "")
             arr.status.append(entry_status(radio_entry(figures), "", "radio://%d" % index))
+            loads.append((index, figures.load))
+        world = self._world
+        share = world[0] if world is not None and now - world[1] < WORLD_FIGURE_STALE_S else None
+        bottleneck = bottleneck_entry(BottleneckFigures(share, self._loop_lag_s, tuple(loads)))
+        self._bottleneck = bottleneck.message
+        arr.status.append(entry_status(bottleneck, "", "crazyflie_server"))
         return arr
 
     def _diagnostics_loop(self) -> None:
         while not shutting_down():
+            slept = time.monotonic()
             time.sleep(DIAGNOSTICS_PERIOD)
+            self._loop_lag_s = max(0.0, time.monotonic() - slept - DIAGNOSTICS_PERIOD)
             try:
                 with self._lock:
                     served = list(self._ros.values())
@@ -484,7 +517,7 @@ class CrazyflieServer:
             rospy.logerr("add_crazyflie: %s", e)
             raise rospy.ServiceException(str(e))
         try:
-            ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key))
+            ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key), late_cause=self.late_cause)
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
             worker.safety.configure(safety)
         except Exception as e:

@@ -35,7 +35,7 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import (ConnectCancelled, CrazyflieError, LogConfigError, RadioNotFound, RadioUnplugged,
                                      UnknownName)
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
-from crazyflie_driver.server.diagnostics import CrazyflieHealth, Reports
+from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
                                               RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock,
                                               check_log_limits, log_packet_rate, plan_log_blocks)
@@ -91,6 +91,11 @@ class WorkerListener:
 
     def on_log_late(self, message: str, late: bool) -> None:
         """Log data started (``late``) or stopped arriving later than ``LATE_DATA_WARNING_S``."""
+
+    def late_cause(self) -> str:
+        """What limits the data flow as far as is known (``diagnostics.bottleneck_entry``), for the late-data
+        message; any thread."""
+        return UNKNOWN_BOTTLENECK
 
     def on_rssi(self, rssi: float) -> None:
         """Radio signal strength, -dBm, from the acks or the ``radio.rssi`` log variable."""
@@ -558,10 +563,13 @@ class CrazyflieWorker:
             new_lost = lost - self._lost_at_late_warning
             self._lost_at_late_warning = lost
             self.log_late, self._late_warned_at = True, now
-            text = ("%s: log data arrives %.1f s late%s: the radio carries fewer packets than its log blocks "
-                    "send (fewer Crazyflies per Crazyradio, longer log periods or enable_logging false)" % (
-                        self.uri, age, "; %d log packets lost: the Crazyflie's transmit queue overflows"
-                        % new_lost if new_lost else ""))
+            try:
+                cause = self.listener.late_cause()
+            except Exception:
+                cause = UNKNOWN_BOTTLENECK
+            text = "%s: log data arrives %.1f s late%s; bottleneck: %s" % (
+                self.uri, age, "; %d log packets lost: the Crazyflie's transmit queue overflows" % new_lost
+                if new_lost else "", cause)
             LOG.warning(text)
             self._tell_late(text, True)
         elif self.log_late and age < LATE_DATA_WARNING_S / 2:
