@@ -44,6 +44,10 @@ class LinkLost(CrazyflieError):
     """Too many packets in a row went unacknowledged."""
 
 
+class ConnectCancelled(CrazyflieError):
+    """A connect sequence stopped before it finished: its add timed out or it was removed meanwhile."""
+
+
 class ProtocolError(CrazyflieError):
     """The Crazyflie answered something the protocol does not allow."""
 

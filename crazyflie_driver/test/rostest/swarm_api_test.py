@@ -18,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from std_srvs.srv import Empty, SetBool
 
-from crazyflie_driver.srv import GoTo, Land, Takeoff
+from crazyflie_driver.srv import GoTo, Land, Takeoff, UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import RosoutRecorder, TopicRecorder, wait_until, world  # noqa: E402
@@ -53,6 +53,20 @@ class SwarmApi(unittest.TestCase):
 
     def names(self, *ids):
         return ["cf%d" % i for i in ids]
+
+    def test_0_update_params_reaches_every_crazyflie_and_refuses_a_bad_name_by_name(self):
+        update = rospy.ServiceProxy("/update_params", UpdateParams)
+        rospy.set_param("/allcfs/ring/effect", 7)
+        update(["ring/effect"])
+        for name, v in self.vehicles.items():     # on the world's truth: each simulated firmware's value
+            self.assertEqual(self.world.control("state", uri=v["uri"])["params"]["ring.effect"], 7, name)
+        bad = "ring/eff\x01ect"
+        with self.assertRaises(rospy.ServiceException) as refused:
+            update([bad])
+        self.assertIn("ring/eff", str(refused.exception))     # named, with the rule it breaks
+        self.assertIn("printable ASCII", str(refused.exception))
+        self.assertNotIn("ExpatError", str(refused.exception))
+        update(["ring/effect"])     # still serving
 
     def test_1_group_mask_takeoff_only_the_masked_subset_flies(self):
         rospy.ServiceProxy("/takeoff", Takeoff)(groupMask=1, height=HEIGHT, duration=rospy.Duration(2.0))

@@ -11,7 +11,7 @@ import time
 from typing import Any, Dict, List, Optional
 
 from crazyflie_driver.crtp.firmware_limits import LOG_MAX_BLOCKS, LOG_MAX_OPS
-from crazyflie_driver.errors import RadioNotFound, RadioUnplugged, UnknownName
+from crazyflie_driver.errors import CrazyflieError, RadioNotFound, RadioUnplugged, UnknownName
 from crazyflie_driver.protocol.toc import Toc, TocEntry
 from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
@@ -106,6 +106,7 @@ class FakeCrazyflie:
         self.params = FakeParams(self)
         self.link = Link()
         self.closed = False
+        self._closing = threading.Event()
         self.lock = threading.Lock()
         self.radio_missing_for = 0           # connect attempts that find no dongle
         self.downlink: List[tuple] = []     # queued log packets, one fetched per null packet
@@ -116,13 +117,14 @@ class FakeCrazyflie:
         if self.radio_missing_for > 0:
             self.radio_missing_for -= 1
             raise RadioNotFound("no Crazyradio at index 0")
-        if self.connect_delay:
-            time.sleep(self.connect_delay)
+        if self.connect_delay and self._closing.wait(self.connect_delay):
+            raise CrazyflieError("%s: link is not open" % self.uri)     # closed under it, as a real link ends
         if self.connect_error:
             raise self.connect_error
 
     def close(self):
         self.closed = True
+        self._closing.set()
 
     def _packet(self, kind, *args):
         if self.unplugged:

@@ -21,7 +21,7 @@ import math
 import os
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,12 +37,13 @@ from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCraz
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
                         TEMPERATURE_TOPIC, LogBlockSpec)
-from crazyflie_driver.errors import UnknownName
-from crazyflie_driver.protocol.toc import check_toc_name
+from crazyflie_driver.server.param_names import param_values
 from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.refusals import RefusalThrottle
-from crazyflie_driver.server.diagnostics import (CounterWindow, CrazyflieDiagnostics, Entry, RadioFigures,
-                                                 radio_entry)
+from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
+from crazyflie_driver.server.diagnostics import (UNKNOWN_BOTTLENECK, BottleneckFigures, CounterWindow,
+                                                 CrazyflieDiagnostics, Entry, RadioFigures, bottleneck_entry,
+                                                 radio_entry, world_speed_share)
 from crazyflie_driver.server import radio_budget
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.server.registry import CrazyflieRegistry
@@ -64,6 +65,7 @@ DIAGNOSTICS_PERIOD = 1.0        # s between /diagnostics messages
 #: Wall seconds [s] the clock may stand still while the shutdown waits for landings: a simulated world
 #: that stopped publishing /clock (it was shut down first) lands nothing more.
 CLOCK_STALL_S = 2.0
+SIM_HARDWARE_ID = "crazyflie_sim"   # the simulated world's /diagnostics entries (nodes/sim_node.py)
 
 
 def namespace(tf_prefix: str) -> str:
@@ -77,6 +79,14 @@ def param_server_value(value: Any) -> Any:
     if isinstance(value, int) and not -XMLRPC_INT_MAX - 1 <= value <= XMLRPC_INT_MAX:
         return float(value)
     return value
+
+
+def ros_param_or_none(name: str) -> Any:
+    """The ROS parameter ``name``, None when it is not set (``server.param_names.Lookup``)."""
+    try:
+        return rospy.get_param(name)
+    except KeyError:
+        return None
 
 
 def diagnostic_status(status: CrazyflieStatus, tf_prefix: str, uri: str) -> DiagnosticStatus:
@@ -98,9 +108,11 @@ def entry_status(entry: Entry, label: str, hardware_id: str) -> DiagnosticStatus
 class RosCrazyflie(WorkerListener):
     """The ROS face of one Crazyflie: publishers, the cmd_vel subscriber, its services."""
 
-    def __init__(self, config: WorkerConfig, on_gave_up: Optional[Callable[[], None]] = None) -> None:
+    def __init__(self, config: WorkerConfig, on_gave_up: Optional[Callable[[], None]] = None,
+                 late_cause: Optional[Callable[[], str]] = None) -> None:
         self.config = config
         self._on_gave_up = on_gave_up       # the server removes a Crazyflie whose worker gave up
+        self._late_cause = late_cause       # the server's bottleneck judgement, for the late-data message
         self.ns = namespace(config.tf_prefix)
         self.frame_id = (config.tf_prefix.strip("/") + "/base_link") if config.tf_prefix.strip("/") else "base_link"
         self.worker: Optional[CrazyflieWorker] = None
@@ -222,24 +234,8 @@ class RosCrazyflie(WorkerListener):
         return EmptyResponse()
 
     def _on_update_params(self, req) -> UpdateParamsResponse:
-        values: Dict[str, Any] = {}
-        errors: List[str] = []
-        for p in req.params:
-            ros_name = "%s/%s" % (self.ns, p.strip("/"))
-            if "/" not in p.strip("/"):
-                errors.append("%r: not of the form group/name" % p)
-                continue
-            try:       # NUL, control characters...: refused before the ROS parameter server (XML-RPC) sees them
-                name = check_toc_name(p.strip("/").replace("/", "."), "parameter")
-            except UnknownName as e:
-                errors.append("%r: %s" % (p, e))
-                continue
-            try:
-                values[name] = rospy.get_param(ros_name)
-            except KeyError:
-                errors.append("%s: ROS parameter %s is not set" % (p, ros_name))
-            except Exception as e:      # the parameter server's own refusal, named
-                errors.append("%r: the ROS parameter server refused %s: %s" % (p, ros_name, e))
+        # names checked before the ROS parameter server (XML-RPC) sees them, as the swarm's /update_params does
+        values, errors = param_values(req.params, (self.ns,), ros_param_or_none)
         written, write_errors = self.worker.update_params(values)
         errors.extend(write_errors)
         for name in written:
@@ -311,6 +307,9 @@ class RosCrazyflie(WorkerListener):
     def on_log_late(self, message: str, late: bool) -> None:
         self.publish_status()
 
+    def late_cause(self) -> str:
+        return self._late_cause() if self._late_cause is not None else super().late_cause()
+
     def on_emergency(self) -> None:
         self.publish_status()
 
@@ -372,7 +371,12 @@ class CrazyflieServer:
         self.budget_pose_rate = float(rospy.get_param("~budget_pose_rate", 0.0))
         self._landing_lock = threading.Lock()
         self._landed = False
+        self._loop_lag_s: Optional[float] = None        # how late the diagnostics timer woke (host CPU)
+        self._world: Optional[Tuple[float, float]] = None   # (simulated world's speed share, when heard)
+        self._bottleneck = UNKNOWN_BOTTLENECK
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        if os.environ.get("CRAZYFLIE_BACKEND") == "sim":     # the world's real-time factor, on its /diagnostics
+            rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=5)
         rospy.Service("/add_crazyflie", AddCrazyflie, self._on_add)
         rospy.Service("/remove_crazyflie", RemoveCrazyflie, self._on_remove)
         threading.Thread(target=self._diagnostics_loop, name="diagnostics", daemon=True).start()
@@ -403,6 +407,17 @@ class CrazyflieServer:
                 rospy.logwarn("radio budget: %s", b.message())
         return budget
 
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.hardware_id == SIM_HARDWARE_ID:
+                share = world_speed_share({kv.key: kv.value for kv in st.values})
+                if share is not None:
+                    self._world = (share, self.clock.now())
+
+    def late_cause(self) -> str:
+        """The bottleneck the last /diagnostics named (said where a Crazyflie's log data arrives late)."""
+        return self._bottleneck
+
     def _replan_quietly(self) -> None:
         """The budget without the Crazyflie that left (its radio entry's planned load follows)."""
         try:
@@ -426,6 +441,7 @@ class CrazyflieServer:
                     "diagnostics failed: %r" % e), name="crazyflie_server: %s" % (ros.config.tf_prefix or key)))
             by_dongle.setdefault(parse_uri(key).index, []).append((key, ros))
         now = self.clock.now()
+        loads: List[Tuple[int, float]] = []
         for index in sorted(set(by_dongle) | set(broadcasts)):
             members = by_dongle.get(index, [])
             window = self._radio_windows.setdefault(index, CounterWindow())
@@ -438,11 +454,20 @@ class CrazyflieServer:
                 radio_budget.capacity_per_s([parse_uri(key) for key, _ in members]),
                 planned.load if planned else None, "; ".join(planned.advice) if planned else "")
             arr.status.append(entry_status(radio_entry(figures), "", "radio://%d" % index))
+            loads.append((index, figures.load))
+        world = self._world
+        share = world[0] if world is not None and now - world[1] < WORLD_FIGURE_STALE_S else None
+        bottleneck = bottleneck_entry(BottleneckFigures(share, self._loop_lag_s, tuple(loads)))
+        self._bottleneck = bottleneck.message
+        arr.status.append(entry_status(bottleneck, "", "crazyflie_server"))
         return arr
 
     def _diagnostics_loop(self) -> None:
         while not shutting_down():
+            slept = self.clock.now()
             self.clock.sleep(DIAGNOSTICS_PERIOD)
+            # how late this loop woke, on the clock its deadlines are kept on (host CPU starvation)
+            self._loop_lag_s = max(0.0, self.clock.now() - slept - DIAGNOSTICS_PERIOD)
             try:
                 with self._lock:
                     served = list(self._ros.values())
@@ -493,7 +518,7 @@ class CrazyflieServer:
             rospy.logerr(msg)
             raise rospy.ServiceException(msg)
         rospy.loginfo("adding %s as %r", key, config.tf_prefix)
-        ros = None
+        ros = worker = None
         try:
             safety = SafetyConfig.from_params(lambda name, default: rospy.get_param(
                 namespace(config.tf_prefix) + "/" + name, rospy.get_param("~" + name, default)))
@@ -501,10 +526,12 @@ class CrazyflieServer:
             rospy.logerr("add_crazyflie: %s", e)
             raise rospy.ServiceException(str(e))
         try:
-            ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key))
+            ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key), late_cause=self.late_cause)
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
             worker.safety.configure(safety)
         except Exception as e:
+            if worker is not None:      # added, then its safety configuration failed: never left running
+                self.registry.remove(key)
             if ros is not None:
                 ros.detach()
             msg = "could not add %s: %s" % (key, e)

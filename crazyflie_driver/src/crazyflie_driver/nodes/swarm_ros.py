@@ -33,7 +33,7 @@ from crazyflie_driver.server.mocap_stream import MocapStream
 from crazyflie_driver.server import estimator_placement, radio_budget
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_param_values
+from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_params
 from crazyflie_driver.server.swarm_config import SwarmConfig, SwarmCrazyflie, load_swarm_file
 from crazyflie_driver.server.swarm_heartbeat import Heartbeat
 from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
@@ -61,6 +61,14 @@ def pose_periods(config: SwarmConfig, options: SwarmOptions) -> Dict[str, int]:
     if options.pose_period_ms is not None:
         return {cf.tf_prefix: options.pose_period_ms for cf in config.crazyflies}
     return radio_budget.pose_log_periods({cf.tf_prefix: cf.uri for cf in config.crazyflies})
+
+
+def ros_param_or_none(name: str) -> Any:
+    """The ROS parameter ``name``, None when it is not set (one call to the master)."""
+    try:
+        return rospy.get_param(name)
+    except KeyError:
+        return None
 
 
 def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0) -> WorkerConfig:
@@ -245,20 +253,18 @@ class RosSwarm:
         return EmptyResponse()
 
     def _update_params(self, req) -> None:
-        """Each name from /allcfs/<group>/<name> (for every Crazyflie) or else /<tf_prefix>/<group>/<name>;
-        written by unicast to every Crazyflie, in parallel, each write acknowledged."""
+        """Each name from /allcfs/<group>/<name> (for every Crazyflie) or else /<tf_prefix>/<group>/<name>, each
+        ROS parameter read once: an /allcfs value by one broadcast on every radio, the others by acknowledged
+        unicast, the radios in parallel (``swarm_commands.update_params``); the first-fix writes keep their own
+        pool. While first fixes are still to come, it waits for them first (up to the takeoff's
+        ``PLACEMENT_WAIT_S``): every Crazyflie answers each write, and a placement's request would wait behind
+        those answers in its transmit queue (bench/results/swarm_params.txt: placement 2.6 s -> 5.0 s)."""
         members = self.live_members()
-        lookup = lambda name: rospy.get_param(name) if rospy.has_param(name) else None   # noqa: E731
-
-        def write(m: SwarmMember) -> List[str]:
-            values, errors = update_param_values(req.params, m.name, lookup)
-            written, write_errors = m.worker.update_params(values)
-            for name in written:
-                rospy.loginfo("swarm: %s: parameter %s updated", m.name, name)
-            return errors + ["%s: %s" % (m.name, e) for e in write_errors]
-
-        with ThreadPoolExecutor(max_workers=max(1, min(16, len(members)))) as pool:
-            errors = [e for result in pool.map(write, members) for e in result]
+        if self.stream is not None:
+            self.placement.missing([m.name for m in members])
+        written, errors = update_params(members, req.params, ros_param_or_none, self.broadcaster)
+        for name, cfs in written.items():
+            rospy.loginfo("swarm: parameter %s updated on %d Crazyflie(s)", name, len(cfs))
         if errors:
             raise ValueError("%d not applied: %s" % (len(errors), "; ".join(errors[:10])))
 

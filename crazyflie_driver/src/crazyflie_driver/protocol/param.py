@@ -12,7 +12,7 @@ import math
 import struct
 from typing import Any, Callable, Dict, List, Union
 
-from crazyflie_driver.crtp.packet import PORT_PARAM, CRTPPacket
+from crazyflie_driver.crtp.packet import MAX_PAYLOAD, PORT_PARAM, CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam
 from crazyflie_driver.crtp.ctypes import ctype, type_size
 from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name
@@ -23,6 +23,7 @@ CH_TOC = 0
 CH_READ = 1
 CH_WRITE = 2
 CH_MISC = 3
+MISC_SET_BY_NAME = 0
 MISC_VALUE_UPDATED = 1
 ENOENT = 2
 
@@ -84,6 +85,22 @@ def _as_integer(label: str, value: Any) -> int:
     if not math.isfinite(number) or number != int(number):
         raise ParamValueError("%s: %r is not an integer" % (label, value))
     return int(number)
+
+
+def set_by_name_packet(full_name: str, ctype_name: str, value: Any) -> CRTPPacket:
+    """SET_BY_NAME (misc channel, command 0): ``[0, group, 0, name, 0, type, value]``, a write that names the
+    parameter instead of its TOC id, so one broadcast sets it on every Crazyflie that has it (as swarm servers
+    send ``/update_params``). ``value`` converted as ``param_value`` does; ParamValueError when the name and
+    value do not fit in one packet. The firmware answers it (the answer waits in its transmit queue)."""
+    check_toc_name(full_name, "parameter")
+    ct = ctype(ctype_name)
+    group, name = full_name.split(".")
+    payload = (bytes([MISC_SET_BY_NAME]) + group.encode("ascii") + b"\x00" + name.encode("ascii") + b"\x00"
+               + bytes([ct.param_code]) + ct.pack(param_value(full_name, ctype_name, value)))
+    if len(payload) > MAX_PAYLOAD:
+        raise ParamValueError("parameter %s: a write by name takes %d bytes, more than a packet's %d"
+                              % (full_name, len(payload), MAX_PAYLOAD))
+    return CRTPPacket(PORT_PARAM, CH_MISC, payload)
 
 
 def pack_value(entry: TocEntry, value: Value) -> bytes:

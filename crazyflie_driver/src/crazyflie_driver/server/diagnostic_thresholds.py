@@ -32,3 +32,8 @@ POSE_AGE_WARN_S = 0.5               # s since the last external position/pose, o
 # -- a dongle (radio budget) ------------------------------------------------------------------------
 RADIO_LOAD_WARN = 0.8               # share of the dongle's modelled capacity in use above this: WARN
 RADIO_LOAD_ERROR = 1.0              # planned load beyond the capacity: ERROR (data will be late or lost)
+
+# -- what limits the data flow (the bottleneck entry) -------------------------------------------------
+WORLD_BEHIND_FACTOR = 0.9           # simulated world below this share of its speed: it is the bottleneck
+LOOP_LAG_WARN_S = 0.05              # s the server's own periodic timer wakes late: the host's CPU is
+WORLD_FIGURE_STALE_S = 5.0          # s after which the world's last real-time factor is no longer trusted

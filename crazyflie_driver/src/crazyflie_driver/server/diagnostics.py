@@ -355,11 +355,22 @@ class RadioFigures:
     advice: str = ""
 
 
+    @property
+    def broadcasts_per_s(self) -> float:
+        return self.broadcasts / self.span_s if self.span_s > 0 else 0.0
+
+    @property
+    def load(self) -> float:
+        """Share of the modelled capacity in use (round trips and broadcasts)."""
+        return ((self.round_trips_per_s + self.broadcasts_per_s) / self.capacity_per_s
+                if self.capacity_per_s > 0 else 0.0)
+
+
 def radio_entry(f: RadioFigures) -> Entry:
     """Round trips and broadcasts per second against the dongle's modelled capacity."""
     rt_s = f.round_trips_per_s
-    bc_s = f.broadcasts / f.span_s if f.span_s > 0 else 0.0
-    load = (rt_s + bc_s) / f.capacity_per_s if f.capacity_per_s > 0 else 0.0
+    bc_s = f.broadcasts_per_s
+    load = f.load
     level, why = OK, []
     if f.planned_load is not None:
         level, reason = graded(f.planned_load * 100, T.RADIO_LOAD_WARN * 100, T.RADIO_LOAD_ERROR * 100,
@@ -379,6 +390,63 @@ def radio_entry(f: RadioFigures) -> Entry:
         ("planned load", "%.2f" % f.planned_load if f.planned_load is not None else "n/a"),
         ("crazyflies", ", ".join(f.crazyflies)), ("window [s]", "%.2f" % f.span_s)))
     return Entry("radio %d" % f.index, level, message, values)
+
+
+@dataclass(frozen=True)
+class BottleneckFigures:
+    """What may limit the data flow, as the server sees it (None: not known)."""
+
+    world_speed_share: Optional[float] = None   # simulated world: its real-time factor over its speed
+    loop_lag_s: Optional[float] = None          # the server's own periodic timer: how late it woke (host CPU)
+    radio_loads: Tuple[Tuple[int, float], ...] = ()     # (dongle, measured share of its modelled capacity)
+
+
+#: Said where data arrives late, until a bottleneck entry has named what limits it.
+UNKNOWN_BOTTLENECK = ("the simulated world, the host's CPU or the radio falls behind (the bottleneck entry of "
+                      "/diagnostics names which)")
+
+
+def bottleneck_entry(f: BottleneckFigures) -> Entry:
+    """The bottleneck it sees, in this order: a simulated world behind real time (everything that follows its
+    clock is late by that factor, whatever the radios carry), the host's CPU (the server's timers wake late),
+    a radio near its capacity; OK when none is. Each with the figures of the others and what to do."""
+    busiest = max(f.radio_loads, key=lambda r: r[1]) if f.radio_loads else None
+    radios = ("radio load %s" % ", ".join("%d: %.0f %%" % (i, 100 * load) for i, load in f.radio_loads)
+              if f.radio_loads else "no radio figures yet")
+    lag = "server timer lag %.0f ms" % (1000 * f.loop_lag_s) if f.loop_lag_s is not None else "no timer lag yet"
+    world = ("world at %.2f of its speed" % f.world_speed_share if f.world_speed_share is not None
+             else "no simulated world figures")
+    figures = "; ".join((world, lag, radios))
+    if f.world_speed_share is not None and f.world_speed_share < T.WORLD_BEHIND_FACTOR:
+        level, message = WARN, ("the simulated world: it runs at %.2f of its speed, so the Crazyflies' data and "
+                                "the motion capture come that much slower, whatever the radios carry (give it "
+                                "a core: fewer processes on this host, or a lower world speed)" % f.world_speed_share)
+    elif f.loop_lag_s is not None and f.loop_lag_s > T.LOOP_LAG_WARN_S:
+        level, message = WARN, ("the host's CPU: crazyflie_server's timers wake %.0f ms late, so it polls and "
+                                "publishes late (fewer processes on this host)" % (1000 * f.loop_lag_s))
+    elif busiest is not None and busiest[1] > T.RADIO_LOAD_WARN:
+        level, message = WARN, ("radio %d: in use %.0f %% of its capacity (fewer Crazyflies on it, longer log "
+                                "periods or enable_logging false)" % (busiest[0], 100 * busiest[1]))
+    else:
+        return Entry("bottleneck", OK, "none seen (%s)" % figures, _bottleneck_values(f))
+    return Entry("bottleneck", level, "%s (%s)" % (message, figures), _bottleneck_values(f))
+
+
+def _bottleneck_values(f: BottleneckFigures) -> Values:
+    na = "n/a"
+    return _values([("world speed share", "%.3f" % f.world_speed_share if f.world_speed_share is not None else na),
+                    ("server timer lag [s]", "%.3f" % f.loop_lag_s if f.loop_lag_s is not None else na)]
+                   + [("radio %d load" % i, "%.2f" % load) for i, load in f.radio_loads])
+
+
+def world_speed_share(values: Mapping[str, str]) -> Optional[float]:
+    """The simulated world's real-time factor over its speed, from its /diagnostics values ("real-time factor",
+    "speed"); None when they are missing or the world runs as fast as it can (speed 0)."""
+    try:
+        factor, speed = float(values["real-time factor"]), float(values["speed"])
+    except (KeyError, ValueError):
+        return None
+    return factor / speed if speed > 0 and math.isfinite(factor) else None
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -3,7 +3,8 @@
 ``/add_crazyflie`` and ``/remove_crazyflie`` come in on service threads, possibly at once: the
 registry refuses a URI or tf_prefix already served, reserves the URI while its worker connects
 (so a slow or absent Crazyflie blocks only its own caller), and keeps nothing when the connect
-fails.
+fails or times out: the worker is stopped and its link closed before the slot is freed and the
+caller hears of it, so nothing more goes to that Crazyflie and an add again finds it free.
 """
 from __future__ import annotations
 
@@ -13,6 +14,10 @@ from typing import Any, Callable, Dict, List, Optional
 from crazyflie_driver.server.log_plan import validate_log_block_specs
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+
+#: s a failed add waits for its worker's connect sequence to end once the link is closed under it (one
+#: radio round trip in practice; a thread still busy after this is left to finish and close the link)
+ADD_TEARDOWN_S = 5.0
 
 
 class DuplicateCrazyflie(ValueError):
@@ -51,9 +56,10 @@ class CrazyflieRegistry:
             worker.start()
             worker.wait_ready(timeout)
         except BaseException:
+            worker.stop(timeout=ADD_TEARDOWN_S)     # cuts a connect under way short: nothing more is sent
             with self._lock:
-                self._workers.pop(key, None)
-            worker.stop(timeout=0.0)    # an absent Crazyflie: do not wait for its connect to time out
+                if self._workers.get(key) is worker:
+                    del self._workers[key]
             raise
         return worker
 

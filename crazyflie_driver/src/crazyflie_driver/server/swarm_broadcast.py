@@ -20,7 +20,7 @@ from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.protocol import high_level
+from crazyflie_driver.protocol import high_level, param
 from crazyflie_driver.protocol.commander import emergency_stop_packet
 from crazyflie_driver.protocol.localization import address_id, packed_pose_packets, packed_position_packets
 from crazyflie_driver.protocol.setpoints import notify_setpoints_stop_packet
@@ -138,6 +138,11 @@ class SwarmBroadcaster:
         return self._everywhere(high_level.start_trajectory_packet(trajectory_id, self.protocol_version, timescale,
                                                                    reversed_, relative=True,
                                                                    group_mask_=group_mask))
+
+    def set_param(self, full_name: str, ctype_name: str, value) -> int:
+        """Parameter ``full_name`` (of C type ``ctype_name`` on these Crazyflies) set to ``value`` on every
+        Crazyflie by name (SET_BY_NAME): unacknowledged, repeated like every command."""
+        return self._everywhere(param.set_by_name_packet(full_name, ctype_name, value))
 
     def notify_setpoints_stop(self) -> int:
         return self._everywhere(notify_setpoints_stop_packet(0))

@@ -18,9 +18,14 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-from crazyflie_driver.errors import CrazyflieError, FlightRefused, TrajectoryError
+from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.errors import (CrazyflieError, FlightRefused, TrajectoryError,
+                                     UnknownName)
 from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive, positive_duration
 from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
+from crazyflie_driver.protocol.param import param_value, set_by_name_packet
+from crazyflie_driver.server.param_names import Lookup, param_values, ros_param_name
+from crazyflie_driver.server.radio_lanes import RadioLanes
 from crazyflie_driver.server.safety import checked_landing
 
 LOG = logging.getLogger("crazyflie_driver.server.swarm")
@@ -155,28 +160,95 @@ class SwarmCommands:
 
 #: ``/update_params`` of the swarm reads ``<ALL_CFS_NAMESPACE>/<group>/<name>`` first (every Crazyflie).
 ALL_CFS_NAMESPACE = "/allcfs"
+#: Unicast parameter writes of a swarm-wide ``/update_params`` at once on each radio (acknowledged requests).
+PARAM_WRITERS_PER_RADIO = 4
 
 
-def update_param_values(names: Sequence[str], cf_name: str, lookup: Callable[[str], Any]) -> Tuple[Dict[str, Any],
-                                                                                                   List[str]]:
-    """The values ``/update_params`` writes to one Crazyflie: each ``group/name`` from
-    ``/allcfs/group/name`` or else ``/<cf_name>/group/name`` (``lookup(ros_name)`` returns None when
-    unset). Returns ({"group.name": value}, errors naming what is missing or malformed)."""
-    values: Dict[str, Any] = {}
+def update_params(members: Sequence[SwarmMember], names: Sequence[str], lookup: Lookup, broadcaster: Any,
+                  per_radio: int = PARAM_WRITERS_PER_RADIO) -> Tuple[Dict[str, List[str]], List[str]]:
+    """``/update_params`` of the swarm: (``{parameter: [Crazyflies written]}``, errors).
+
+    A value every Crazyflie takes from ``/allcfs`` goes out as one write by name (SET_BY_NAME) broadcast on
+    every radio at once, repeated, as swarm servers send it, once each Crazyflie's TOC has it writable with
+    one C type and the value converts to it: its answers wait in the transmit queues, which broadcast
+    high-level commands fill (every one is answered, and only unicast polls drain them), so waiting for 49
+    of them took minutes. The rest (a Crazyflie's own ``/<name>/...`` values, or where the TOC check fails,
+    so the unicast names the fault) by acknowledged unicast, the radios in parallel (``RadioLanes``, up to
+    ``per_radio`` at once on each). ``lookup`` is asked once per ROS name."""
+    lookup = _once_per_name(lookup)
+    plans = {m.name: update_param_values(names, m.name, lookup) for m in members}
     errors: List[str] = []
+    written: Dict[str, List[str]] = {}
+    for full, (ctype_name, value) in _broadcastable(members, names, lookup).items():
+        broadcaster.set_param(full, ctype_name, value)
+        converted = param_value(full, ctype_name, value)
+        for m in members:
+            m.worker.param_values[full] = converted
+            plans[m.name][0].pop(full, None)
+        written[full] = [m.name for m in members]
+
+    def write(m: SwarmMember) -> Tuple[List[str], List[str]]:
+        values, lookup_errors = plans[m.name]
+        done, write_errors = m.worker.update_params(values) if values else ([], [])
+        return done, lookup_errors + ["%s: %s" % (m.name, e) for e in write_errors]
+
+    with RadioLanes(per_radio, "update_params") as lanes:
+        results = lanes.map(lambda m: parse_uri(m.uri).index, write, list(members))
+    for m, (done, member_errors) in zip(members, results):
+        for full in done:
+            written.setdefault(full, []).append(m.name)
+        errors.extend(member_errors)
+    return written, list(dict.fromkeys(errors))       # a bad name once, not once per Crazyflie
+
+
+def _broadcastable(members: Sequence[SwarmMember], names: Sequence[str], lookup: Lookup) -> Dict[str, Tuple[str,
+                                                                                                      Any]]:
+    """{"group.name": (C type, value)} of the names every member takes from ``/allcfs`` and can be written by
+    one broadcast: in each one's TOC, writable, of one C type, the value converting to it and fitting a packet."""
+    out: Dict[str, Tuple[str, Any]] = {}
+    if not members:
+        return out
     for raw in names:
-        p = raw.strip("/")
-        if p.count("/") != 1 or not all(p.split("/")):
-            errors.append("%s: not of the form group/name" % raw)
+        try:
+            p = ros_param_name(raw)
+        except UnknownName:
             continue
-        for ns in (ALL_CFS_NAMESPACE, "/" + cf_name):
-            value = lookup(ns + "/" + p)
-            if value is not None:
-                values[p.replace("/", ".")] = value
-                break
-        else:
-            errors.append("%s: neither %s/%s nor /%s/%s is set" % (cf_name, ALL_CFS_NAMESPACE, p, cf_name, p))
-    return values, errors
+        value = lookup(ALL_CFS_NAMESPACE + "/" + p)
+        if value is None:
+            continue
+        full = p.replace("/", ".")
+        types = set()
+        for m in members:
+            toc = getattr(getattr(m.worker.cf, "params", None), "toc", None)
+            entry = toc.find(full) if toc is not None else None
+            types.add(None if entry is None or entry.readonly else entry.ctype)
+        if len(types) != 1 or None in types:
+            continue
+        ctype_name = types.pop()
+        try:
+            set_by_name_packet(full, ctype_name, value)
+        except (ValueError, CrazyflieError):
+            continue
+        out[full] = (ctype_name, value)
+    return out
+
+
+def _once_per_name(lookup: Lookup) -> Lookup:
+    seen: Dict[str, Any] = {}
+
+    def cached(name: str) -> Any:
+        if name not in seen:
+            seen[name] = lookup(name)
+        return seen[name]
+    return cached
+
+
+def update_param_values(names: Sequence[str], cf_name: str, lookup: Lookup) -> Tuple[Dict[str, Any], List[str]]:
+    """The values ``/update_params`` writes to one Crazyflie: each ``group/name`` (checked as every service
+    checks parameter names, ``server.param_names``) from ``/allcfs/group/name`` or else
+    ``/<cf_name>/group/name`` (``lookup(ros_name)`` returns None when unset). Returns ({"group.name": value},
+    errors naming what is missing or malformed)."""
+    return param_values(names, (ALL_CFS_NAMESPACE, "/" + cf_name), lookup)
 
 
 def _uploaded(member: SwarmMember) -> Dict[int, Any]:

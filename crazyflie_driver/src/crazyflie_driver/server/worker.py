@@ -27,15 +27,16 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import (CrazyflieError, LogConfigError, RadioMediumGone, RadioNotFound, RadioUnplugged,
-                                     UnknownName)
+from crazyflie_driver.errors import (ConnectCancelled, CrazyflieError, LogConfigError, RadioMediumGone, RadioNotFound,
+                                     RadioUnplugged, UnknownName)
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
-from crazyflie_driver.server.diagnostics import CrazyflieHealth, Reports
+from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
                                               RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock,
                                               check_log_limits, log_packet_rate, plan_log_blocks)
@@ -55,6 +56,9 @@ LOG = logging.getLogger("crazyflie_driver.server")
 MAX_RESTARTS = 5            # unexpected loop errors within RESTART_WINDOW before the worker gives up
 RESTART_WINDOW = 30.0       # s
 RESTART_DELAY = 0.05        # s, pause before the loop restarts after an unexpected error
+#: s between closes of the link of a connect sequence being stopped: each close ends the step waiting on the
+#: radio at its next round trip (a step that opened the link again meanwhile is closed by the next one)
+CANCEL_POLL_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -88,6 +92,11 @@ class WorkerListener:
 
     def on_log_late(self, message: str, late: bool) -> None:
         """Log data started (``late``) or stopped arriving later than ``LATE_DATA_WARNING_S``."""
+
+    def late_cause(self) -> str:
+        """What limits the data flow as far as is known (``diagnostics.bottleneck_entry``), for the late-data
+        message; any thread."""
+        return UNKNOWN_BOTTLENECK
 
     def on_rssi(self, rssi: float) -> None:
         """Radio signal strength, -dBm, from the acks or the ``radio.rssi`` log variable."""
@@ -214,13 +223,23 @@ class CrazyflieWorker:
             raise self.error
 
     def stop(self, timeout: float = 2.0) -> None:
-        """Stop the thread and close the link. Safe to call twice and from any thread."""
+        """Stop the thread and close the link. Safe to call twice and from any thread.
+
+        A connect sequence under way is cut short: the link is closed under it, so the step waiting on
+        the radio fails at its next round trip and nothing more is sent (an add that timed out leaves no
+        worker talking to the Crazyflie). Waits up to ``timeout`` s for the thread to end."""
         with self._cond:
             self._stopping = True
             self._cond.notify_all()
         t = self._thread
         if t is not None and t is not threading.current_thread():
-            t.join(timeout)
+            deadline = time.monotonic() + timeout      # wall clock: joining a host thread
+            while True:
+                if self.state == WorkerState.CONNECTING:
+                    self._close_link()
+                t.join(max(0.0, min(CANCEL_POLL_S, deadline - time.monotonic())))
+                if not t.is_alive() or time.monotonic() >= deadline:
+                    break
             if t.is_alive():
                 # it closes the link itself when its current radio exchange ends
                 if timeout > 0:
@@ -228,11 +247,14 @@ class CrazyflieWorker:
                 return
         self._close()
 
-    def _close(self) -> None:
+    def _close_link(self) -> None:
         try:
             self.cf.close()
         except Exception as e:          # closing a dead link must not raise into the caller
             LOG.debug("%s: close: %s", self.uri, e)
+
+    def _close(self) -> None:
+        self._close_link()
         if self.state != WorkerState.FAILED:
             self.state = WorkerState.STOPPED
 
@@ -322,10 +344,12 @@ class CrazyflieWorker:
         try:
             self._connect_sequence()
         except BaseException as e:
+            if self._stopping:      # whatever the closed link made the step raise: it was stopped
+                e = ConnectCancelled("%s: connect stopped before it finished (%s)" % (self.uri, e))
             self.error = e if isinstance(e, Exception) else RuntimeError(str(e))
             self.state = WorkerState.FAILED
+            self._close()           # before the caller hears of it: a retry finds the link down
             self._ready.set()
-            self._close()
             return
         self.state = WorkerState.RUNNING
         self._last_ack = self._clock()
@@ -387,23 +411,35 @@ class CrazyflieWorker:
         return True
 
     def _connect_sequence(self) -> None:
+        """Connect, TOCs, parameters, log blocks, thrust unlock; stopped between steps by ``stop`` (which
+        also closes the link under the step under way)."""
         cfg, cf = self.config, self.cf
         self._connect_link()
-        if self._stopping:
-            return
+        self._check_cancelled()
         if cfg.enable_logging or cfg.log_blocks:
             cf.log.reset()
         if cfg.enable_parameters:
+            self._check_cancelled()
             cf.params.fetch_toc()
             self.param_types = toc_types(cf.params.toc)
+            self._check_cancelled()
             values = cf.params.read_all()
             self.param_values = dict(values)
+            self._check_cancelled()
             self.listener.on_params(dict(values))
         if cfg.enable_logging or cfg.log_blocks:
+            self._check_cancelled()
             cf.log.fetch_toc()
             self._log_plan = self._plan_logging(toc_types(cf.log.toc))
+            self._check_cancelled()
             self._start_log_blocks()
+        self._check_cancelled()
         self._release_thrust_lock()
+        self._check_cancelled()
+
+    def _check_cancelled(self) -> None:
+        if self._stopping:
+            raise ConnectCancelled("%s: connect stopped before it finished" % self.uri)
 
     def _connect_link(self) -> None:
         """``cf.connect()``; a radio that is not there yet (dongle, or the simulated world still
@@ -532,10 +568,13 @@ class CrazyflieWorker:
             new_lost = lost - self._lost_at_late_warning
             self._lost_at_late_warning = lost
             self.log_late, self._late_warned_at = True, now
-            text = ("%s: log data arrives %.1f s late%s: the radio carries fewer packets than its log blocks "
-                    "send (fewer Crazyflies per Crazyradio, longer log periods or enable_logging false)" % (
-                        self.uri, age, "; %d log packets lost: the Crazyflie's transmit queue overflows"
-                        % new_lost if new_lost else ""))
+            try:
+                cause = self.listener.late_cause()
+            except Exception:
+                cause = UNKNOWN_BOTTLENECK
+            text = "%s: log data arrives %.1f s late%s; bottleneck: %s" % (
+                self.uri, age, "; %d log packets lost: the Crazyflie's transmit queue overflows" % new_lost
+                if new_lost else "", cause)
             LOG.warning(text)
             self._tell_late(text, True)
         elif self.log_late and age < LATE_DATA_WARNING_S / 2:

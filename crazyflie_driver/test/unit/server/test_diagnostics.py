@@ -8,10 +8,11 @@ import pytest
 
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.server import diagnostic_thresholds as T
-from crazyflie_driver.server.diagnostics import (ABOVE, BELOW, ERROR, OK, STALE, WARN, CounterWindow,
-                                                 CrazyflieDiagnostics, CrazyflieHealth, LinkFigures, RadioFigures,
-                                                 Reports, ack_ratio_tolerance, battery_entry, commands_entry, graded,
-                                                 link_entry, radio_entry, supervisor_entry, worst)
+from crazyflie_driver.server.diagnostics import (ABOVE, BELOW, ERROR, OK, STALE, WARN, BottleneckFigures,
+                                                 CounterWindow, CrazyflieDiagnostics, CrazyflieHealth, LinkFigures,
+                                                 RadioFigures, Reports, ack_ratio_tolerance, battery_entry,
+                                                 bottleneck_entry, commands_entry, graded, link_entry, radio_entry,
+                                                 supervisor_entry, world_speed_share, worst)
 from crazyflie_driver.server.status import worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
 
@@ -236,3 +237,30 @@ def test_reports_raise_the_status_topic():
         assert worker_status(worker).level == OK
     finally:
         worker.stop()
+
+
+def test_the_bottleneck_is_the_one_seen_not_assumed_to_be_the_radio():
+    """The swarm run that blamed the radios: a world at 0.52 of real time with radios 29-38 % loaded. The
+    world is named, with the radios' figures; a host whose timers wake late is named next; a radio only
+    when it is near its capacity; none when nothing is."""
+    radios = ((0, 0.29), (1, 0.38), (2, 0.33))
+    world = bottleneck_entry(BottleneckFigures(0.52, 0.004, radios))
+    assert world.level == WARN and world.message.startswith("the simulated world: it runs at 0.52 of its speed")
+    assert "radio load 0: 29 %, 1: 38 %, 2: 33 %" in world.message and "radio 1:" not in world.message
+    host = bottleneck_entry(BottleneckFigures(1.0, 0.2, radios))
+    assert host.level == WARN and host.message.startswith("the host's CPU: crazyflie_server's timers wake 200 ms late")
+    radio = bottleneck_entry(BottleneckFigures(None, 0.004, ((0, 0.29), (1, 0.93))))
+    assert radio.level == WARN and radio.message.startswith("radio 1: in use 93 % of its capacity")
+    assert "no simulated world figures" in radio.message
+    none = bottleneck_entry(BottleneckFigures(0.99, 0.004, radios))
+    assert none.level == OK and none.message.startswith("none seen")
+    assert ("radio 1 load", "0.38") in none.values
+    assert bottleneck_entry(BottleneckFigures()).level == OK
+
+
+def test_the_worlds_speed_share_comes_from_its_diagnostics_values():
+    assert world_speed_share({"real-time factor": "0.520", "speed": "1.000"}) == pytest.approx(0.52)
+    assert world_speed_share({"real-time factor": "1.0", "speed": "2.0"}) == pytest.approx(0.5)
+    assert world_speed_share({"real-time factor": "40.0", "speed": "0.000"}) is None     # as fast as it can
+    assert world_speed_share({"speed": "1.0"}) is None and world_speed_share({"real-time factor": "x",
+                                                                            "speed": "1"}) is None

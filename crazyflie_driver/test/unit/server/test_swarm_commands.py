@@ -134,7 +134,8 @@ def test_update_params_reads_allcfs_first_then_the_crazyflies_own_and_names_what
     values, errors = update_param_values(["stabilizer/controller", "/locSrv/extPosStdDev/", "ring/effect", "bad"],
                                          "cf1", ros.get)
     assert values == {"stabilizer.controller": 2, "locSrv.extPosStdDev": 0.001}
-    assert errors == ["cf1: neither /allcfs/ring/effect nor /cf1/ring/effect is set", "bad: not of the form group/name"]
+    assert errors == ["'ring/effect': neither /allcfs/ring/effect nor /cf1/ring/effect is set",
+                      "'bad': not of the form group/name"]
 
 
 def test_commands_that_went_out_are_observed_for_the_safety_reactions_refused_ones_are_not():

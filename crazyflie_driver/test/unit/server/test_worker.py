@@ -375,6 +375,9 @@ class StampRecorder(Recorder):
     def on_log_late(self, message, late):
         self.late.append((message, late))
 
+    def late_cause(self):
+        return "the simulated world: it runs at 0.52 of its speed"
+
 
 def test_late_log_data_is_measured_from_onboard_stamps_and_said_once(caplog):
     rec = StampRecorder()
@@ -393,6 +396,8 @@ def test_late_log_data_is_measured_from_onboard_stamps_and_said_once(caplog):
         assert rec.ages[-1][0] == "imu" and rec.ages[-1][1] == pytest.approx(late_age, abs=0.05)
         assert [late for _, late in rec.late] == [True]       # said once for both
         assert "late" in rec.late[0][0] and "8 log packets lost" in rec.late[0][0]
+        # what limits the flow is the server's judgement (diagnostics.bottleneck_entry), never assumed
+        assert rec.late[0][0].endswith("; bottleneck: the simulated world: it runs at 0.52 of its speed")
         assert w.topic_timing["imu"].lost == 8 and w.log_late
         # fresh data again (the queue drained): on time, said once
         cf.downlink.append((imu, int((time.monotonic() - t0) * 1000) + 5000, [0.0] * 6))
