@@ -1,0 +1,148 @@
+"""World pacing: fixed speeds, the ``auto`` rule on made-up lag samples, the lag probe, speed changes."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from crazyflie_driver.sim.world import pacing
+from crazyflie_driver.sim.world.pacing import (LAG_BOUND_S, MIN_SPEED, RECOVER_WINDOWS, AutoSpeed, LagProbe, Pacing,
+                                               PacingError, parse_pacing, percentile)
+from crazyflie_driver.sim.world.world import World
+
+
+def test_speed_settings_are_auto_or_a_number_and_anything_else_names_the_choice():
+    assert parse_pacing("auto") == Pacing(True, 1.0)
+    assert parse_pacing(" AUTO ") == Pacing(True, 1.0)
+    assert parse_pacing("0.5") == Pacing(False, 0.5)
+    assert parse_pacing(2) == Pacing(False, 2.0)
+    assert parse_pacing(0.0) == Pacing(False, 0.0)
+    for bad in ("fast", -1, "-0.5", float("nan"), True, None):
+        with pytest.raises(PacingError, match="'auto' or a number"):
+            parse_pacing(bad)
+
+
+def test_auto_keeps_real_time_while_the_host_wakes_up_on_time():
+    rule = AutoSpeed()
+    for _ in range(20):
+        assert rule.update(0.0001) == 1.0
+
+
+def test_auto_slows_down_at_once_when_host_wake_ups_are_late_in_world_time():
+    """4 ms late at speed 1 is 4 ms of world time, twice the bound: halved, at most, in one sample."""
+    rule = AutoSpeed()
+    assert rule.update(0.004) == pytest.approx(0.5)
+    # 3 ms late at 0.5 is 1.5 ms of world time: within the bound, the speed stays
+    assert rule.update(0.003) == pytest.approx(0.5)
+    assert rule.lag_world_s == pytest.approx(0.0015)
+    # 5 ms at 0.5 is 2.5 ms of world time: to where it would be 0.8 of the bound
+    assert rule.update(0.005) == pytest.approx(0.5 * 0.8 * LAG_BOUND_S / 0.0025)
+
+
+def test_auto_never_goes_below_its_floor():
+    rule = AutoSpeed()
+    for _ in range(30):
+        rule.update(1.0)
+    assert rule.speed == MIN_SPEED
+
+
+def test_auto_returns_to_real_time_after_calm_samples_and_not_before():
+    rule = AutoSpeed()
+    rule.update(0.008)                      # down to 0.5
+    slow = rule.speed
+    for _ in range(RECOVER_WINDOWS - 1):
+        assert rule.update(0.0) == slow     # one calm sample is not yet a recovery
+    assert rule.update(0.0) > slow
+    for _ in range(50):
+        rule.update(0.0)
+    assert rule.speed == 1.0
+    rule.update(0.008)                      # a relapse starts the count again
+    after = rule.speed
+    assert rule.update(0.0) == after
+
+
+def test_auto_takes_the_speed_the_world_itself_achieves_when_that_is_lower():
+    rule = AutoSpeed()
+    assert rule.update(0.0001, achieved=0.6) == pytest.approx(0.6)
+    assert rule.update(0.0001, achieved=0.59) == pytest.approx(0.6)    # within 5 %: not behind
+    assert rule.update(0.0001, achieved=None) == pytest.approx(0.6 * pacing.SPEED_UP_FACTOR)   # calm again
+
+
+def test_auto_with_a_target_above_real_time_stays_under_it():
+    rule = AutoSpeed(target=2.0)
+    for _ in range(10):
+        rule.update(0.0)
+    assert rule.speed == 2.0
+    # at 2x, 1.5 ms of wall lateness is 3 ms of world time: too late
+    assert rule.update(0.0015) < 2.0
+
+
+def test_percentile_is_nearest_rank():
+    assert percentile([], 0.9) == 0.0
+    assert percentile(list(range(1, 11)), 0.9) == 9
+    assert percentile([5.0], 0.9) == 5.0
+
+
+def test_lag_probe_reports_windows_of_its_wake_up_lateness_and_stops():
+    samples = []
+    got = threading.Event()
+
+    def on_sample(p, worst):
+        samples.append((p, worst))
+        if len(samples) >= 2:
+            got.set()
+    probe = LagProbe(on_sample, nice=0, period_s=0.002, window=10).start()
+    try:
+        assert got.wait(10.0), "the probe reported %d windows" % len(samples)
+    finally:
+        probe.stop()
+    for p, worst in samples:
+        assert 0.0 <= p <= worst < 1.0
+
+
+def test_a_speed_change_continues_world_time_without_a_jump():
+    """At 1x for 0.3 s, then 0.25x for 0.4 s: about 0.3 + 0.1 s of world time, none skipped or repeated."""
+    w = World(speed=1.0, seed=1)
+    w.add_vehicle("cf1")
+    seen = []
+    w.add_tick_listener(lambda now: seen.append(now), 0.001)
+    w.start()
+    try:
+        time.sleep(0.3)
+        t_change = w.time
+        w.set_speed(0.25)
+        time.sleep(0.4)
+        t_end = w.time
+    finally:
+        w.stop()
+    assert t_change == pytest.approx(0.3, abs=0.06)
+    assert t_end - t_change == pytest.approx(0.1, abs=0.04)
+    steps = [b - a for a, b in zip(seen, seen[1:])]
+    assert max(steps) == pytest.approx(0.001, abs=1e-9) and min(steps) == pytest.approx(0.001, abs=1e-9)
+    with pytest.raises(ValueError, match="speed"):
+        w.set_speed(-1.0)
+
+
+class _World:
+    """What the pacer needs of a world: its measured factor, its speed, ``set_speed``."""
+
+    def __init__(self) -> None:
+        self.realtime_factor = 1.0
+        self.speed = 1.0
+        self.set_to = []
+
+    def set_speed(self, speed: float) -> None:
+        self.speed = speed
+        self.set_to.append(speed)
+
+
+def test_pacer_sets_the_world_speed_from_the_probe_samples():
+    world = _World()
+    pacer = pacing.AutoPacer(world, Pacing(True, 1.0))
+    pacer._sample(0.0001, 0.0002)          # calm: nothing to change
+    assert world.set_to == []
+    pacer._sample(0.004, 0.01)             # 4 ms late in world time: halved
+    assert world.set_to == [pytest.approx(0.5)]
+    assert pacer.lag_wall_s == 0.004 and pacer.samples == 2
+    assert pacing.start_pacing(world, Pacing(False, 1.0)) is None     # a fixed speed needs no pacer
