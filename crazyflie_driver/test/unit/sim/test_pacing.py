@@ -130,6 +130,8 @@ class _World:
     def __init__(self) -> None:
         self.realtime_factor = 1.0
         self.speed = 1.0
+        self.overruns = 0
+        self.ticks_behind = 0
         self.set_to = []
 
     def set_speed(self, speed: float) -> None:
@@ -146,3 +148,19 @@ def test_pacer_sets_the_world_speed_from_the_probe_samples():
     assert world.set_to == [pytest.approx(0.5)]
     assert pacer.lag_wall_s == 0.004 and pacer.samples == 2
     assert pacing.start_pacing(world, Pacing(False, 1.0)) is None     # a fixed speed needs no pacer
+
+
+def test_pacer_takes_the_achieved_factor_only_when_the_world_is_behind_its_own_schedule():
+    """A factor measured partly at the previous speed does not veto a speed-up; a world that overran does."""
+    world = _World()
+    pacer = pacing.AutoPacer(world, Pacing(True, 1.0))
+    world.realtime_factor = 0.6          # stale: the last second ran partly at an older speed
+    pacer._sample(0.0001, 0.0002)
+    assert world.set_to == []
+    world.overruns = 1                   # the world let go of a lag: it cannot keep 1.0
+    pacer._sample(0.0001, 0.0002)
+    assert world.set_to == [pytest.approx(0.6)]
+    world.realtime_factor = 0.3
+    world.ticks_behind = pacing.BEHIND_TICKS + 1
+    pacer._sample(0.0001, 0.0002)
+    assert world.set_to[-1] == pytest.approx(0.3)

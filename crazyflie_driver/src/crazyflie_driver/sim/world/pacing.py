@@ -46,6 +46,9 @@ SPEED_UP_FACTOR = 1.15
 """Per calm sample, ``auto`` speeds the world up by this factor (up to its target)."""
 MAX_SLOW_DOWN = 0.5
 """Per laggy sample, ``auto`` at most halves the speed."""
+BEHIND_TICKS = 50
+"""Firmware ticks (50 ms of world time) the world may trail its own schedule before ``auto`` takes
+the speed it achieves."""
 
 
 class PacingError(ValueError):
@@ -202,7 +205,12 @@ class LagProbe:
 
 
 class AutoPacer:
-    """Runs ``AutoSpeed`` on a ``LagProbe`` and sets the world's speed (``world.set_speed``)."""
+    """Runs ``AutoSpeed`` on a ``LagProbe`` and sets the world's speed (``world.set_speed``).
+
+    The world counts as unable to keep its speed when it let go of a lag since the last sample
+    (``overruns`` grew) or trails its schedule by more than BEHIND_TICKS; only then is its measured
+    real-time factor (over the last second, so partly at the previous speed) passed on as ``achieved``.
+    """
 
     def __init__(self, world, pacing: Pacing, nice: int = 0) -> None:
         self.world = world
@@ -211,10 +219,14 @@ class AutoPacer:
         self.lag_wall_s = 0.0
         self.lag_max_s = 0.0
         self.samples = 0
+        self._overruns = int(getattr(world, "overruns", 0))
         self._probe = LagProbe(self._sample, nice=nice)
 
     def _sample(self, lag_s: float, lag_max_s: float) -> None:
-        achieved = self.world.realtime_factor or None
+        overruns = int(getattr(self.world, "overruns", 0))
+        behind = overruns > self._overruns or int(getattr(self.world, "ticks_behind", 0)) > BEHIND_TICKS
+        self._overruns = overruns
+        achieved = (self.world.realtime_factor or None) if behind else None
         self.lag_wall_s, self.lag_max_s = lag_s, lag_max_s
         self.samples += 1
         speed = self.rule.update(lag_s, achieved)
