@@ -49,7 +49,6 @@ back. Tests use it to check what the controller does without a pose.
 from __future__ import annotations
 
 import math
-import os
 import threading
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
@@ -279,7 +278,8 @@ def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behi
     """The world's real-time status; WARN when it runs below ``behind_factor`` × its speed.
 
     ``pacing``: the speed setting (``auto``: ``speed`` is where it has set the world now, ``target``
-    where it returns to); ``host_lag_s``: the lag probe's latest lateness [wall s] (auto only)."""
+    where it returns to); ``host_lag_s``: the host's latest mean run-queue wait per time slice [wall s]
+    (auto only)."""
     pacing = pacing if pacing is not None else Pacing(False, speed)
     slowed = pacing.auto and speed < pacing.target * behind_factor
     if speed <= 0:
@@ -297,7 +297,7 @@ def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behi
               ("vehicles", str(vehicles)), ("ticks behind", str(ticks_behind)), ("overruns", str(overruns)),
               ("world time [s]", "%.3f" % world_time))
     if host_lag_s is not None:
-        values += (("host wake-up lag p90 [ms]", "%.2f" % (host_lag_s * 1e3)),)
+        values += (("host run-queue wait [ms]", "%.2f" % (host_lag_s * 1e3)),)
     return WorldStatus(level, message, values)
 
 
@@ -543,7 +543,6 @@ def main() -> None:
     params = _private_params()
     # /clock first: nodes under /use_sim_time wait for it (nodes.ros_clock) before they time anything
     clock_pub = rospy.Publisher("/clock", Clock, queue_size=100) if params.get("publish_clock", True) else None
-    host_nice = os.getpriority(os.PRIO_PROCESS, 0)      # the lag probe runs where the host's nodes do
     try:
         pacing = parse_pacing(params.get("speed", 1.0))
         boost = int(_number("~priority_boost", params.get("priority_boost", DEFAULT_PRIORITY_BOOST)))
@@ -573,7 +572,7 @@ def main() -> None:
     if clock_pub is not None:
         _publish_clock(world, clock_pub, Clock)
     world.start()
-    pacer = start_pacing(world, pacing, host_nice)
+    pacer = start_pacing(world, pacing)
     rospy.loginfo("crazyflie_sim: world served on %s (%d dongle%s, mocap %s at %.0f Hz, speed %s%s): %s",
                   server.address, dongles, "" if dongles == 1 else "s", mocap.style, mocap.rate, pacing.describe(),
                   ", /clock" if clock_pub is not None else "",

@@ -108,9 +108,9 @@ def test_world_status_says_the_speed_mode_the_target_and_the_host_lag():
     values = dict(slowed.values)
     assert slowed.level == 0 and "slowed down to 0.50x" in slowed.message
     assert values["speed mode"] == "auto" and values["target speed"] == "1.000" and values["speed"] == "0.500"
-    assert values["host wake-up lag p90 [ms]"] == "4.00"
+    assert values["host run-queue wait [ms]"] == "4.00"
     fixed = dict(world_status(1.0, 1.0, 1, 0, 0, 3.0, 0.95).values)
-    assert fixed["speed mode"] == "fixed" and "host wake-up lag p90 [ms]" not in fixed
+    assert fixed["speed mode"] == "fixed" and "host run-queue wait [ms]" not in fixed
 
 
 def test_clock_is_published_at_start_and_every_period_of_world_time_with_the_tick_time():

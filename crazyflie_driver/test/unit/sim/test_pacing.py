@@ -1,14 +1,16 @@
 """World pacing: fixed speeds, the ``auto`` rule on made-up lag samples, the lag probe, speed changes."""
 from __future__ import annotations
 
-import threading
+import os
+import subprocess
+import sys
 import time
 
 import pytest
 
 from crazyflie_driver.sim.world import pacing
-from crazyflie_driver.sim.world.pacing import (LAG_BOUND_S, MIN_SPEED, RECOVER_WINDOWS, AutoSpeed, LagProbe, Pacing,
-                                               PacingError, parse_pacing, percentile)
+from crazyflie_driver.sim.world.pacing import (LAG_BOUND_S, MIN_SPEED, RECOVER_WINDOWS, AutoSpeed, HostDelay, Pacing,
+                                               PacingError, parse_pacing, read_schedstat, sibling_pids)
 from crazyflie_driver.sim.world.world import World
 
 
@@ -29,15 +31,15 @@ def test_auto_keeps_real_time_while_the_host_wakes_up_on_time():
         assert rule.update(0.0001) == 1.0
 
 
-def test_auto_slows_down_at_once_when_host_wake_ups_are_late_in_world_time():
-    """4 ms late at speed 1 is 4 ms of world time, twice the bound: halved, at most, in one sample."""
+def test_auto_slows_down_at_once_when_host_threads_wait_long_in_world_time():
+    """4 ms of wait at speed 1 is 4 ms of world time, four times the bound: halved, at most, in one sample."""
     rule = AutoSpeed()
     assert rule.update(0.004) == pytest.approx(0.5)
-    # 3 ms late at 0.5 is 1.5 ms of world time: within the bound, the speed stays
-    assert rule.update(0.003) == pytest.approx(0.5)
-    assert rule.lag_world_s == pytest.approx(0.0015)
-    # 5 ms at 0.5 is 2.5 ms of world time: to where it would be 0.8 of the bound
-    assert rule.update(0.005) == pytest.approx(0.5 * 0.8 * LAG_BOUND_S / 0.0025)
+    # 1.5 ms at 0.5 is 0.75 ms of world time: within the bound, above the calm level: the speed stays
+    assert rule.update(0.0015) == pytest.approx(0.5)
+    assert rule.lag_world_s == pytest.approx(0.00075)
+    # 3 ms at 0.5 is 1.5 ms of world time: to where it would be 0.8 of the bound
+    assert rule.update(0.003) == pytest.approx(0.5 * 0.8 * LAG_BOUND_S / 0.0015)
 
 
 def test_auto_never_goes_below_its_floor():
@@ -78,27 +80,48 @@ def test_auto_with_a_target_above_real_time_stays_under_it():
     assert rule.update(0.0015) < 2.0
 
 
-def test_percentile_is_nearest_rank():
-    assert percentile([], 0.9) == 0.0
-    assert percentile(list(range(1, 11)), 0.9) == 9
-    assert percentile([5.0], 0.9) == 5.0
+class _Schedstats:
+    """Made-up schedstat readings: pid -> (ns run, ns waited, slices), advanced by the test."""
+
+    def __init__(self) -> None:
+        self.stats = {}
+        self.asked = []
+
+    def read(self, pids):
+        self.asked.append(list(pids))
+        return {p: self.stats[p] for p in pids if p in self.stats}
 
 
-def test_lag_probe_reports_windows_of_its_wake_up_lateness_and_stops():
-    samples = []
-    got = threading.Event()
+def test_host_delay_is_the_mean_wait_per_time_slice_of_the_processes_seen_twice():
+    fake, t = _Schedstats(), [0.0]
+    host = HostDelay(pids=lambda: [10, 11, 12], read=fake.read, now=lambda: t[0])
+    fake.stats = {10: (0, 0, 0), 11: (0, 0, 0)}
+    assert host.sample() is None                                      # nothing to compare with yet
+    fake.stats = {10: (5_000_000, 2_000_000, 100), 11: (1_000_000, 1_000_000, 50), 12: (9, 9_000_000, 1)}
+    assert host.sample() == pytest.approx(3e-3 / 150)                 # 12 is new: not counted
+    assert host.processes == 3
+    fake.stats = {10: (5_000_000, 2_000_000, 100), 12: (9, 9_000_000, 1)}
+    assert host.sample() is None                                      # none ran: nothing to judge
+    t[0] = 100.0
+    host.sample()
+    assert len(fake.asked) == 4                                       # the pids are re-read after a while
 
-    def on_sample(p, worst):
-        samples.append((p, worst))
-        if len(samples) >= 2:
-            got.set()
-    probe = LagProbe(on_sample, nice=0, period_s=0.002, window=10).start()
+
+def test_schedstat_of_this_process_and_its_siblings_can_be_read():
+    own = read_schedstat([os.getpid()])
+    assert own[os.getpid()][0] > 0 and own[os.getpid()][2] > 0
+    assert read_schedstat([2 ** 22 + 12345]) == {}                    # a process that is gone is left out
+    assert os.getpid() not in sibling_pids()
+    node = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(10)"])     # a node of the launch
     try:
-        assert got.wait(10.0), "the probe reported %d windows" % len(samples)
+        src = os.path.dirname(pacing.__file__.rsplit("/sim/", 1)[0])          # .../src
+        world = subprocess.run([sys.executable, "-c", "import sys; sys.path.insert(0, %r); from crazyflie_driver.sim."
+                                "world.pacing import sibling_pids; print(sibling_pids())" % src],
+                               capture_output=True, text=True, timeout=20)
+        assert node.pid in eval(world.stdout)          # the world sees the launch's other node as host
     finally:
-        probe.stop()
-    for p, worst in samples:
-        assert 0.0 <= p <= worst < 1.0
+        node.kill()
+        node.wait()
 
 
 def test_a_speed_change_continues_world_time_without_a_jump():
@@ -139,12 +162,23 @@ class _World:
         self.set_to.append(speed)
 
 
-def test_pacer_sets_the_world_speed_from_the_probe_samples():
-    world = _World()
-    pacer = pacing.AutoPacer(world, Pacing(True, 1.0))
-    pacer._sample(0.0001, 0.0002)          # calm: nothing to change
+class _Host:
+    def __init__(self) -> None:
+        self.lag = None
+
+    def sample(self):
+        return self.lag
+
+
+def test_pacer_sets_the_world_speed_from_the_host_waits():
+    world, host = _World(), _Host()
+    pacer = pacing.AutoPacer(world, Pacing(True, 1.0), host)
+    pacer.step()                            # nothing to judge: nothing changes
+    host.lag = 0.0001
+    pacer.step()                            # calm
     assert world.set_to == []
-    pacer._sample(0.004, 0.01)             # 4 ms late in world time: halved
+    host.lag = 0.004
+    pacer.step()                            # 4 ms of wait in world time: halved
     assert world.set_to == [pytest.approx(0.5)]
     assert pacer.lag_wall_s == 0.004 and pacer.samples == 2
     assert pacing.start_pacing(world, Pacing(False, 1.0)) is None     # a fixed speed needs no pacer
@@ -152,15 +186,23 @@ def test_pacer_sets_the_world_speed_from_the_probe_samples():
 
 def test_pacer_takes_the_achieved_factor_only_when_the_world_is_behind_its_own_schedule():
     """A factor measured partly at the previous speed does not veto a speed-up; a world that overran does."""
-    world = _World()
-    pacer = pacing.AutoPacer(world, Pacing(True, 1.0))
+    world, host = _World(), _Host()
+    host.lag = 0.0001
+    pacer = pacing.AutoPacer(world, Pacing(True, 1.0), host)
     world.realtime_factor = 0.6          # stale: the last second ran partly at an older speed
-    pacer._sample(0.0001, 0.0002)
+    pacer.step()
     assert world.set_to == []
     world.overruns = 1                   # the world let go of a lag: it cannot keep 1.0
-    pacer._sample(0.0001, 0.0002)
+    pacer.step()
     assert world.set_to == [pytest.approx(0.6)]
     world.realtime_factor = 0.3
     world.ticks_behind = pacing.BEHIND_TICKS + 1
-    pacer._sample(0.0001, 0.0002)
+    pacer.step()
     assert world.set_to[-1] == pytest.approx(0.3)
+
+
+def test_a_started_pacer_stops():
+    world, host = _World(), _Host()
+    pacer = pacing.AutoPacer(world, Pacing(True, 1.0), host).start()
+    pacer.stop()
+    assert not pacer._thread.is_alive()

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import signal
 import socket
 import sys
@@ -604,9 +603,8 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    host_nice = os.getpriority(os.PRIO_PROCESS, 0)
     world.start()
-    pacer = start_pacing(world, pacing, host_nice)
+    pacer = start_pacing(world, pacing)
     for e in server.entries():
         _log.info("%s (%s firmware) on %s%s", e.name, e.crazyflie.profile.generation, e.uri,
                   " and %s" % e.udp.uri if e.udp is not None else "")

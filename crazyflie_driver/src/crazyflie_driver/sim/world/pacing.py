@@ -6,40 +6,41 @@ A world that runs at a speed the machine cannot serve leaves the host late *in w
 flight gets worse. ``speed:=auto`` slows the world down while that happens and returns to real
 time when the host has caught up, so a busy machine makes a flight slower, not worse.
 
-What "the host lags" means here (docs/simulation.md, "World pacing"): a thread at the host nodes'
-priority that asks to wake up every ``PROBE_PERIOD_S`` measures how late it wakes
-(``LagProbe``, a small process of its own at normal niceness, so neither the world's raised
-priority nor its interpreter lock flatters or spoils the figure). That lateness is what every host
-loop suffers on top of its own work; multiplied by the world's speed it is the lateness in world
-time. ``AutoSpeed`` keeps the 90th percentile of it below ``LAG_BOUND_S``. The figure depends on the
-machine's scheduler only, never on what a client sends, so a deliberate silence (a watchdog test,
-a killed controller) cannot look like lag. Where the world itself cannot keep up with its speed,
-``auto`` also takes the speed it achieves.
+What "the host lags" means here (docs/simulation.md, "Simulated time and world pacing"): the host's
+processes (the world's siblings: the other nodes of its launch) wait in the kernel's run queue
+before they get a CPU. Their schedstat (``/proc/<pid>/task/<tid>/schedstat``: time run, time
+waited, time slices) gives the mean wait per time slice over the last half second: how late a host
+thread starts on what it was woken for. Multiplied by the world's speed it is that lateness in world
+time; ``AutoSpeed`` keeps it below ``LAG_BOUND_S``. A process that is silent (a watchdog test, a
+killed controller) does not wait for a CPU, so silence cannot look like lag. Where the world itself
+cannot keep up with its speed, ``auto`` also takes the speed it achieves.
 """
 from __future__ import annotations
 
+import logging
 import math
 import os
-import subprocess
-import sys
 import threading
+import time
 from dataclasses import dataclass
-from typing import Callable, List, Optional
+from typing import Callable, Dict, Iterable, List, Optional, Tuple
+
+_log = logging.getLogger(__name__)
 
 AUTO = "auto"
 MIN_SPEED = 0.1
 """Slowest an ``auto`` world runs [world s per wall s]; below this a simulation is no longer usable."""
-PROBE_PERIOD_S = 0.005
-"""Wall seconds [s] the lag probe sleeps between wake-ups (200 wake-ups/s: about 0.5 % of a core)."""
-PROBE_WINDOW = 100
-"""Wake-ups per lag sample (0.5 s of wall time at PROBE_PERIOD_S)."""
-LAG_PERCENTILE = 0.9
-"""Which percentile of a window's lateness counts (most host loops, not the single worst one)."""
-LAG_BOUND_S = 0.002
-"""World seconds [s] a host wake-up may be late (90th percentile) before ``auto`` slows the world:
-a fifth of a 100 Hz control period."""
-RECOVER_BELOW_S = 0.0008
-"""World seconds [s] of lateness below which ``auto`` speeds the world up again."""
+SAMPLE_PERIOD_S = 0.5
+"""Wall seconds [s] between two looks at the host's run-queue waits."""
+SIBLINGS_REFRESH_S = 5.0
+"""Wall seconds [s] between two scans of /proc for the host's processes (nodes come and go)."""
+LAG_BOUND_S = 0.001
+"""World seconds [s] a host thread may wait for a CPU per time slice (mean) before ``auto`` slows the
+world: a tenth of a 100 Hz control period. Measured on two cores: a node-like thread (3 ms of work
+per 10 ms) waits 0.02 ms per slice on an idle machine, 1.5 ms beside two busy loops, 3.3 ms beside
+six bursty ones."""
+RECOVER_BELOW_S = 0.0004
+"""World seconds [s] of mean wait below which ``auto`` speeds the world up again."""
 RECOVER_WINDOWS = 2
 """Consecutive calm samples before ``auto`` speeds up (it slows down at once)."""
 SPEED_UP_FACTOR = 1.15
@@ -92,8 +93,9 @@ def parse_pacing(value) -> Pacing:
 class AutoSpeed:
     """The ``auto`` rule, pure: one lag sample in, the world's next speed out.
 
-    ``update(lag_wall_s, achieved)``: ``lag_wall_s`` the probe's percentile lateness [wall s] over
-    its last window; ``achieved`` the world's measured real-time factor (None: not known). The
+    ``update(lag_wall_s, achieved)``: ``lag_wall_s`` the host's mean run-queue wait per time slice
+    [wall s] over the last sample; ``achieved`` the world's measured real-time factor (None: not
+    known, or the world keeps its schedule). The
     lateness in world time is ``lag_wall_s * speed``; above LAG_BOUND_S the speed drops at once to
     where it would be 0.8 of the bound (at most halved per sample, never below MIN_SPEED); below
     RECOVER_BELOW_S for RECOVER_WINDOWS samples in a row it rises by SPEED_UP_FACTOR up to ``target``.
@@ -127,122 +129,135 @@ class AutoSpeed:
         return self.speed
 
 
-def percentile(values: List[float], p: float) -> float:
-    """The ``p`` (0..1) percentile of ``values`` (nearest rank); 0.0 for none."""
-    if not values:
-        return 0.0
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, max(0, int(math.ceil(p * len(ordered))) - 1))]
+Schedstat = Dict[int, Tuple[int, int, int]]
 
 
-# The probe process: sleeps PERIOD, prints the window's lateness percentile and maximum [s] per line;
-# ends when its parent is gone (its stdout breaks or it is re-parented).
-_PROBE_SOURCE = r"""
-import math, os, sys, time
-period, window, p, nice = float(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
-try:
-    os.setpriority(os.PRIO_PROCESS, 0, nice)
-except OSError:
-    pass
-parent = os.getppid()
-while os.getppid() == parent:
-    late = []
-    for _ in range(window):
-        t0 = time.monotonic()
-        time.sleep(period)
-        late.append(time.monotonic() - t0 - period)
-    late.sort()
-    k = min(len(late) - 1, max(0, int(math.ceil(p * len(late))) - 1))
+def read_schedstat(pids: Iterable[int]) -> Schedstat:
+    """pid -> (ns run, ns waited in the run queue, time slices), summed over the process's threads;
+    a process that is gone (or has no schedstat) is left out."""
+    out: Schedstat = {}
+    for pid in pids:
+        run = wait = slices = 0
+        try:
+            for tid in os.listdir("/proc/%d/task" % pid):
+                with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                    fields = f.read().split()
+                run, wait, slices = run + int(fields[0]), wait + int(fields[1]), slices + int(fields[2])
+        except (OSError, ValueError, IndexError):
+            continue
+        out[pid] = (run, wait, slices)
+    return out
+
+
+def sibling_pids() -> List[int]:
+    """The processes with this one's parent, but not this one: under roslaunch, the launch's other nodes."""
+    me, parent = os.getpid(), os.getppid()
+    out = []
     try:
-        sys.stdout.write("%.6f %.6f\n" % (max(0.0, late[k]), max(0.0, late[-1])))
-        sys.stdout.flush()
-    except (BrokenPipeError, OSError):
-        break
-"""
+        names = os.listdir("/proc")
+    except OSError:
+        return out
+    for name in names:
+        if not name.isdigit() or int(name) == me:
+            continue
+        try:
+            with open("/proc/%s/stat" % name) as f:
+                stat = f.read()
+            if int(stat[stat.rindex(")") + 2:].split()[1]) == parent:
+                out.append(int(name))
+        except (OSError, ValueError, IndexError):
+            continue
+    return out
 
 
-class LagProbe:
-    """A process at the host nodes' niceness (``nice``) that reports how late it wakes up.
+class HostDelay:
+    """The mean run-queue wait per time slice [s] of the host's processes between two ``sample`` calls.
 
-    ``on_sample(percentile_s, max_s)`` is called from a reader thread once per window. ``stop``
-    ends it. The process is tiny (a sleep loop) and leaves by itself when this one is gone.
+    ``pids()`` names the host's processes (``sibling_pids``; re-read every SIBLINGS_REFRESH_S of
+    ``now``); only processes seen in both samples count, so one that starts or ends adds nothing.
+    None when there is nothing to judge (no host process, or none ran).
     """
 
-    def __init__(self, on_sample: Callable[[float, float], None], nice: int = 0,
-                 period_s: float = PROBE_PERIOD_S, window: int = PROBE_WINDOW,
-                 percentile_p: float = LAG_PERCENTILE) -> None:
-        self._on_sample = on_sample
-        self._args = [repr(float(period_s)), str(int(window)), repr(float(percentile_p)), str(int(nice))]
-        self._proc: Optional[subprocess.Popen] = None
-        self._thread: Optional[threading.Thread] = None
+    def __init__(self, pids: Callable[[], List[int]] = sibling_pids,
+                 read: Callable[[Iterable[int]], Schedstat] = read_schedstat,
+                 now: Callable[[], float] = time.monotonic) -> None:
+        self._pids, self._read, self._now = pids, read, now
+        self._known: List[int] = []
+        self._known_at = -math.inf
+        self._last: Schedstat = {}
+        self.processes = 0
 
-    def start(self) -> "LagProbe":
-        self._proc = subprocess.Popen([sys.executable, "-c", _PROBE_SOURCE] + self._args, stdin=subprocess.DEVNULL,
-                                      stdout=subprocess.PIPE, close_fds=True, env=dict(os.environ))
-        self._thread = threading.Thread(target=self._read, name="lag-probe", daemon=True)
-        self._thread.start()
-        return self
-
-    def _read(self) -> None:
-        proc = self._proc
-        assert proc is not None and proc.stdout is not None
-        for line in proc.stdout:
-            parts = line.split()
-            if len(parts) == 2:
-                self._on_sample(float(parts[0]), float(parts[1]))
-
-    def stop(self) -> None:
-        proc, self._proc = self._proc, None
-        if proc is not None and proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(1.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(1.0)
-        if proc is not None and proc.stdout is not None:
-            proc.stdout.close()
+    def sample(self) -> Optional[float]:
+        t = self._now()
+        if t - self._known_at >= SIBLINGS_REFRESH_S:
+            self._known, self._known_at = list(self._pids()), t
+        stats = self._read(self._known)
+        wait = slices = 0
+        for pid, (_, w, n) in stats.items():
+            before = self._last.get(pid)
+            if before is not None and n >= before[2]:
+                wait, slices = wait + w - before[1], slices + n - before[2]
+        self._last = stats
+        self.processes = len(stats)
+        return wait * 1e-9 / slices if slices > 0 else None
 
 
 class AutoPacer:
-    """Runs ``AutoSpeed`` on a ``LagProbe`` and sets the world's speed (``world.set_speed``).
+    """Runs ``AutoSpeed`` on the host's run-queue waits (``HostDelay``) every SAMPLE_PERIOD_S and sets
+    the world's speed (``world.set_speed``).
 
     The world counts as unable to keep its speed when it let go of a lag since the last sample
     (``overruns`` grew) or trails its schedule by more than BEHIND_TICKS; only then is its measured
     real-time factor (over the last second, so partly at the previous speed) passed on as ``achieved``.
     """
 
-    def __init__(self, world, pacing: Pacing, nice: int = 0) -> None:
+    def __init__(self, world, pacing: Pacing, host: Optional[HostDelay] = None) -> None:
         self.world = world
         self.pacing = pacing
         self.rule = AutoSpeed(pacing.target, start=pacing.target)
+        self.host = host if host is not None else HostDelay()
         self.lag_wall_s = 0.0
-        self.lag_max_s = 0.0
         self.samples = 0
         self._overruns = int(getattr(world, "overruns", 0))
-        self._probe = LagProbe(self._sample, nice=nice)
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
 
-    def _sample(self, lag_s: float, lag_max_s: float) -> None:
+    def step(self) -> None:
+        """One look at the host and the world; sets the world's speed when the rule changes it."""
+        lag = self.host.sample()
         overruns = int(getattr(self.world, "overruns", 0))
         behind = overruns > self._overruns or int(getattr(self.world, "ticks_behind", 0)) > BEHIND_TICKS
         self._overruns = overruns
         achieved = (self.world.realtime_factor or None) if behind else None
-        self.lag_wall_s, self.lag_max_s = lag_s, lag_max_s
+        if lag is None and achieved is None:
+            return
+        self.lag_wall_s = lag if lag is not None else 0.0
         self.samples += 1
-        speed = self.rule.update(lag_s, achieved)
+        speed = self.rule.update(self.lag_wall_s, achieved)
         if speed != self.world.speed:
             self.world.set_speed(speed)
 
+    def _run(self) -> None:
+        while not self._stop.wait(SAMPLE_PERIOD_S):
+            try:
+                self.step()
+            except Exception:      # pacing must never take the world down
+                _log.exception("world pacing failed; the world keeps speed %.2f", self.world.speed)
+
     def start(self) -> "AutoPacer":
-        self._probe.start()
+        self.host.sample()                       # the first reading: the next one is measured from it
+        self._thread = threading.Thread(target=self._run, name="world-pacing", daemon=True)
+        self._thread.start()
         return self
 
     def stop(self) -> None:
-        self._probe.stop()
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(2.0)
 
 
-def start_pacing(world, pacing: Pacing, nice: int = 0) -> Optional[AutoPacer]:
+def start_pacing(world, pacing: Pacing) -> Optional[AutoPacer]:
     """The pacer of an ``auto`` world (started), None for a fixed one (whose speed the world has)."""
     if not pacing.auto:
         return None
-    return AutoPacer(world, pacing, nice).start()
+    return AutoPacer(world, pacing).start()
