@@ -509,7 +509,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="host:port to serve on (default $CRAZYFLIE_SIM_ADDRESS or %s:%d)"
                    % (DEFAULT_HOST, DEFAULT_PORT))
     p.add_argument("--speed", default="1.0", help="world time per real time (0 = as fast as possible), or 'auto': "
-                   "real time, slower while the machine makes the host's processes wake up late (docs/simulation.md)")
+                   "real time, slower while the other processes of its parent (the host) wait for a CPU "
+                   "(docs/simulation.md)")
     p.add_argument("--firmware", default="current", choices=sorted(PROFILES), help="firmware of --uri vehicles")
     p.add_argument("--dongles", type=int, default=None, help="number of simulated Crazyradios (default: 1, or what "
                    "the swarm file needs)")
