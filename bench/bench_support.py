@@ -145,6 +145,7 @@ class IdleWorld:
     """The world contract without physics or ticks: for figures of the air and the server alone."""
 
     time = 0.0
+    speed = 1.0
 
     def add_vehicle(self, name: str, **kw) -> IdleVehicle:
         return IdleVehicle()

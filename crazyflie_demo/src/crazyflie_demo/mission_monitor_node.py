@@ -18,6 +18,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from std_msgs.msg import Bool, Float32, Int32
 
 from crazyflie_demo.mission_summary import VehicleTrack, plot_tracks, summary_lines
+from crazyflie_demo.rosutil import RealTimeFactor
 from crazyflie_driver.nodes.ros_signals import init_node
 
 
@@ -86,6 +87,7 @@ def main() -> None:
     buffer = tf2_ros.Buffer()
     tf2_ros.TransformListener(buffer)
     start = rospy.get_time()
+    pace = RealTimeFactor()
     waypoints: Dict[str, list] = {}
     r = rospy.Rate(rate)
     last_print = start
@@ -136,6 +138,7 @@ def main() -> None:
     print("\n=== mission summary ===", flush=True)
     for line in lines:
         print(line, flush=True)
+    print(pace.line(), flush=True)
     print(f"result: {'every waypoint reached' if ok else 'NOT every waypoint reached'}", flush=True)
     print(f"plot: {os.path.abspath(path)}", flush=True)
     rospy.set_param("~result", "ok" if ok else "incomplete")

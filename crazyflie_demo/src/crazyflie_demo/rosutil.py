@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import time
 from typing import Optional, Tuple
 
 import rospy
@@ -95,3 +96,23 @@ def take_off_when_ready(timeout: float, state_topic: str = "controller/state") -
     if not shutting_down():
         rospy.logerr("no take-off after %.0f s (controller state: %r)", timeout, status["text"])
     return False
+
+
+class RealTimeFactor:
+    """How fast the world ran over a demo: ROS (world) seconds per wall second since ``__init__``.
+
+    Under /use_sim_time ROS time is the simulated world's; its ``speed`` setting is read from the sim
+    node (``sim_node``'s ``~speed``). Without /use_sim_time ROS time is the wall clock and the line says so.
+    """
+
+    def __init__(self, sim_node: str = "/crazyflie_sim") -> None:
+        self._ros0, self._wall0 = rospy.get_time(), time.monotonic()
+        self._sim_node = sim_node
+
+    def line(self) -> str:
+        if not rospy.get_param("/use_sim_time", False):
+            return "world time: the wall clock (no /use_sim_time)"
+        wall = time.monotonic() - self._wall0
+        factor = (rospy.get_time() - self._ros0) / wall if wall > 0 else 0.0
+        speed = rospy.get_param(self._sim_node.rstrip("/") + "/speed", "1.0")
+        return "world ran at %.2fx real time on average (speed %s, %.0f s wall clock)" % (factor, speed, wall)

@@ -22,6 +22,7 @@ from typing import Dict, List, Optional
 import rospy
 from std_msgs.msg import String
 
+from crazyflie_demo.rosutil import RealTimeFactor
 from crazyflie_demo.swarm_flight import Flight, Phase, plot_flight
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.nodes.ros_clock import ros_clock
@@ -149,6 +150,7 @@ def main() -> None:
     result_file = str(rospy.get_param("~result_file", ""))
     clock = recorder.clock
     started = clock.now()
+    pace = RealTimeFactor()
     while not clock.wait(recorder.done, 0.5):
         if shutting_down():
             recorder.stop()
@@ -160,7 +162,7 @@ def main() -> None:
     result = recorder.verdict(float(rospy.get_param("~height", 1.0)),
                               float(rospy.get_param("~max_figure8_error", 0.05))) \
         if recorder.done.is_set() else "the flight did not finish within %.0f s" % timeout
-    for line in recorder.flight.summary_lines():
+    for line in recorder.flight.summary_lines() + [pace.line()]:
         print("swarm: " + line, flush=True)
     if plot:
         try:

@@ -116,6 +116,49 @@ class FollowingClock:
                 return True
 
 
+class ScaledClock:
+    """A clock running at ``speed()`` × the wall clock: world time as a process without ``/clock`` sees it.
+
+    ``speed``: the latest known world speed [world s per wall s] (e.g. what the world server's
+    replies carry, ``RemoteMedium.speed``); read on every call, and a change starts a new segment so
+    the time never jumps. At speed 1 it is ``time.monotonic`` itself and waits are wall waits, so a
+    world at real time behaves exactly as before. Speed 0 (a world as fast as possible) waits nothing.
+    """
+
+    def __init__(self, speed: Callable[[], float]) -> None:
+        self._speed = speed
+        self._lock = threading.Lock()
+        self._wall0 = time.monotonic()
+        self._t0 = self._wall0
+        self._s = 1.0
+
+    def _current(self) -> float:
+        s = max(0.0, float(self._speed()))
+        if s != self._s:
+            with self._lock:
+                wall = time.monotonic()
+                self._t0 += (wall - self._wall0) * self._s
+                self._wall0, self._s = wall, s
+        return s
+
+    def now(self) -> float:
+        s = self._current()
+        with self._lock:
+            return self._t0 + (time.monotonic() - self._wall0) * s
+
+    def wall_bound(self, seconds: float) -> float:
+        s = self._current()
+        return max(0.0, seconds) / s if s > 0 else 0.0
+
+    def sleep(self, seconds: float) -> None:
+        wall = self.wall_bound(seconds)
+        if wall > 0:
+            time.sleep(wall)
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        return event.wait(self.wall_bound(seconds))
+
+
 class ManualClock:
     """A clock for tests: time moves only by ``advance`` (or by ``sleep`` when ``sleep_advances``).
 

@@ -5,7 +5,8 @@ Only entry points (nodes, tools, tests, benchmarks) call this; ``radio/`` takes 
 * default: ``None``, i.e. pyusb picks libusb1 (real hardware);
 * ``CRAZYFLIE_BACKEND=sim``: one shared ``FakeUsbBackend`` attached to the world server at
   ``CRAZYFLIE_SIM_ADDRESS`` (default 127.0.0.1:19840), so nodes and tools fly simulated Crazyflies
-  without a code change;
+  without a code change; its dongles time their transfers in world time (the world's speed comes
+  with every radio reply);
 * ``use_backend(b)``: an explicit backend for this process (tests inject an in-process fake),
   usable as a plain call or as a context manager that restores the previous choice.
 """
@@ -45,6 +46,7 @@ def get_backend():
 def _sim_backend(address: str):
     # Imported here: a process flying real hardware never loads the simulator.
     from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address
+    from crazyflie_driver.sim.air.dongle_timing import DongleClock
     from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
     try:
         host, port = parse_address(address)
@@ -55,7 +57,8 @@ def _sim_backend(address: str):
         backend = _sim_backends.get((host, port))
         if backend is None:
             medium = RemoteMedium(host, port)
-            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()))
+            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()),
+                                     clock=DongleClock.world_paced(medium))
             _sim_backends[(host, port)] = backend
         return backend
 

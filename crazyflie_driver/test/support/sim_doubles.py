@@ -46,6 +46,7 @@ class FakeWorld:
 
     def __init__(self) -> None:
         self.time = 0.0
+        self.speed = 1.0            # world seconds per wall second, as its radio replies report it
         self._vehicles: Dict[str, FakeVehicle] = {}
         self._listeners: List[Tuple[Callable[[float], None], float, List[float]]] = []
         self._lock = threading.Lock()

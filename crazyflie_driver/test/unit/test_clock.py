@@ -96,3 +96,30 @@ def test_manual_clock_blocks_waiters_until_advanced():
 def test_manual_clock_refuses_to_go_back():
     with pytest.raises(ValueError, match="does not go back"):
         ManualClock().advance(-1.0)
+
+
+def test_scaled_clock_at_speed_one_is_the_wall_clock():
+    from crazyflie_driver.clock import ScaledClock
+    clock = ScaledClock(lambda: 1.0)
+    a, t, b = time.monotonic(), clock.now(), time.monotonic()
+    assert a <= t <= b
+    assert clock.wall_bound(0.25) == 0.25
+
+
+def test_scaled_clock_runs_at_the_speed_it_is_given_and_never_jumps():
+    from crazyflie_driver.clock import ScaledClock
+    speed = [0.5]
+    clock = ScaledClock(lambda: speed[0])
+    assert clock.wall_bound(0.01) == pytest.approx(0.02)
+    t0, w0 = clock.now(), time.monotonic()
+    clock.sleep(0.02)                                   # 0.02 s at half speed: 0.04 wall seconds
+    assert time.monotonic() - w0 >= 0.039
+    assert clock.now() - t0 == pytest.approx((time.monotonic() - w0) * 0.5, abs=0.005)
+    before = clock.now()
+    speed[0] = 2.0                                      # a new speed continues from where it was
+    assert clock.now() == pytest.approx(before, abs=0.002)
+    speed[0] = 0.0                                      # a world as fast as possible: no wall waits
+    w1 = time.monotonic()
+    clock.sleep(5.0)
+    assert clock.wait(threading.Event(), 5.0) is False
+    assert time.monotonic() - w1 < 0.1

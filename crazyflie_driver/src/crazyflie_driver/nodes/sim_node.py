@@ -19,11 +19,13 @@ or ``swarm_file``, the path of the swarm file crazyflie_server reads (``server.s
 Crazyflie at its ``initialPosition`` on the URI the server derives from its id and channel (one
 dongle per channel), named after its tf_prefix, as the server's motion capture looks for it;
 ``dongles``
-(simulated Crazyradios, default: enough for the URIs); ``speed`` (1.0); ``seed``; ``mocap``
+(simulated Crazyradios, default: enough for the URIs); ``speed`` (1.0: world seconds per wall second;
+``auto``: real time, slower while the host lags; ``sim.world.pacing``); ``seed``; ``mocap``
 (vicon); ``mocap_rate`` (100 Hz); ``mocap_noise`` (position noise, m, standard deviation);
 ``mocap_latency`` (s); ``mocap_dropout`` (fraction of frames lost); ``world_frame`` (world);
-``publish_clock`` (false: publish the world time on /clock; the node sets no global parameter,
-so set /use_sim_time yourself if you want ROS time to follow it); ``vrpn`` (false: also serve the
+``publish_clock`` (true: publish the world time on /clock every CLOCK_PERIOD_S of world time, from
+the world's stepping thread, from its first tick on; the node sets no global parameter: sim.launch
+sets /use_sim_time, so that ROS time is world time); ``vrpn`` (false: also serve the
 motion capture as a VRPN server on loopback, one tracker per vehicle named after it, as a
 motion-capture PC would) and ``vrpn_port`` (default 3883 when free, else one the system picks;
 0 = any; the node logs which); ``priority_boost`` (5 niceness steps the world's process is raised
@@ -55,8 +57,13 @@ from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.sim.air.faults import MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M
 from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST, raise_priority
+from crazyflie_driver.sim.world.pacing import Pacing, PacingError, parse_pacing
 
 MOCAP_STYLES = ("vicon", "vrpn", "both", "none")
+CLOCK_PERIOD_S = 0.002
+"""World seconds [s] between two /clock messages (500 Hz at real time): a host loop at 100 Hz wakes
+within 2 ms of world time of its deadline. Every 1 ms cost twice as much (measured: the sim node
++33 % of a core against +12 %, each subscribing node +3 % against +1.3 %; docs/simulation.md)."""
 
 
 class SimConfigError(ValueError):
@@ -268,18 +275,31 @@ class WorldStatus:
 
 
 def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behind: int, overruns: int,
-                 world_time: float, behind_factor: float) -> WorldStatus:
-    """The world's real-time status; WARN when it runs below ``behind_factor`` × its speed."""
+                 world_time: float, behind_factor: float, pacing: Optional[Pacing] = None,
+                 host_lag_s: Optional[float] = None) -> WorldStatus:
+    """The world's real-time status; WARN when it runs below ``behind_factor`` × its speed.
+
+    ``pacing``: the speed setting (``auto``: ``speed`` is where it has set the world now, ``target``
+    where it returns to); ``host_lag_s``: the host's latest mean run-queue wait per time slice [wall s]
+    (auto only)."""
+    pacing = pacing if pacing is not None else Pacing(False, speed)
+    slowed = pacing.auto and speed < pacing.target * behind_factor
     if speed <= 0:
         level, message = 0, "fast mode: %.1fx real time" % realtime_factor
     elif realtime_factor < speed * behind_factor:
         level, message = 1, ("behind real time: %.2fx instead of %.2fx (%d ticks behind); rates that follow the "
                              "firmware's clock are low by the same factor" % (realtime_factor, speed, ticks_behind))
+    elif slowed:
+        level, message = 0, ("slowed down to %.2fx for a lagging host (speed auto, up to %.2fx); ROS time follows"
+                             % (realtime_factor, pacing.target))
     else:
         level, message = 0, "keeps real time (%.2fx)" % realtime_factor
     values = (("real-time factor", "%.3f" % realtime_factor), ("speed", "%.3f" % speed),
+              ("speed mode", pacing.mode), ("target speed", "%.3f" % pacing.target),
               ("vehicles", str(vehicles)), ("ticks behind", str(ticks_behind)), ("overruns", str(overruns)),
               ("world time [s]", "%.3f" % world_time))
+    if host_lag_s is not None:
+        values += (("host run-queue wait [ms]", "%.2f" % (host_lag_s * 1e3)),)
     return WorldStatus(level, message, values)
 
 
@@ -329,7 +349,7 @@ class MocapPublisher:
     """
 
     def __init__(self, config: MocapConfig, names: Sequence[str],
-                 vicon_frames: Optional[Dict[str, str]] = None) -> None:
+                 vicon_frames: Optional[Dict[str, str]] = None, world_stamps: bool = False) -> None:
         import rospy
         from geometry_msgs.msg import PoseStamped, TransformStamped
         from tf2_msgs.msg import TFMessage
@@ -346,6 +366,9 @@ class MocapPublisher:
         self._bodies: Dict[str, Any] = {}
         self.guard = StampGuard()
         self.vicon_frames = dict(vicon_frames or {})   # name -> tf child frame, where not vicon/<name>/<name>
+        # under /use_sim_time ROS time is world time: stamp from the world itself, not from this
+        # node's copy of /clock (which trails it by a delivery)
+        self.world_stamps = world_stamps
         for n in names:
             self._body(n)
 
@@ -375,7 +398,7 @@ class MocapPublisher:
         """
         if not frames or self._tf is None:
             return 0
-        now_ns = self._rospy.Time.now().to_nsec()
+        now_ns = int(round(world_time * 1e9)) if self.world_stamps else self._rospy.Time.now().to_nsec()
         parts: List[bytes] = []
         guard = self.guard
         for f in newest_per_body(frames):
@@ -447,7 +470,8 @@ def _advertise_fault_service(control: Any) -> Any:
     return rospy.Service("~fault", InjectFault, on_call)
 
 
-def _start_diagnostics(world: Any, address: str, active_faults: Any = None):
+def _start_diagnostics(world: Any, address: str, active_faults: Any = None, pacing: Optional[Pacing] = None,
+                       pacer: Any = None):
     """Publishes the world's real-time status on /diagnostics every second; warns (throttled) when behind."""
     import rospy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -460,7 +484,8 @@ def _start_diagnostics(world: Any, address: str, active_faults: Any = None):
 
     def on_timer(_event) -> None:
         st = world_status(world.realtime_factor, world.speed, len(world.vehicles()), world.ticks_behind,
-                          world.overruns, float(world.time), BEHIND_FACTOR)
+                          world.overruns, float(world.time), BEHIND_FACTOR, pacing,
+                          pacer.lag_wall_s if pacer is not None and pacer.samples else None)
         if st.level:
             rospy.logwarn_throttle(BEHIND_WARNING_PERIOD_S, "crazyflie_sim: the world runs %s" % st.message)
         msg = DiagnosticArray()
@@ -480,6 +505,24 @@ def _start_diagnostics(world: Any, address: str, active_faults: Any = None):
     return rospy.Timer(rospy.Duration(1.0), on_timer)
 
 
+def _publish_clock(world: Any, pub: Any, clock_type: Any) -> None:
+    """World time on /clock: now, then every CLOCK_PERIOD_S of world time from the stepping thread
+    (the message is stamped with the tick's own time, so /clock is exactly the world's)."""
+    import rospy
+
+    from crazyflie_driver.nodes.ros_signals import shutting_down
+
+    def on_tick(now: float) -> None:
+        try:
+            pub.publish(clock_type(clock=rospy.Time(*divmod(int(round(now * 1e9)), 1000000000))))
+        except Exception as e:     # a publishing hiccup must not stop the world
+            if not shutting_down():
+                rospy.logwarn_throttle(5.0, "crazyflie_sim: /clock failed: %s" % e)
+
+    on_tick(float(world.time))
+    world.add_tick_listener(on_tick, CLOCK_PERIOD_S)
+
+
 def _private_params() -> Dict[str, Any]:
     import rospy
     prefix = rospy.get_name().rstrip("/") + "/"
@@ -494,12 +537,16 @@ def main() -> None:
     from crazyflie_driver.sim.air.faults import describe_result as faults_text
     from crazyflie_driver.sim.air.medium import parse_address
     from crazyflie_driver.sim.air.server import WorldServer
+    from crazyflie_driver.sim.world.pacing import start_pacing
     from crazyflie_driver.sim.world.world import World
     from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 
     init_node("crazyflie_sim")
     params = _private_params()
+    # /clock first: nodes under /use_sim_time wait for it (nodes.ros_clock) before they time anything
+    clock_pub = rospy.Publisher("/clock", Clock, queue_size=100) if params.get("publish_clock", True) else None
     try:
+        pacing = parse_pacing(params.get("speed", 1.0))
         boost = int(_number("~priority_boost", params.get("priority_boost", DEFAULT_PRIORITY_BOOST)))
         refused = raise_priority(boost)
         if refused is not None:
@@ -515,24 +562,28 @@ def main() -> None:
         vrpn_on, vrpn_port = vrpn_port_from_params(params)
         start_faults = start_faults_from_params(params, dongles)
         host, port = parse_address(str(params.get("address", "127.0.0.1:19840")))
-        speed = _number("~speed", params.get("speed", 1.0))
         seed = params.get("seed")
-        world = World(speed=speed, seed=None if seed is None else int(seed))
+        world = World(speed=pacing.target, seed=None if seed is None else int(seed))
         server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed))
         for v in vehicles:
             server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw)
         server.start()
-    except (SimConfigError, ValueError, CrazyflieError) as e:
+    except (SimConfigError, PacingError, ValueError, CrazyflieError) as e:
         rospy.logfatal("crazyflie_sim: %s", e)
         raise SystemExit(1)
+    if clock_pub is not None:
+        _publish_clock(world, clock_pub, Clock)
     world.start()
-    rospy.loginfo("crazyflie_sim: world served on %s (%d dongle%s, mocap %s at %.0f Hz): %s", server.address,
-                  dongles, "" if dongles == 1 else "s", mocap.style, mocap.rate,
+    pacer = start_pacing(world, pacing)
+    rospy.loginfo("crazyflie_sim: world served on %s (%d dongle%s, mocap %s at %.0f Hz, speed %s%s): %s",
+                  server.address, dongles, "" if dongles == 1 else "s", mocap.style, mocap.rate, pacing.describe(),
+                  ", /clock" if clock_pub is not None else "",
                   ", ".join("%s on %s" % (v.name, v.uri) for v in vehicles))
 
     names = [v.name for v in vehicles]
     model = mocap_model(world, mocap, None if seed is None else int(seed))
-    publisher = MocapPublisher(mocap, names, {v.name: v.frame for v in vehicles if v.frame})
+    publisher = MocapPublisher(mocap, names, {v.name: v.frame for v in vehicles if v.frame},
+                               world_stamps=clock_pub is not None and bool(rospy.get_param("/use_sim_time", False)))
     _advertise_mocap_switches(model, names)
     server.mocap = model
     try:
@@ -544,7 +595,6 @@ def main() -> None:
         world.stop()
         raise SystemExit(1)
     _advertise_fault_service(server.control)
-    clock_pub = rospy.Publisher("/clock", Clock, queue_size=10) if params.get("publish_clock", False) else None
     stop = threading.Event()
     delivered: List[Any] = []
     delivered_lock = threading.Lock()
@@ -584,19 +634,19 @@ def main() -> None:
                 del delivered[:]
             try:
                 publisher.publish(frames, float(world.time))
-                if clock_pub is not None:
-                    clock_pub.publish(Clock(clock=rospy.Time.from_sec(float(world.time))))
             except Exception as e:   # a publishing hiccup must not stop the world
                 if not shutting_down():   # (at shutdown the topics close under this thread)
                     rospy.logwarn_throttle(5.0, "crazyflie_sim: mocap frame failed: %s" % e)
 
     thread = threading.Thread(target=mocap_loop, name="mocap", daemon=True)
     thread.start()
-    diagnostics = _start_diagnostics(world, server.address, server.active_faults)
+    diagnostics = _start_diagnostics(world, server.address, server.active_faults, pacing, pacer)
 
     def shutdown() -> None:
         stop.set()
         diagnostics.shutdown()
+        if pacer is not None:
+            pacer.stop()
         if vrpn is not None:
             vrpn.stop()
         server.stop()

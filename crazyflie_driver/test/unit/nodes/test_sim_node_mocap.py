@@ -99,3 +99,39 @@ def test_world_that_cannot_keep_real_time_warns_with_its_factor(caplog):
     assert len(warnings) == 1, warnings                           # throttled
     assert 0.0 < w.realtime_factor < 0.3
     assert "%.2fx" % w.realtime_factor in warnings[0]
+
+
+def test_world_status_says_the_speed_mode_the_target_and_the_host_lag():
+    from crazyflie_driver.sim.world.pacing import Pacing
+
+    slowed = world_status(0.5, 0.5, 1, 0, 0, 3.0, 0.95, Pacing(True, 1.0), 0.004)
+    values = dict(slowed.values)
+    assert slowed.level == 0 and "slowed down to 0.50x" in slowed.message
+    assert values["speed mode"] == "auto" and values["target speed"] == "1.000" and values["speed"] == "0.500"
+    assert values["host run-queue wait [ms]"] == "4.00"
+    fixed = dict(world_status(1.0, 1.0, 1, 0, 0, 3.0, 0.95).values)
+    assert fixed["speed mode"] == "fixed" and "host run-queue wait [ms]" not in fixed
+
+
+def test_clock_is_published_at_start_and_every_period_of_world_time_with_the_tick_time():
+    """/clock is the world's own time: one message now (0), then one per CLOCK_PERIOD_S of world time."""
+    rosgraph_msgs = pytest.importorskip("rosgraph_msgs.msg")
+    from crazyflie_driver.nodes.sim_node import CLOCK_PERIOD_S, _publish_clock
+    from crazyflie_driver.sim.world.world import World
+
+    class Pub:
+        def __init__(self):
+            self.sent = []
+
+        def publish(self, msg):
+            self.sent.append(msg.clock.to_nsec())
+
+    w = World(speed=0, seed=1)
+    w.add_vehicle("cf1")
+    pub = Pub()
+    _publish_clock(w, pub, rosgraph_msgs.Clock)
+    assert pub.sent == [0]
+    w.step(100)                                          # 0.1 s of world time
+    period_ns = int(round(CLOCK_PERIOD_S * 1e9))
+    assert pub.sent == list(range(0, 100000001, period_ns))
+    assert pub.sent[-1] == int(round(w.time * 1e9))

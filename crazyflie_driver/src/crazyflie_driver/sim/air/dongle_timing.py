@@ -4,8 +4,9 @@ Figures and their sources: docs/simulation.md, "Crazyradio timing".
 """
 from __future__ import annotations
 
-import time as _time
 from dataclasses import dataclass
+
+from crazyflie_driver.clock import WALL, Clock, ScaledClock
 
 
 @dataclass
@@ -27,8 +28,25 @@ class DongleTiming:
         return cls(0.0, 0.0, 0.0)
 
 
-class RealClock:
-    """Monotonic wall clock; ``sleep`` really sleeps."""
+class DongleClock:
+    """The clock a fake dongle times its transfers on (``time()`` and ``sleep(s)``), over a ``Clock``.
 
-    time = staticmethod(_time.monotonic)
-    sleep = staticmethod(_time.sleep)
+    By default the wall clock, as a real dongle. A dongle flying a world served by another process
+    (``RemoteMedium``) runs in world time: ``DongleClock.world_paced(medium)``, so a transfer of
+    0.8 ms takes 0.8 ms of world time, 0.8 ms / speed of wall time, and a radio budget means the same
+    at any speed. At speed 1 that is the wall clock exactly.
+    """
+
+    def __init__(self, clock: Clock = WALL) -> None:
+        self.clock = clock
+
+    def time(self) -> float:
+        return self.clock.now()
+
+    def sleep(self, seconds: float) -> None:
+        self.clock.sleep(seconds)
+
+    @classmethod
+    def world_paced(cls, medium) -> "DongleClock":
+        """Paced by the world speed ``medium.speed`` that the world server's replies carry."""
+        return cls(ScaledClock(lambda: medium.speed))

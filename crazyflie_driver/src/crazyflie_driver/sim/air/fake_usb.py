@@ -38,7 +38,7 @@ import usb.core
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
-from crazyflie_driver.sim.air.dongle_timing import DongleTiming, RealClock
+from crazyflie_driver.sim.air.dongle_timing import DongleClock, DongleTiming
 from crazyflie_driver.sim.air.usb_descriptors import (
     DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_MODELS, DongleModel, config_descriptor_bytes,
     configuration_descriptor, device_descriptor, device_descriptor_bytes, endpoint_descriptor,
@@ -78,7 +78,7 @@ class FakeUsbBackend(usb.backend.IBackend):
             raise ValueError("dongles must be >= 0, got %d" % dongles)
         self.medium = medium
         self.timing = timing if timing is not None else DongleTiming()
-        self.clock = clock if clock is not None else RealClock()
+        self.clock = clock if clock is not None else DongleClock()
         self.firmware = DongleFirmware(medium, self.timing, self.clock, fault_request)
         m = MODELS[model]
         self.dongles = [FakeDongle(first_id + i, m, self._serial_for(first_id + i, m))

@@ -228,6 +228,8 @@ class RemoteMedium:
         self.timeout = float(timeout)
         self._lock = threading.Lock()
         self._conn: Optional[framing.Connection] = None
+        self.speed = 1.0
+        """The world's speed [world s / wall s] its latest radio reply carried (1.0 before the first)."""
 
     @property
     def address(self) -> str:
@@ -273,7 +275,8 @@ class RemoteMedium:
         status, body = self._request(framing.OP_TRANSMIT, request)
         if status != framing.STATUS_OK:
             raise CrazyflieError("world server refused a radio packet: %s" % body.decode("utf-8", "replace"))
-        return framing.decode_air_reply(body, AirReply)
+        reply, self.speed = framing.decode_air_reply(body, AirReply)
+        return reply
 
     def control(self, op: str, **args) -> Any:
         """A control call on the world server (see ``WorldServer.control``); raises its error text."""

@@ -30,6 +30,7 @@ from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
 from crazyflie_driver.sim.world import battery as battery_model
 from crazyflie_driver.sim.world.mocap_feed import MocapEstimatorFeed
+from crazyflie_driver.sim.world.pacing import parse_pacing, start_pacing
 from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
@@ -423,7 +424,7 @@ class WorldServer:
                 try:
                     if code == framing.OP_TRANSMIT:
                         reply = medium.transmit(*framing.decode_transmit(body))
-                        conn.send(framing.STATUS_OK, framing.encode_air_reply(reply))
+                        conn.send(framing.STATUS_OK, framing.encode_air_reply(reply, self.world.speed))
                         continue
                     if code == framing.OP_CONTROL:
                         request = json.loads(body.decode("utf-8"))
@@ -509,7 +510,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--address", default=None,
                    help="host:port to serve on (default $CRAZYFLIE_SIM_ADDRESS or %s:%d)"
                    % (DEFAULT_HOST, DEFAULT_PORT))
-    p.add_argument("--speed", type=float, default=1.0, help="world time per real time (0 = as fast as possible)")
+    p.add_argument("--speed", default="1.0", help="world time per real time (0 = as fast as possible), or 'auto': "
+                   "real time, slower while the other processes of its parent (the host) wait for a CPU "
+                   "(docs/simulation.md)")
     p.add_argument("--firmware", default="current", choices=sorted(PROFILES), help="firmware of --uri vehicles")
     p.add_argument("--dongles", type=int, default=None, help="number of simulated Crazyradios (default: 1, or what "
                    "the swarm file needs)")
@@ -569,12 +572,11 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         for v in vehicles:
             key_of(str(v["uri"]))             # refuse a bad URI before building the world
         host, port = parse_address(args.address)
-        if args.speed < 0:
-            raise ValueError("--speed must be >= 0, got %r" % args.speed)
+        pacing = parse_pacing(args.speed)
         if args.dongles < 1:
             raise ValueError("--dongles must be >= 1, got %r" % args.dongles)
         from crazyflie_driver.sim.world.world import World
-        world = World(speed=args.speed, seed=args.seed)
+        world = World(speed=pacing.target, seed=args.seed)
         server = WorldServer(world, dongles=args.dongles, host=host, port=port, seed=args.seed,
                              udp_base_port=UDP_BASE_PORT if args.udp else None)
         for i, v in enumerate(vehicles):
@@ -605,17 +607,20 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     world.start()
+    pacer = start_pacing(world, pacing)
     for e in server.entries():
         _log.info("%s (%s firmware) on %s%s", e.name, e.crazyflie.profile.generation, e.uri,
                   " and %s" % e.udp.uri if e.udp is not None else "")
     if vrpn is not None:
         _log.info("motion capture served as VRPN on 127.0.0.1:%d (%.0f Hz, one tracker per vehicle)", vrpn.port,
                   args.mocap_rate)
-    _log.info("world served on %s (speed %.2f); Ctrl-C to stop", server.address, args.speed)
+    _log.info("world served on %s (speed %s); Ctrl-C to stop", server.address, pacing.describe())
     try:
         while not stop.wait(0.5):
             pass
     finally:
+        if pacer is not None:
+            pacer.stop()
         if vrpn is not None:
             vrpn.stop()
         server.stop()

@@ -2,7 +2,9 @@
 
 A frame is ``[code u8, length u16 LE, body]``. Requests: OP_TRANSMIT (a radio packet; the hot path,
 a fixed 10-byte head plus the packet) and OP_CONTROL (JSON ``{"op": ..., "args": {...}}``). Replies
-carry STATUS_OK or STATUS_ERROR as code. Kept tiny so one loopback round trip stays cheap.
+carry STATUS_OK or STATUS_ERROR as code. Kept tiny so one loopback round trip stays cheap. A radio
+reply also carries the world's speed (world seconds per wall second) at the time it was served, so a
+fake dongle in another process can time its transfers in world time (``dongle_timing.WorldPacedClock``).
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ STATUS_ERROR = 1
 
 _HEAD = struct.Struct("<BH")
 _TX = struct.Struct("<BBBBB5s")       # dongle, channel, datarate, ack_enabled, arc, address
-_REPLY = struct.Struct("<BBf")        # flags (acked, power detector, unplugged), retries, latency_s
+_REPLY = struct.Struct("<BBff")       # flags (acked, power detector, unplugged), retries, latency_s, world speed
 MAX_BODY = 0xFFFF
 
 
@@ -34,15 +36,17 @@ def decode_transmit(body: bytes):
     return dongle, channel, datarate, address, body[_TX.size:], bool(ack), arc
 
 
-def encode_air_reply(reply) -> bytes:
+def encode_air_reply(reply, speed: float = 1.0) -> bytes:
+    """``reply`` (an ``AirReply``) and the world's ``speed`` [world s / wall s] when it was served."""
     flags = (1 if reply.acked else 0) | (2 if reply.power_detector else 0) | (4 if reply.unplugged else 0)
-    return _REPLY.pack(flags, reply.retries & 0xFF, reply.latency_s) + bytes(reply.payload)
+    return _REPLY.pack(flags, reply.retries & 0xFF, reply.latency_s, speed) + bytes(reply.payload)
 
 
-def decode_air_reply(body: bytes, cls):
-    flags, retries, latency = _REPLY.unpack_from(body)
-    return cls(acked=bool(flags & 1), payload=bytes(body[_REPLY.size:]), retries=retries,
-               power_detector=bool(flags & 2), unplugged=bool(flags & 4), latency_s=float(latency))
+def decode_air_reply(body: bytes, cls) -> Tuple[object, float]:
+    """The ``cls`` (``AirReply``) of a reply body and the world's speed it carried."""
+    flags, retries, latency, speed = _REPLY.unpack_from(body)
+    return (cls(acked=bool(flags & 1), payload=bytes(body[_REPLY.size:]), retries=retries,
+                power_detector=bool(flags & 2), unplugged=bool(flags & 4), latency_s=float(latency)), float(speed))
 
 
 class Connection:

@@ -293,6 +293,7 @@ class World:
         self._anchor: Optional[Tuple[float, float]] = None     # the thread's schedule: (host time.time(), world time)
         self.ticks_behind = 0                      # how far world time trails wall time × speed, in ticks
         self._last_behind_warning = -math.inf
+        self._speed_changed = threading.Event()    # set_speed: the thread starts a new schedule from now
 
     @property
     def time(self) -> float:
@@ -492,6 +493,14 @@ class World:
             return None
         return anchor[0] + (world_t - anchor[1]) / self.speed
 
+    def set_speed(self, speed: float) -> None:
+        """Run at ``speed`` × real time from now on (0: as fast as possible); world time goes on from
+        where it is, without a jump (the real-time thread starts a new schedule)."""
+        if not (speed >= 0 and math.isfinite(speed)):
+            raise ValueError("world speed must be >= 0 (0 = as fast as possible), got %r" % (speed,))
+        self.speed = float(speed)
+        self._speed_changed.set()
+
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
@@ -504,6 +513,10 @@ class World:
         wake_ticks = max(1, int(round(WAKE_PERIOD_S / FIRMWARE_TICK_S)))
         while not self._stop.is_set():
             now = _time.monotonic()
+            if self._speed_changed.is_set():
+                self._speed_changed.clear()
+                wall0, world0 = now, self.time
+                self._anchor = (_time.time(), world0)
             if now - meter_wall >= METER_PERIOD_S:
                 self._meter((self.time - meter_world) / (now - meter_wall), world0 + (now - wall0) * self.speed)
                 meter_wall, meter_world = now, self.time
