@@ -18,17 +18,20 @@ Two more guards keep the exit itself prompt:
 * Whatever still holds the process after that shutdown (a library thread that is not a daemon
   and waits on a peer, or a lock left held in finalisation) must not hold it until roslaunch's
   SIGTERM 15 s later: once the shutdown has ended the process has EXIT_GRACE_S to end; past that,
-  ``faulthandler`` prints every thread's stack (where it was held) and ends it with status 1. It
-  runs from a C thread, so it also ends a process stuck in finalisation.
+  a daemon thread prints every thread's stack (where it was held) and ends it with status 1. A
+  process stuck where even that thread no longer runs (late in finalisation) is ended by the
+  kernel's alarm (SIGALRM, default action) EXIT_ALARM_EXTRA_S later.
 """
 from __future__ import annotations
 
 import atexit
-import faulthandler
+import math
 import os
 import signal
 import sys
 import threading
+import time
+import traceback
 from typing import Any
 
 import rospy
@@ -36,6 +39,7 @@ import rospy
 HANDLED = (signal.SIGINT, signal.SIGTERM)
 SHUTDOWN_WAIT_S = 10.0      # at exit: wait this long for rospy's shutdown still running in the watcher
 EXIT_GRACE_S = 5.0          # after rospy's shutdown: the process ends within this, or is ended
+EXIT_ALARM_EXTRA_S = 2      # whole seconds after EXIT_GRACE_S: the kernel's alarm ends what is left
 
 
 class ShutdownOnSignal:
@@ -69,13 +73,30 @@ class ShutdownOnSignal:
             self._finished.wait(SHUTDOWN_WAIT_S)
 
     def _end_within_grace(self) -> None:
+        if self.exit_grace_s > 0:
+            threading.Thread(target=self._end_after_grace, name="exit-guard", daemon=True).start()
+            signal.alarm(int(math.ceil(self.exit_grace_s)) + EXIT_ALARM_EXTRA_S)
+
+    def _end_after_grace(self) -> None:
+        """Past the grace, print every thread's stack (where the exit was held) and end with status 1.
+
+        A Python daemon thread rather than ``faulthandler``'s timer: it keeps running while the
+        interpreter waits for non-daemon threads and runs atexit handlers, and it reads the stacks
+        through ``sys._current_frames`` instead of walking thread states that may be torn down
+        (the C timer crashed the process once, SIGSEGV, when it fired during that wait).
+        """
+        time.sleep(self.exit_grace_s)
         stream = sys.__stderr__
-        if stream is None or self.exit_grace_s <= 0:
-            return
         try:
-            faulthandler.dump_traceback_later(self.exit_grace_s, exit=True, file=stream)
-        except (ValueError, OSError, RuntimeError):
-            pass                          # no usable stderr: nothing to arm the timer on
+            if stream is not None:
+                names = {t.ident: t.name for t in threading.enumerate()}
+                stream.write("node still running %.0f s after its shutdown; its threads:\n" % self.exit_grace_s)
+                for ident, frame in sys._current_frames().items():
+                    stream.write("Thread %s (%s):\n" % (names.get(ident, "?"), ident))
+                    stream.write("".join(traceback.format_stack(frame)))
+                stream.flush()
+        finally:
+            os._exit(1)
 
 
 def init_node(name: str, **kwargs: Any) -> None:
