@@ -45,6 +45,7 @@ class MultiWaypoint(unittest.TestCase):
         cls.lock = threading.Lock()
         cls.indices = {n: [] for n in cls.names}      # (monotonic time, index) as published
         cls.finished = {n: None for n in cls.names}
+        cls.finished_ros = {n: None for n in cls.names}     # ROS time of `finished` (world time in simulation)
         cls.reached = {n: [] for n in cls.names}      # PointStamped, as published
         cls.track = Track(cls.probe, cls.names, period=0.05)
         for n in cls.names:
@@ -65,10 +66,11 @@ class MultiWaypoint(unittest.TestCase):
             with cls.lock:
                 if msg.data and cls.finished[name] is None:
                     cls.finished[name] = time.monotonic()
+                    cls.finished_ros[name] = rospy.get_time()
         return cb
 
     def test_every_waypoint_in_order_then_land(self):
-        t0 = time.monotonic()
+        t0, t0_ros = time.monotonic(), rospy.get_time()
         done = wait_until(lambda: all(self.finished[n] is not None for n in self.names), self.timeout, 0.2)
         with self.lock:
             indices = {n: list(v) for n, v in self.indices.items()}
@@ -83,22 +85,28 @@ class MultiWaypoint(unittest.TestCase):
             reached = list(self.reached[n])
             self.assertEqual(len(reached), len(waypoints), "%s: %d reached messages for %d waypoints"
                              % (n, len(reached), len(waypoints)))
-            wall_minus_monotonic = time.time() - time.monotonic()       # ROS stamps are wall time
+            sim_time = rospy.get_param("/use_sim_time", False)         # stamps in world time, else wall time
+            wall_minus_monotonic = time.time() - time.monotonic()
             times, worst = [], 0.0
             for k, (w, r) in enumerate(zip(waypoints, reached)):
                 seen = (r.point.x, r.point.y, r.point.z)
                 for axis in range(3):
                     self.assertLess(abs(seen[axis] - w[axis]), TOLERANCE,
                                     "%s: waypoint %d %s counted as reached at %s" % (n, k + 1, w, seen))
-                t = r.header.stamp.to_sec() - wall_minus_monotonic
-                truth = self.track.position_at(n, t)
+                if sim_time:
+                    truth = self.track.position_at_world_time(n, r.header.stamp.to_sec())
+                    t = r.header.stamp.to_sec() - t0_ros + t0      # on the test's monotonic line, for the print
+                else:
+                    t = r.header.stamp.to_sec() - wall_minus_monotonic
+                    truth = self.track.position_at(n, t)
                 worst = max(worst, distance(truth, seen))
                 self.assertLess(distance(truth, seen), MOCAP_MATCH, "%s: waypoint %d decided at %s, truly at %s"
                                 % (n, k + 1, seen, truth))
                 times.append(t - t0)
             # and in order: each hand-over after the one before, the last one before `finished`
             self.assertEqual(times, sorted(times), n)
-            self.assertLess(times[-1], self.finished[n] - t0, n)
+            finished = (self.finished_ros[n] - t0_ros) if sim_time else (self.finished[n] - t0)
+            self.assertLess(times[-1], finished, n)
             print("WAYPOINTS %s: the positions that decided the hand-overs at most %.1f mm from the truth"
                   % (n, 1e3 * worst))
             print("WAYPOINTS %s reached at %s s after the test started" % (n, ["%.1f" % x for x in times]))

@@ -186,6 +186,21 @@ class Track:
                 return tuple(a + f * (b - a) for a, b in zip(s0["position"], s1["position"]))
         return tuple(self.at(name, t)["position"])
 
+    def position_at_world_time(self, name: str, world_t: float) -> Vec3:
+        """The true position of ``name`` at world time ``world_t`` (a ROS stamp under /use_sim_time),
+        interpolated between the samples the world stamped just before and after it."""
+        with self._lock:
+            rows = sorted((r[1] for r in self.samples[name]), key=lambda s: s["time"])
+        before = [s for s in rows if s["time"] <= world_t]
+        after = [s for s in rows if s["time"] > world_t]
+        if before and after and after[0]["time"] - before[-1]["time"] <= self.MAX_GAP_PERIODS * self.period:
+            s0, s1 = before[-1], after[0]
+            f = (world_t - s0["time"]) / (s1["time"] - s0["time"])
+            return tuple(a + f * (b - a) for a, b in zip(s0["position"], s1["position"]))
+        if not rows:
+            raise ValueError("no samples of %s yet" % name)
+        return tuple(min(rows, key=lambda s: abs(s["time"] - world_t))["position"])
+
     def between(self, name: str, t0: float, t1: float) -> List[Dict[str, Any]]:
         with self._lock:
             return [s for t, s, _ in self.samples[name] if t0 <= t <= t1]
