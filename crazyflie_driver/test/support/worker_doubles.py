@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 from crazyflie_driver.crtp.firmware_limits import LOG_MAX_BLOCKS, LOG_MAX_OPS
 from crazyflie_driver.errors import CrazyflieError, RadioNotFound, RadioUnplugged, UnknownName
@@ -202,3 +202,14 @@ def started(cf=None, config=None, listener=None, ready_timeout=2.0, **kw):
     w.start()
     w.wait_ready(ready_timeout)
     return w, cf, listener
+
+
+def poll_actions(monitor: Any, t0: float, t1: float, step: float = 0.01) -> List[Tuple[float, Any]]:
+    """Poll a SafetyMonitor from t0 to t1 [s] every ``step`` s; the actions it took, with their times."""
+    out, t = [], t0
+    while t <= t1:
+        a = monitor.poll(t)
+        if a is not None:
+            out.append((round(t, 3), a))
+        t += step
+    return out

@@ -18,6 +18,7 @@ from crazyflie_driver.server.setpoint import Setpoint
 from crazyflie_driver.server.status import worker_status
 
 from support.worker_doubles import FakeCrazyflie, Recorder, started, wait_for
+from support.worker_doubles import poll_actions as run
 
 HOVER = 36344
 CURRENT_FW = 12
@@ -35,15 +36,6 @@ def hover_for(m, t0, seconds, thrust=HOVER, period=0.02):
     return t - period
 
 
-def run(m, t0, t1, step=0.01):
-    """Poll from t0 to t1; the actions with their times."""
-    out, t = [], t0
-    while t <= t1:
-        a = m.poll(t)
-        if a is not None:
-            out.append((round(t, 3), a))
-        t += step
-    return out
 
 
 # ---------------------------------------------------------------- config

@@ -25,6 +25,7 @@ from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 from support.swarm_doubles import FirmwareDouble, LinkDouble
 from support.worker_doubles import FakeCrazyflie, started
+from support.worker_doubles import poll_actions as run
 
 CURRENT_FW = 12
 HOVER = 36344
@@ -44,14 +45,6 @@ def monitor(protocol=CURRENT_FW):
     return SafetyMonitor(SafetyConfig(), "cf1", lambda: protocol, dict)
 
 
-def run(m, t0, t1, step=0.01):
-    out, t = [], t0
-    while t <= t1:
-        a = m.poll(t)
-        if a is not None:
-            out.append((round(t, 3), a))
-        t += step
-    return out
 
 
 def flying_at(m, t, z=0.5):

@@ -15,17 +15,12 @@ are compared clamped."""
 from __future__ import annotations
 
 import math
-import types
 
-import numpy as np
 import pytest
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, MODE_DISABLE, MODE_VELOCITY, Setpoint
-from crazyflie_driver.sim.world import estimator
-from crazyflie_driver.sim.world.flight import OnboardFlight
-from crazyflie_driver.sim.world.stabilizer import OnboardController
+from support.open_loop import fly_open_loop
 
-from test_sim_pid_reference import quaternion
 
 COUNTS = 2.0
 ABS, VEL, OFF = MODE_ABS, MODE_VELOCITY, MODE_DISABLE
@@ -102,28 +97,7 @@ REFERENCE = {       # tick: roll, pitch, yaw commands, thrust (unclamped, as the
 
 
 def fly(states, setpoint_at, ticks):
-    flight, stab = OnboardFlight(), OnboardController()
-    rpy, pos, _, _ = states(0.0)
-    stab.s.add("current", 0.0, rpy[2])
-    flight.add(np.random.default_rng(0), pos, 0.0)
-    flight.set_param(0, "stabilizer.controller", 2, np.array(pos), 0.0)
-    est = flight.estimator.s                       # a perfect estimate
-    est.kind[0], est.err[0], est.verr[0], est.drift_acc[0] = estimator.KALMAN, 0.0, 0.0, 0.0
-    bodies = types.SimpleNamespace(position=np.zeros((1, 3)), velocity=np.zeros((1, 3)),
-                                   quaternion=np.zeros((1, 4)))
-    out = {}
-    for k in range(ticks):
-        t = k / 1000.0
-        rpy, pos, vel, gyro = states(t)
-        bodies.position[0], bodies.velocity[0], bodies.quaternion[0] = pos, vel, quaternion(*rpy)
-        sp = setpoint_at(k)
-        if sp is not None:
-            flight.setpoint(0, sp)
-        stab.s.sp_time[0] = t
-        flight.step(k, t, bodies, stab.s, 0.0)
-        stab.update(k, t, bodies, np.array([gyro]), np.zeros(1, bool))
-        out[k] = (*stab.s.rate_out[0], stab.s.thrust[0])
-    return out
+    return fly_open_loop(states, setpoint_at, ticks, controller=2, read=lambda s: (*s.rate_out[0], s.thrust[0]))
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))

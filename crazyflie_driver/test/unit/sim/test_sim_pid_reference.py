@@ -14,15 +14,11 @@ Each reference: roll, pitch, yaw commands of the rate PIDs (counts, as the mixer
 from __future__ import annotations
 
 import math
-import types
 
-import numpy as np
 import pytest
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, MODE_DISABLE, MODE_VELOCITY, Setpoint
-from crazyflie_driver.sim.world import estimator
-from crazyflie_driver.sim.world.flight import OnboardFlight
-from crazyflie_driver.sim.world.stabilizer import OnboardController
+from support.open_loop import fly_open_loop
 
 COUNTS = 2.0                   # the firmware truncates its float outputs to int16
 DEGREES = 0.05
@@ -102,37 +98,10 @@ REFERENCE = {       # tick: roll, pitch, yaw commands, thrust, desired roll, pit
 }
 
 
-def quaternion(roll, pitch, yaw):
-    """(x, y, z, w) of standard roll, pitch, yaw in degrees (z-y-x)."""
-    r, p, y = (math.radians(a) / 2 for a in (roll, pitch, yaw))
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy)
-
-
 def fly(states, setpoints, ticks):
     """Our controller driven open loop by the scripted states: {tick: outputs as in REFERENCE}."""
-    flight, stab = OnboardFlight(), OnboardController()
-    rpy, pos, _, _ = states(0.0)
-    stab.s.add("current", 0.0, rpy[2])
-    flight.add(np.random.default_rng(0), pos, 0.0)
-    est = flight.estimator.s                       # a perfect estimate
-    est.kind[0], est.err[0], est.verr[0], est.drift_acc[0] = estimator.KALMAN, 0.0, 0.0, 0.0
-    bodies = types.SimpleNamespace(position=np.zeros((1, 3)), velocity=np.zeros((1, 3)),
-                                   quaternion=np.zeros((1, 4)))
-    out = {}
-    for k in range(ticks):
-        t = k / 1000.0
-        rpy, pos, vel, gyro = states(t)
-        bodies.position[0], bodies.velocity[0], bodies.quaternion[0] = pos, vel, quaternion(*rpy)
-        if k in setpoints:
-            flight.setpoint(0, setpoints[k])
-        stab.s.sp_time[0] = t                      # a stream: no watchdog
-        flight.step(k, t, bodies, stab.s, 0.0)
-        stab.update(k, t, bodies, np.array([gyro]), np.zeros(1, bool))
-        s = stab.s
-        out[k] = (*s.rate_out[0], s.thrust[0], *s.attitude_desired[0])
-    return out
+    return fly_open_loop(states, setpoints.get, ticks, controller=1,
+                         read=lambda s: (*s.rate_out[0], s.thrust[0], *s.attitude_desired[0]))
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
