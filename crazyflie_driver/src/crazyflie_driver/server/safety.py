@@ -341,8 +341,14 @@ class SafetyMonitor:
             return True
 
     def note_stream_released(self, now: float) -> None:
-        """The low-level stream handed control to the high-level commander (notify-setpoints-stop)."""
+        """The low-level stream handed control to the high-level commander (notify-setpoints-stop).
+
+        A Crazyflie flying on that stream stays in the air under the high-level commander: counted as
+        high-level flight from here, so a shutdown or removal that looks between this and the high-level
+        command that usually follows still lands it (it once saw neither and closed the link at 0.54 m)."""
         with self._lock:
+            if self._flying and self._stream != "":
+                self._hl_flying = self._hl_used = True
             self._stream = ""
             self._last_setpoint_at = None
 

@@ -224,6 +224,26 @@ def test_streamed_port7_setpoints_land_onboard_and_a_released_stream_is_not_sile
     assert m.flying
 
 
+def test_a_removal_between_a_released_stream_and_its_high_level_command_still_lands():
+    """notify-setpoints-stop hands a flying Crazyflie to the high-level commander: it is still in the
+    air, so a removal that looks before the go_to that follows is noted lands it, not drops it."""
+    m = monitor(protocol=CURRENT_FW)
+    for k in range(50):
+        m.note_setpoint(k * 0.02, None)            # flying on a position stream, with motion capture
+        m.note_pose(k * 0.02, 0.5)
+    m.note_stream_released(1.0)                    # a go_to's notify-setpoints-stop went out ...
+    assert m.flying
+    assert m.begin_shutdown(1.01, 10.0)            # ... and the removal looks before the go_to is noted
+    assert run(m, 1.01, 2.0)[0][1].kind == "land"
+
+
+def test_a_released_stream_on_the_ground_is_not_flight():
+    m = monitor(protocol=CURRENT_FW)
+    m.note_setpoint(0.0, None, stop=True)
+    m.note_stream_released(0.1)
+    assert not m.flying and not m.begin_shutdown(0.2, 10.0)
+
+
 def test_finished_only_once_the_last_zero_thrust_went_out():
     m = monitor()
     t = hover_for(m, 0.0, 1.0)
