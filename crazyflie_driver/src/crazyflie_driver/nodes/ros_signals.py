@@ -18,9 +18,8 @@ Two more guards keep the exit itself prompt:
 * Whatever still holds the process after that shutdown (a library thread that is not a daemon
   and waits on a peer, or a lock left held in finalisation) must not hold it until roslaunch's
   SIGTERM 15 s later: once the shutdown has ended the process has EXIT_GRACE_S to end; past that,
-  a daemon thread prints every thread's stack (where it was held) and ends it with status 1. A
-  process stuck where even that thread no longer runs (late in finalisation) is ended by the
-  kernel's alarm (SIGALRM, default action) EXIT_ALARM_EXTRA_S later.
+  the kernel's alarm (SIGALRM) runs a handler in the main thread that prints every thread's stack
+  (where it was held) and ends the process with status 1.
 """
 from __future__ import annotations
 
@@ -30,7 +29,6 @@ import os
 import signal
 import sys
 import threading
-import time
 import traceback
 from typing import Any
 
@@ -39,7 +37,6 @@ import rospy
 HANDLED = (signal.SIGINT, signal.SIGTERM)
 SHUTDOWN_WAIT_S = 10.0      # at exit: wait this long for rospy's shutdown still running in the watcher
 EXIT_GRACE_S = 5.0          # after rospy's shutdown: the process ends within this, or is ended
-EXIT_ALARM_EXTRA_S = 2      # whole seconds after EXIT_GRACE_S: the kernel's alarm ends what is left
 
 
 class ShutdownOnSignal:
@@ -74,18 +71,15 @@ class ShutdownOnSignal:
 
     def _end_within_grace(self) -> None:
         if self.exit_grace_s > 0:
-            threading.Thread(target=self._end_after_grace, name="exit-guard", daemon=True).start()
-            signal.alarm(int(math.ceil(self.exit_grace_s)) + EXIT_ALARM_EXTRA_S)
+            signal.alarm(int(math.ceil(self.exit_grace_s)))
 
-    def _end_after_grace(self) -> None:
-        """Past the grace, print every thread's stack (where the exit was held) and end with status 1.
+    def on_alarm(self, _signum: int, _frame: Any) -> None:
+        """Past the grace: print every thread's stack (where the exit was held) and end with status 1.
 
-        A Python daemon thread rather than ``faulthandler``'s timer: it keeps running while the
-        interpreter waits for non-daemon threads and runs atexit handlers, and it reads the stacks
-        through ``sys._current_frames`` instead of walking thread states that may be torn down
-        (the C timer crashed the process once, SIGSEGV, when it fired during that wait).
+        The kernel's alarm and a handler in the main thread, not a timer thread: a thread still
+        sleeping while the interpreter finalised crashed the process (SIGSEGV) on busy machines, both
+        as faulthandler's C timer and as a Python daemon thread.
         """
-        time.sleep(self.exit_grace_s)
         stream = sys.__stderr__
         try:
             if stream is not None:
@@ -104,6 +98,7 @@ def init_node(name: str, **kwargs: Any) -> None:
     shutdown = ShutdownOnSignal()
     for signum in HANDLED:
         signal.signal(signum, shutdown.handle)
+    signal.signal(signal.SIGALRM, shutdown.on_alarm)     # armed only once rospy's shutdown has ended
     rospy.init_node(name, disable_signals=True, **kwargs)
     # registered after rospy's (rospy.core registers at import), so it runs first: atexit is LIFO
     atexit.register(shutdown.wait_for_shutdown)
