@@ -41,6 +41,11 @@ DEFAULT_GATHER_S = 0.002
 LATENCY_SAMPLES = 2000          # kept for the median / p99 (the newest ones)
 #: A Crazyflie's refused poses are logged at most once in this many seconds (s; its first one at once).
 REFUSAL_LOG_PERIOD_S = 5.0
+#: Faster than a Crazyflie flies (m/s): a pose that implies more, from that Crazyflie's last accepted
+#: one, is a ghost (noise, a swapped or reflected marker set) and is refused, not sent.
+MAX_POSE_SPEED_M_S = 5.0
+#: What a true pose may move on top of that (m): motion-capture noise and one frame's latency.
+POSE_JUMP_MARGIN_M = 0.2
 
 
 def usable_quaternion(q: Optional[Sequence[float]]) -> Optional[Quaternion]:
@@ -83,6 +88,7 @@ class MocapStream:
             radio: {} for radio in self._radio.values()}
         self._stats_lock = threading.Lock()
         self._fixed: set = set()
+        self._last_good: Dict[str, Tuple[float, Position]] = {}     # name -> (time s, position m) accepted
         self._fixes: "queue.Queue[Optional[Tuple[str, Position]]]" = queue.Queue()
         self._stopping = False
         self._paused = False
@@ -110,7 +116,12 @@ class MocapStream:
             self._refuse(name, str(e))
             return False
         now = self._clock() if received is None else received
+        jump = self._implausible_jump(name, now, position)
+        if jump:
+            self._refuse(name, jump)
+            return False
         with self._cond:
+            self._last_good[name] = (now, (float(position[0]), float(position[1]), float(position[2])))
             self._pending[self._radio[name]][name] = (now, p, usable_quaternion(orientation))
             self._cond.notify_all()
             first = name not in self._fixed
@@ -118,6 +129,22 @@ class MocapStream:
         if first:
             self._fixes.put((name, p))
         return True
+
+    def _implausible_jump(self, name: str, now: float, position: Sequence[float]) -> str:
+        """Why ``position`` cannot be ``name``'s (a jump faster than MAX_POSE_SPEED_M_S from its last
+        accepted pose), or "". The allowance grows with the time since, so a body hidden and carried
+        elsewhere is taken again once the time could explain the move."""
+        with self._cond:
+            last = self._last_good.get(name)
+        if last is None:
+            return ""
+        t0, p0 = last
+        moved = math.sqrt(sum((float(a) - b) ** 2 for a, b in zip(position, p0)))
+        allowed = POSE_JUMP_MARGIN_M + MAX_POSE_SPEED_M_S * max(0.0, now - t0)
+        if moved <= allowed:
+            return ""
+        return ("pose jumped %.2f m in %.3f s from its last accepted one (more than %.1f m/s): a ghost or a "
+                "swapped marker set; check the motion-capture body" % (moved, max(0.0, now - t0), MAX_POSE_SPEED_M_S))
 
     def refix(self, name: str) -> None:
         """Report ``name``'s next pose as a first fix again (its initial position was not written)."""

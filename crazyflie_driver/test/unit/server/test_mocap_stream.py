@@ -200,3 +200,25 @@ def test_refusals_are_logged_once_per_period_and_crazyflie_with_their_count(capl
     lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
     assert len(lines) == 3                          # at 0 s, 5 s and 10 s
     assert "500 since the last report" in lines[1] and "1001 refused in all" in lines[2]
+
+
+def test_a_ghost_within_the_packed_range_is_refused_as_a_jump_and_a_real_move_is_not():
+    """Noise of 100 m puts some ghosts inside +-32.767 m: each is refused by the speed a jump from the
+    Crazyflie's last accepted pose would need, so its estimator never sees one; a move at flying speed,
+    or a body carried elsewhere while hidden for long enough, is taken."""
+    from crazyflie_driver.server.mocap_stream import MAX_POSE_SPEED_M_S, POSE_JUMP_MARGIN_M
+
+    bc, medium = rig()
+    now = [0.0]
+    stream = MocapStream(URIS, bc.send_poses, clock=lambda: now[0])
+    assert stream.pose("cf1", (0.0, 0.0, 0.5), Q)
+    now[0] = 0.01
+    assert not stream.pose("cf1", (12.0, -20.0, 6.0), Q)                  # a ghost inside the range
+    assert "jumped" in stream.last_refusal["cf1"]
+    now[0] = 0.02                                                          # 2 cm in 20 ms: 1 m/s
+    assert stream.pose("cf1", (0.02, 0.0, 0.5), Q)
+    hidden = (3.0 - POSE_JUMP_MARGIN_M) / MAX_POSE_SPEED_M_S + 0.01        # long enough to explain 3 m
+    now[0] = 0.02 + hidden
+    assert stream.pose("cf1", (3.02, 0.0, 0.5), Q)
+    stream.send_frame(stream.take_pending())
+    assert wire_ids(medium).count(1) == 1 and stream.refused["cf1"] == 1
