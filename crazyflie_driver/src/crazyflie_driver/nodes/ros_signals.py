@@ -20,10 +20,17 @@ Two more guards keep the exit itself prompt:
   SIGTERM 15 s later: once the shutdown has ended the process has EXIT_GRACE_S to end; past that,
   the kernel's alarm (SIGALRM) runs a handler in the main thread that prints every thread's stack
   (where it was held) and ends the process with status 1.
+
+One log record of rospy's own is demoted: when a publisher leaves (its node shuts down first on a
+Ctrl-C that reaches every node), rospy closes the subscriber's socket from the master's callback
+thread while that connection's receive thread starts its next read, and logs the read's
+``OSError: [Errno 9] Bad file descriptor`` as an ERROR traceback on ``rospy.internal``. The
+connection was being removed anyway; nothing is lost. :class:`ClosedSocketRace` makes it DEBUG.
 """
 from __future__ import annotations
 
 import atexit
+import logging
 import math
 import os
 import signal
@@ -93,8 +100,28 @@ class ShutdownOnSignal:
             os._exit(1)
 
 
+class ClosedSocketRace(logging.Filter):
+    """Demotes rospy's ERROR for a read on a socket rospy itself just closed to DEBUG.
+
+    rospy logs it as the bare text of a traceback (no exception object on the record), so its
+    text is all there is to recognise: a read in ``receive_once`` failing with EBADF.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.ERROR and record.name == RECEIVE_LOGGER:
+            text = record.getMessage()
+            if "in receive_once" in text and text.rstrip().endswith(CLOSED_SOCKET_ERROR):
+                record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+        return True
+
+
+RECEIVE_LOGGER = "rospy.internal"               # the logger rospy's TCPROS receive loop writes to
+CLOSED_SOCKET_ERROR = "OSError: [Errno 9] Bad file descriptor"
+
+
 def init_node(name: str, **kwargs: Any) -> None:
     """``rospy.init_node`` with this module's signal handling instead of rospy's."""
+    logging.getLogger(RECEIVE_LOGGER).addFilter(ClosedSocketRace())
     shutdown = ShutdownOnSignal()
     for signum in HANDLED:
         signal.signal(signum, shutdown.handle)

@@ -230,3 +230,45 @@ def test_a_thread_left_waiting_cannot_hold_the_exit(master_uri):
     assert "spin returned" in out, out
     assert took < EXIT_GRACE_S + 3.0, "took %.1f s:\n%s" % (took, out)
     assert child.returncode == 1 and "waits_for_a_peer" in out, out
+
+
+def test_rospys_read_on_a_socket_it_closed_is_not_an_error():
+    """rospy's receive loop reading a socket that rospy closed under it (a publisher leaving)
+    logs a traceback as ERROR; with the filter init_node installs it is DEBUG. Any other error
+    of rospy's stays an ERROR."""
+    import logging
+    import socket
+
+    from rospy.impl.tcpros_base import TCPROSTransport, TCPROSTransportProtocol, TransportException
+    from std_msgs.msg import String
+
+    from crazyflie_driver.nodes.ros_signals import RECEIVE_LOGGER, ClosedSocketRace
+
+    records = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            records.append(record)
+
+    logger = logging.getLogger(RECEIVE_LOGGER)
+    race, keep = ClosedSocketRace(), Keep(logging.DEBUG)
+    logger.addFilter(race)
+    logger.addHandler(keep)
+    old_level = logger.level
+    logger.setLevel(logging.DEBUG)
+    try:
+        transport = TCPROSTransport(TCPROSTransportProtocol("/probe", String), "/probe")
+        sock = socket.socket()
+        sock.close()                    # what rospy's removal of the connection does
+        transport.socket = sock
+        with pytest.raises(TransportException):
+            transport.receive_once()
+        logger.error("Traceback (most recent call last):\nValueError: something else")
+    finally:
+        logger.removeFilter(race)
+        logger.removeHandler(keep)
+        logger.setLevel(old_level)
+    closed = [r for r in records if "receive_once" in r.getMessage()]
+    assert len(closed) == 1 and closed[0].levelno == logging.DEBUG, [r.getMessage() for r in records]
+    other = [r for r in records if "something else" in r.getMessage()]
+    assert len(other) == 1 and other[0].levelno == logging.ERROR

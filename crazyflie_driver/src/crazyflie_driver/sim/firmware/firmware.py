@@ -78,6 +78,7 @@ class SimulatedCrazyflie:
         self._param_table = tuple(param_table if param_table is not None else T.PARAM_TABLE)
         self._log_table = tuple(log_table if log_table is not None else T.LOG_TABLE)
         self._tx: Deque[bytes] = deque()
+        self._tx_queued_at: Deque[float] = deque()   # world time [s] each packet in _tx was queued
         self._tx_listener: Optional[Callable[[], None]] = None
         self._last_radio: Optional[float] = None
         self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
@@ -90,7 +91,7 @@ class SimulatedCrazyflie:
     def _boot(self) -> None:
         self.timer_due = 0.0                 # world time at which `tick` next has work (0: at once)
         self._boot_time = self.now()
-        self._tx.clear()
+        self._clear_tx()
         self._last_radio = None
         self.packet_link_active = False      # True while a packet link (UDP) is the active link
         self.link.reset()
@@ -360,6 +361,7 @@ class SimulatedCrazyflie:
                 self.state.tx_dropped += 1
                 return False
             self._tx.append(bytes([header & 0xFF]) + bytes(payload[:MAX_PAYLOAD]))
+            self._tx_queued_at.append(self.now())
             listener = self._tx_listener
         if listener is not None:
             try:
@@ -369,7 +371,15 @@ class SimulatedCrazyflie:
         return True
 
     def _pop_locked(self) -> Optional[bytes]:
-        return self._tx.popleft() if self._tx else None
+        if not self._tx:
+            return None
+        if self._tx_queued_at:
+            self.state.tx_last_wait_s = self.now() - self._tx_queued_at.popleft()
+        return self._tx.popleft()
+
+    def _clear_tx(self) -> None:
+        self._tx.clear()
+        self._tx_queued_at.clear()
 
     def pop_outgoing(self, packet_link: bool = False) -> Optional[bytes]:
         """Next queued packet for a packet link (header + payload), or None.
@@ -417,7 +427,7 @@ class SimulatedCrazyflie:
                 if timeout is not None and self._last_radio is not None:
                     if now - self._last_radio > timeout:
                         self.logs.reset()          # the firmware cleans up after a lost radio link
-                        self._tx.clear()
+                        self._clear_tx()
                         self._last_radio = None
                         return
                     due = min(due, self._last_radio + timeout)
@@ -450,7 +460,7 @@ class SimulatedCrazyflie:
             if self.state.halted:
                 return
             self.state.halted = reason
-            self._tx.clear()
+            self._clear_tx()
             _log.error("simulated Crazyflie %s halted on a firmware assert: %s; packet %s. A real Crazyflie "
                        "stops the same way: fix the host's packet. Reboot it to fly again.",
                        self.address.hex().upper(), reason, packet.hex())
@@ -491,6 +501,7 @@ class SimulatedCrazyflie:
                 "packets_by_port": {str(k): v for k, v in s.packets_by_port.items()},
                 "tx_pending": len(self._tx),
                 "tx_dropped": s.tx_dropped,
+                "tx_last_wait_s": s.tx_last_wait_s,
                 "safelink": self.link.safelink,
                 "reboots": s.reboots,
                 "rssi_dbm": self.rssi_dbm,

@@ -25,4 +25,5 @@ class SimState:
     estop_watchdog: Optional[float] = None
     packets_by_port: Dict[int, int] = field(default_factory=dict)
     tx_dropped: int = 0
+    tx_last_wait_s: float = 0.0             # time the last packet handed to the radio spent queued [s, world]
     reboots: int = 0
