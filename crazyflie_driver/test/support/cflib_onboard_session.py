@@ -15,7 +15,9 @@ PYTHONPATH, CRAZYFLIE_SIM_ADDRESS naming the world server). cflib's public API o
   (set through cflib as ``hlCommander.groupmask``) so that other Crazyflies on the channel stay down.
 
 The world's true position is sampled through the world server's control API during every phase and
-reported per phase, so the test judges the flight on the truth.
+reported per phase, so the test judges the flight on the truth. Every duration here (the 100 Hz of
+the motion capture, each phase, the estimator's settling) is counted in the world's seconds, so a
+world that runs slower than real time (a busy machine) gets the same flight, only slower.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ SETPOINT_PERIOD_S = 0.02
 
 
 class Mocap(threading.Thread):
-    """Streams the world's true pose to the Crazyflie at 100 Hz and keeps the samples."""
+    """Streams the world's true pose to the Crazyflie at 100 Hz of world time and keeps the samples."""
 
     def __init__(self, cf, control, uri: str, pose: bool) -> None:
         super().__init__(daemon=True)
@@ -41,28 +43,47 @@ class Mocap(threading.Thread):
         self.samples: list = []
         self.sent = 0
         self.stop = threading.Event()
+        self.started = threading.Event()
+
+    def world_time(self) -> float:
+        """World time [s] of the newest sample (the world's clock, without another round trip)."""
+        return self.samples[-1][0]
 
     def run(self) -> None:
+        due = None
         while not self.stop.is_set():
-            t0 = time.monotonic()
             state = self.control.control("vehicle_state", uri=self.uri)
+            now = state["time"]
+            if due is not None and now < due:
+                # the world runs at most at real time: its seconds to go, slept on the wall, never oversleep
+                self.stop.wait(due - now)
+                continue
             p, q = state["position"], state["quaternion"]
-            self.samples.append([state["time"]] + list(p) + [max(state["motors"])])
+            self.samples.append([now] + list(p) + [max(state["motors"])])
+            self.started.set()
             if self.pose:
                 self.cf.extpos.send_extpose(p[0], p[1], p[2], q[0], q[1], q[2], q[3])
             else:
                 self.cf.extpos.send_extpos(p[0], p[1], p[2])
             self.sent += 1
-            self.stop.wait(max(0.0, MOCAP_PERIOD_S - (time.monotonic() - t0)))
+            due = (now if due is None else due) + MOCAP_PERIOD_S
+            if due <= now:                  # this thread was held up: go on from now, do not burst
+                due = now + MOCAP_PERIOD_S
+
+    def wait_world(self, seconds: float, send=None) -> None:
+        """Let ``seconds`` of world time pass, calling ``send()`` every SETPOINT_PERIOD_S of wall time."""
+        self.started.wait(10.0)
+        end = self.world_time() + seconds
+        while self.world_time() < end:
+            if send is not None:
+                send()
+            time.sleep(SETPOINT_PERIOD_S)
 
 
 def phase(name: str, seconds: float, send, mocap: Mocap, out: dict) -> None:
     start = len(mocap.samples)
     with Step(name):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            send()
-            time.sleep(SETPOINT_PERIOD_S)
+        mocap.wait_world(seconds, send)
     out[name] = mocap.samples[start:]
 
 
@@ -87,7 +108,7 @@ def run(args: argparse.Namespace) -> None:
         cf.param.set_value(name, str(value))
     mocap = Mocap(cf, control, args.sim_uri, args.pose)
     mocap.start()
-    time.sleep(0.5)                       # the estimator settles on the first measurements
+    mocap.wait_world(0.5)                 # the estimator settles on the first measurements
     x, y, z = args.goal
     phases: dict = {}
     if args.high_level:

@@ -100,18 +100,6 @@ def test_too_many_log_blocks_fail_the_add_before_any_block_is_created():
         w.stop()
 
 
-def test_keepalive_every_10ms_when_no_setpoints():
-    w, cf, _ = started()
-    try:
-        time.sleep(0.3)
-        nulls = cf.of_kind("null")
-        assert 20 <= len(nulls) <= 32
-        gaps = [b[0] - a[0] for a, b in zip(nulls, nulls[1:])]
-        assert max(gaps) < 0.03
-    finally:
-        w.stop()
-
-
 def test_queued_log_data_is_drained_without_waiting_for_the_keepalive_period():
     w, cf, rec = started(keepalive_period=0.05)
     try:

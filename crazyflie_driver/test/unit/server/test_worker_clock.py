@@ -1,7 +1,8 @@
 """The worker times everything on the clock it is given (the world's in a simulation), never on the wall clock.
 
 Each test holds the clock still while wall time passes, then moves it: what the worker does must
-follow the clock's seconds. On the wall clock the same worker behaves as it always did (test_worker).
+follow the clock's seconds. These are also the pacing tests of the wall clock (the default): a count of
+keepalives in a window of wall time measures how busy the machine is, not the worker.
 """
 from __future__ import annotations
 

@@ -2,9 +2,11 @@
 streamed to the onboard estimator (extpos / extpose at 100 Hz), onboard PID position control,
 position, hover and velocity-world setpoints; and the complementary-estimator trap.
 
-A world server runs in this process (real time, ephemeral ports); ``support/cflib_onboard_session.py``
-runs in cflib's own interpreter over the fake Crazyradio or udp://. The flight is judged on the
-world's true positions, which the session samples through the server's control API.
+A world server runs in this process (ephemeral ports); ``support/cflib_onboard_session.py`` runs in
+cflib's own interpreter over the fake Crazyradio or udp://. The flight is judged on the world's true
+positions, which the session samples through the server's control API. The session counts its
+durations in world seconds and the world runs at ``auto`` speed, paced by the session's waits for a
+CPU (as a launch's world is paced by its nodes'), so a busy machine slows the flight, not worsens it.
 """
 from __future__ import annotations
 
@@ -13,10 +15,12 @@ import math
 import os
 import pathlib
 import subprocess
+from typing import List
 
 import pytest
 
 from crazyflie_driver.sim.air.server import WorldServer
+from crazyflie_driver.sim.world.pacing import AutoPacer, HostDelay, Pacing
 from support.cflib_python import cflib_python
 
 TEST = pathlib.Path(__file__).resolve().parents[2]
@@ -26,6 +30,7 @@ URI_HOLD = "radio://0/80/2M/E7E7E7E703"          # starts at the origin
 URI_TRAP = "radio://0/80/2M/E7E7E7E704"          # starts away from the origin
 TRAP_START = (1.0, 0.5)
 SESSION_TIMEOUT_S = 45.0
+SESSIONS: List[int] = []     # pids of the running cflib sessions: the host the world is paced by
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +47,9 @@ def served():
     server.add_crazyflie(URI_TRAP, "cf4", (TRAP_START[0], TRAP_START[1], 0.0), "current")
     server.start()
     world.start()
+    pacer = AutoPacer(world, Pacing(True, 1.0), HostDelay(pids=lambda: list(SESSIONS), refresh_s=0.0)).start()
     yield server
+    pacer.stop()
     server.stop()
     world.stop()
 
@@ -53,13 +60,20 @@ def fly(python, server, uri, sim_uri, *args):
                PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--sim-uri", sim_uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
-    proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
-                          timeout=SESSION_TIMEOUT_S + 15)
-    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
-    assert lines, "no JSON from the cflib session (exit %d)\nstderr:\n%s" % (proc.returncode, proc.stderr[-3000:])
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True)
+    SESSIONS.append(proc.pid)
+    try:
+        stdout, stderr = proc.communicate(timeout=SESSION_TIMEOUT_S + 15)
+    finally:
+        SESSIONS.remove(proc.pid)
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    lines = [line for line in stdout.splitlines() if line.startswith("{")]
+    assert lines, "no JSON from the cflib session (exit %d)\nstderr:\n%s" % (proc.returncode, stderr[-3000:])
     result = json.loads(lines[-1])
     assert proc.returncode == 0 and result["error"] is None, \
-        "cflib session failed: %s\nstderr:\n%s" % (result["error"], proc.stderr[-3000:])
+        "cflib session failed: %s\nstderr:\n%s" % (result["error"], stderr[-3000:])
     return result
 
 

@@ -173,15 +173,17 @@ def sibling_pids() -> List[int]:
 class HostDelay:
     """The mean run-queue wait per time slice [s] of the host's processes between two ``sample`` calls.
 
-    ``pids()`` names the host's processes (``sibling_pids``; re-read every SIBLINGS_REFRESH_S of
-    ``now``); only processes seen in both samples count, so one that starts or ends adds nothing.
+    ``pids()`` names the host's processes (``sibling_pids``; re-read every ``refresh_s`` of ``now``,
+    SIBLINGS_REFRESH_S by default); only processes seen in both samples count, so one that starts or
+    ends adds nothing.
     None when there is nothing to judge (no host process, or none ran).
     """
 
     def __init__(self, pids: Callable[[], List[int]] = sibling_pids,
                  read: Callable[[Iterable[int]], Schedstat] = read_schedstat,
-                 now: Callable[[], float] = time.monotonic) -> None:
+                 now: Callable[[], float] = time.monotonic, refresh_s: float = SIBLINGS_REFRESH_S) -> None:
         self._pids, self._read, self._now = pids, read, now
+        self._refresh_s = refresh_s
         self._known: List[int] = []
         self._known_at = -math.inf
         self._last: Schedstat = {}
@@ -189,7 +191,7 @@ class HostDelay:
 
     def sample(self) -> Optional[float]:
         t = self._now()
-        if t - self._known_at >= SIBLINGS_REFRESH_S:
+        if t - self._known_at >= self._refresh_s:
             self._known, self._known_at = list(self._pids()), t
         stats = self._read(self._known)
         wait = slices = 0
