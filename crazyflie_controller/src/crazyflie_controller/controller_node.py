@@ -201,6 +201,7 @@ class ControllerNode:
         tf = newest_transform_of(msg.transforms, self.frame)
         if tf is None or rospy.get_time() - self._last_step < ON_POSE_MIN_GAP / self.frequency:
             return
+        pose: Optional[PoseSample]
         if tf.header.frame_id.strip("/") == self.world_frame:
             pose = self._pose_of(tf)
         else:                # our frame hangs below another one: let the buffer chain it to the world

@@ -212,9 +212,14 @@ class RosCrazyflie(WorkerListener):
         self._subscribers, self._services = [], []
 
     # -- ROS callbacks ------------------------------------------------------------------------------
+    def _attached(self) -> CrazyflieWorker:
+        """The worker, for the callbacks ``attach`` subscribes after setting it."""
+        assert self.worker is not None, "a callback before attach()"
+        return self.worker
+
     def _on_cmd_vel(self, msg: Twist) -> None:
         try:
-            setpoint = self.worker.setpoint_for_cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z)
+            setpoint = self._attached().setpoint_for_cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z)
         except ValueError as e:
             text = self._refusals.say(self.config.uri, "cmd_vel", str(e))     # once a second per field and rule
             if text is not None:
@@ -224,19 +229,19 @@ class RosCrazyflie(WorkerListener):
             text = self._refusals.say(self.config.uri, "cmd_vel held", "; ".join(setpoint.notes))
             if text is not None:
                 rospy.logwarn("%s: cmd_vel held to the firmware's limits: %s" % (self.config.uri, text))
-        if not self.worker.set_setpoint(setpoint) and not self._said_ignored:
+        if not self._attached().set_setpoint(setpoint) and not self._said_ignored:
             self._said_ignored = True       # once: the status topic keeps saying it
             rospy.logwarn("%s: cmd_vel ignored after emergency (the Crazyflie stays stopped until a reboot: "
                           "switch it off and on, then remove and add it again to fly)" % self.config.uri)
 
     def _on_emergency(self, _req) -> EmptyResponse:
-        self.worker.emergency()
+        self._attached().emergency()
         return EmptyResponse()
 
     def _on_update_params(self, req) -> UpdateParamsResponse:
         # names checked before the ROS parameter server (XML-RPC) sees them, as the swarm's /update_params does
         values, errors = param_values(req.params, (self.ns,), ros_param_or_none)
-        written, write_errors = self.worker.update_params(values)
+        written, write_errors = self._attached().update_params(values)
         errors.extend(write_errors)
         for name in written:
             rospy.loginfo("%s: parameter %s updated", self.config.uri, name)
@@ -395,11 +400,11 @@ class CrazyflieServer:
         ``~budget_pose_rate``) and the broadcasts added; a dongle that will be short is logged as a warning
         (``warn``)."""
         with self._lock:
-            served = [(key, ros) for key, ros in self._ros.items() if ros.worker is not None]
+            served = [(key, ros, ros.worker) for key, ros in self._ros.items() if ros.worker is not None]
             plan = list(self._broadcast_plan)
         demands = [radio_budget.CrazyflieDemand(ros.config.tf_prefix or key, parse_uri(key), self.budget_setpoint_rate,
-                                                self.budget_pose_rate, ros.worker.log_packet_rate)
-                   for key, ros in served]
+                                                self.budget_pose_rate, worker.log_packet_rate)
+                   for key, ros, worker in served]
         budget = radio_budget.check_budget(demands, plan)
         self._budget = budget
         for b in budget:

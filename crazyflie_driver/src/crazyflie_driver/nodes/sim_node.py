@@ -294,7 +294,7 @@ def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behi
                              % (realtime_factor, pacing.target))
     else:
         level, message = 0, "keeps real time (%.2fx)" % realtime_factor
-    values = (("real-time factor", "%.3f" % realtime_factor), ("speed", "%.3f" % speed),
+    values: Tuple[Tuple[str, str], ...] = (("real-time factor", "%.3f" % realtime_factor), ("speed", "%.3f" % speed),
               ("speed mode", pacing.mode), ("target speed", "%.3f" % pacing.target),
               ("vehicles", str(vehicles)), ("ticks behind", str(ticks_behind)), ("overruns", str(overruns)),
               ("world time [s]", "%.3f" % world_time))

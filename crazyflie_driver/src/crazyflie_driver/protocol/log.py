@@ -196,6 +196,9 @@ class LogClient(TocPortClient):
         items = []
         for entry in block.variables:
             code = ctype(entry.ctype).log_code
+            if code is None:
+                raise LogConfigError("%s is a %s, which the log cannot carry: log another variable"
+                                     % (entry.name, entry.ctype))
             type_byte = (code << 4) | code
             if v2:
                 items.append(struct.pack("<BH", type_byte, entry.ident))

@@ -60,7 +60,7 @@ class RadioAck(NamedTuple):
 class RadioInfo(NamedTuple):
     """A Crazyradio on the bus, as ``list_radios`` reports it."""
 
-    index: int
+    index: int   # type: ignore[assignment]  # the dongle's number: shadows tuple.index, long public
     serial: Optional[str]   # None when the dongle could not be opened (permissions)
     version: float
 

@@ -280,7 +280,7 @@ class RadioLink:
                 sent0, acked0 = self.stats.sent, self.stats.acked
                 first_packet = self.downlink_packets
                 seen, last_data = first_packet, start
-                acked = self.send(packet)
+                acked: int = self.send(packet)   # then the count acked since
                 next_resend = start + resend_interval
                 while waiter.result is None:
                     if waiter.error is not None:

@@ -375,9 +375,9 @@ class SafetyMonitor:
             elif self.reaction == Reaction.LANDING:
                 # past refusal() (a broadcast, or sent while the reaction began): the firmware flies that
                 # command now, so the landing starts again from here; it is never ended in the air
-                self._plan_landing(now)
+                _, duration = self._plan_landing(now)
                 self._event(LOG.error, "%s: a %s replaced the landing in the firmware: landing again in %.1f s"
-                            % (self.reason, what, self._pending_land))
+                            % (self.reason, what, duration))
             elif self.reaction not in (Reaction.HOLD, Reaction.DESCENT):
                 self._land_until = 0.0
 

@@ -249,14 +249,15 @@ class RemoteMedium:
         """One request/response; reconnects once if the connection dropped since the last call."""
         with self._lock:
             for attempt in (0, 1):
-                fresh = self._conn is None
-                if fresh:
-                    self._conn = self._connect()
+                conn = self._conn
+                fresh = conn is None
+                if conn is None:
+                    conn = self._conn = self._connect()
                 try:
-                    self._conn.send(op, body)
-                    return self._conn.receive()
+                    conn.send(op, body)
+                    return conn.receive()
                 except (OSError, EOFError) as e:
-                    self._conn.close()
+                    conn.close()
                     self._conn = None
                     if fresh or attempt:
                         raise WorldNotRunning("simulated world at %s went away (%s)" % (self.address, e)) from None

@@ -152,7 +152,7 @@ def read_schedstat(pids: Iterable[int]) -> Schedstat:
 def sibling_pids() -> List[int]:
     """The processes with this one's parent, but not this one: under roslaunch, the launch's other nodes."""
     me, parent = os.getpid(), os.getppid()
-    out = []
+    out: List[int] = []
     try:
         names = os.listdir("/proc")
     except OSError:
