@@ -243,9 +243,9 @@ class Row:
     key: str
     title: str
     path: str                              # "chapter", "onboard" or KEEPALIVE
-    inject: Callable[["Bench"], None]
+    inject: Callable[[Bench], None]
     observe_s: float
-    cleanup: Callable[["Bench"], None] = lambda b: None
+    cleanup: Callable[[Bench], None] = lambda b: None
     result: Dict[str, Any] = field(default_factory=dict)
 
 
@@ -852,7 +852,7 @@ def main() -> int:
     core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     commit = subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
-                            universal_newlines=True).stdout.strip()[:100]
+                            text=True).stdout.strip()[:100]
     t_start = time.monotonic()
     results: List[Tuple[Row, Dict[str, Any]]] = []
     bench = None

@@ -93,7 +93,7 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
         try:
             gains[field] = PidGains.from_params(pids[axis], axis)
         except ValueError as e:
-            raise ConfigError("~PIDs/%s" % e)
+            raise ConfigError("~PIDs/%s" % e) from e
     extra = {}
     for name, field in EXTRA_PARAMS.items():
         if name in params:
@@ -105,12 +105,12 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
                 try:
                     value = float(value)
                 except (TypeError, ValueError):
-                    raise ConfigError("~%s must be a number, got %r" % (name, value))
+                    raise ConfigError("~%s must be a number, got %r" % (name, value)) from None
             extra[field] = value
     try:
         return ControllerConfig(gains["x"], gains["y"], gains["z"], gains["yaw"], **extra)
     except ValueError as e:
-        raise ConfigError(str(e))
+        raise ConfigError(str(e)) from e
 
 
 def emergency_of(values) -> Optional[bool]:

@@ -104,7 +104,7 @@ class PoseSample(NamedTuple):
 
     @classmethod
     def from_quaternion(cls, stamp: float, position: Tuple[float, float, float],
-                        quaternion: Tuple[float, float, float, float]) -> "PoseSample":
+                        quaternion: Tuple[float, float, float, float]) -> PoseSample:
         """``quaternion`` is (x, y, z, w), as in ROS messages."""
         return cls(stamp, position[0], position[1], position[2], yaw_from_quaternion(*quaternion))
 
@@ -188,7 +188,7 @@ class ControllerConfig:
             raise ValueError("lost_pose_thrust_drop must be >= 0, got %r" % (self.lost_pose_thrust_drop,))
 
     @classmethod
-    def original(cls, x: PidGains, y: PidGains, z: PidGains, yaw: PidGains, **kw) -> "ControllerConfig":
+    def original(cls, x: PidGains, y: PidGains, z: PidGains, yaw: PidGains, **kw) -> ControllerConfig:
         """The original controller's take-off, goal-change, derivative and thrust behaviour (for comparison)."""
         kw.setdefault("takeoff_handover", "original")
         kw.setdefault("derivative", "error")

@@ -50,7 +50,7 @@ class Step:
     def __init__(self, name: str) -> None:
         self.name = name
 
-    def __enter__(self) -> "Step":
+    def __enter__(self) -> Step:
         _active_steps.add(self.name)
         self.t0 = time.monotonic()
         return self

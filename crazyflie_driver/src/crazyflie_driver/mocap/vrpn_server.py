@@ -210,7 +210,7 @@ class VrpnTestServer:
             time.sleep(down_for)
         self.start()
 
-    def __enter__(self) -> "VrpnTestServer":
+    def __enter__(self) -> VrpnTestServer:
         self.start()
         return self
 

@@ -506,7 +506,7 @@ class CrazyflieServer:
             self.registry.canonical_uri(config.uri)      # a malformed URI is refused here
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)
-            raise rospy.ServiceException(str(e))
+            raise rospy.ServiceException(str(e)) from e
         self.add(config)
         return AddCrazyflieResponse()
 
@@ -529,7 +529,7 @@ class CrazyflieServer:
                 namespace(config.tf_prefix) + "/" + name, rospy.get_param("~" + name, default)))
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)
-            raise rospy.ServiceException(str(e))
+            raise rospy.ServiceException(str(e)) from e
         try:
             ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key), late_cause=self.late_cause)
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
@@ -541,7 +541,7 @@ class CrazyflieServer:
                 ros.detach()
             msg = "could not add %s: %s" % (key, e)
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from e
         try:
             ros.attach(worker)
         except Exception as e:      # a name the master refuses: never a Crazyflie without its emergency service
@@ -549,7 +549,7 @@ class CrazyflieServer:
             self.registry.remove(key)
             msg = "could not add %s: its topics or services could not be registered: %s" % (key, e)
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from e
         with self._lock:
             self._ros[key] = ros
             self._gone.pop(key, None)
@@ -571,7 +571,7 @@ class CrazyflieServer:
         except (ValueError, KeyError) as e:
             msg = "could not remove %s: %s" % (req.uri, str(e).strip("'\""))
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from e
         with self._lock:
             ros = self._ros.pop(key, None)
         if ros is not None:
@@ -664,7 +664,7 @@ def main() -> None:
         start_swarm(server)      # only with ~swarm_file
     except Exception as e:       # e.g. no usable USB backend, a bad swarm file
         rospy.logfatal("crazyflie_server cannot start: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     rospy.loginfo("crazyflie_server ready (backend: %s)", os.environ.get("CRAZYFLIE_BACKEND", "usb"))
     rospy.spin()
     server.land_all("shutdown")     # the process ends after this: never while a Crazyflie comes down

@@ -570,7 +570,7 @@ def main() -> None:
         server.start()
     except (SimConfigError, PacingError, ValueError, CrazyflieError) as e:
         rospy.logfatal("crazyflie_sim: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     if clock_pub is not None:
         _publish_clock(world, clock_pub, Clock)
     world.start()
@@ -593,7 +593,7 @@ def main() -> None:
         rospy.logfatal("crazyflie_sim: ~faults: %s", e)
         server.stop()
         world.stop()
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     _advertise_fault_service(server.control)
     stop = threading.Event()
     delivered: List[Any] = []
@@ -616,7 +616,7 @@ def main() -> None:
                            "0 for any)", vrpn_port, e.strerror or e)
             server.stop()
             world.stop()
-            raise SystemExit(1)
+            raise SystemExit(1) from None
         rospy.loginfo("crazyflie_sim: motion capture served as VRPN on 127.0.0.1:%d (trackers %s)", vrpn.port,
                       ", ".join(names))
     if mocap.style != "none":

@@ -339,7 +339,7 @@ class Crazyradio:
             except usb.core.USBError:
                 pass
 
-    def __enter__(self) -> "Crazyradio":
+    def __enter__(self) -> Crazyradio:
         return self
 
     def __exit__(self, *exc) -> None:

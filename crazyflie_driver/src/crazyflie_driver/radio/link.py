@@ -137,7 +137,7 @@ class RadioLink:
         if shared is not None:
             self.manager.release(shared)
 
-    def __enter__(self) -> "RadioLink":
+    def __enter__(self) -> RadioLink:
         self.open()
         return self
 

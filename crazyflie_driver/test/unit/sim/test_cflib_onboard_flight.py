@@ -53,7 +53,7 @@ def fly(python, server, uri, sim_uri, *args):
                PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--sim-uri", sim_uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
-    proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True,
                           timeout=SESSION_TIMEOUT_S + 15)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
     assert lines, "no JSON from the cflib session (exit %d)\nstderr:\n%s" % (proc.returncode, proc.stderr[-3000:])

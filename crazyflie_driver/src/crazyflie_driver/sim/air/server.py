@@ -382,7 +382,8 @@ class WorldServer:
         except OSError as e:
             sock.close()
             raise CrazyflieError("cannot serve the simulated world on %s:%d: %s (is another crazyflie_world_server "
-                                 "running? choose another with --address)" % (self.host, self.port, e.strerror or e))
+                                 "running? choose another with --address)"
+                                 % (self.host, self.port, e.strerror or e)) from e
         sock.listen(16)
         sock.settimeout(0.2)
         self._listener = sock

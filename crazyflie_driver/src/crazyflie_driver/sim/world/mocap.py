@@ -114,7 +114,7 @@ class MocapModel:
         self.frames_superseded = 0      # in flight when a lower latency let a newer frame overtake them
 
     # --- driving -----------------------------------------------------------------------------
-    def attach(self) -> "MocapModel":
+    def attach(self) -> MocapModel:
         """Run from the world's ticks: a capture every 1/rate s of world time, each delivered ``latency`` later."""
         if not self._attached:
             period = 1.0 / self.rate

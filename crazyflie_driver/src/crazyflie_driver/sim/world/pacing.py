@@ -244,7 +244,7 @@ class AutoPacer:
             except Exception:      # pacing must never take the world down
                 _log.exception("world pacing failed; the world keeps speed %.2f", self.world.speed)
 
-    def start(self) -> "AutoPacer":
+    def start(self) -> AutoPacer:
         self.host.sample()                       # the first reading: the next one is measured from it
         self._thread = threading.Thread(target=self._run, name="world-pacing", daemon=True)
         self._thread.start()

@@ -41,7 +41,7 @@ _ONES4 = np.ones(4)
 class Vehicle:
     """One simulated Crazyflie as the firmware side sees it. Thread safe."""
 
-    def __init__(self, world: "World", name: str, firmware: str, params: VehicleParams) -> None:
+    def __init__(self, world: World, name: str, firmware: str, params: VehicleParams) -> None:
         self.name = name
         self.firmware = firmware
         self.params = params
