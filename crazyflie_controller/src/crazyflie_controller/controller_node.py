@@ -1,6 +1,6 @@
 """rospy node ``controller``: tf pose + ``goal`` in, ``cmd_vel`` out, ``takeoff`` / ``land`` services.
 
-Thin glue around :class:``PositionController``. The pose is the tf transform ``worldFrame → frame``;
+Thin glue around :class:`PositionController`. The pose is the tf transform ``worldFrame → frame``;
 its stamp is the pose's age, so a motion-capture stream that stops is noticed (the original used
 the latest transform whatever its age). The state and the safety status ("Automatic: ok",
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).

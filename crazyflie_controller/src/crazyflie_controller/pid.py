@@ -69,7 +69,7 @@ def clamp(value: float, low: float, high: float) -> float:
 
 
 class PID:
-    """A PID loop; call :meth:``update`` once per control cycle with a timestamp in seconds."""
+    """A PID loop; call :meth:`update` once per control cycle with a timestamp in seconds."""
 
     def __init__(self, gains: PidGains, derivative: str = "measurement", name: str = "") -> None:
         if derivative not in DERIVATIVE_MODES:

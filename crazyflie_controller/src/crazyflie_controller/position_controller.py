@@ -33,7 +33,7 @@ Differences from the original, each a fix:
   estimate and is then set to the hover thrust fitted over the next ``hover_refine_time`` s
   (``hover_thrust``), so the chapter's slow Z mode is not left ringing after the take-off.
 
-:meth:``ControllerConfig.original`` (takeoff_handover "original", derivative "error", goal_change
+:meth:`ControllerConfig.original` (takeoff_handover "original", derivative "error", goal_change
 "step", z_integration "always", no tilt compensation, hover_refine_time 0) reproduces the original.
 
 Sign conventions of the output follow crazyflie_ros' cmd_vel: linear.x = pitch command [deg]
@@ -207,7 +207,7 @@ def _no_log(level: str, message: str) -> None:
 
 
 class PositionController:
-    """Feed it :meth:``update`` at the control rate; :meth:``takeoff``, :meth:``land``, :meth:``set_goal`` any time."""
+    """Feed it :meth:`update` at the control rate; :meth:`takeoff`, :meth:`land`, :meth:`set_goal` any time."""
 
     def __init__(self, config: ControllerConfig, log: Logger = _no_log) -> None:
         self.config = config

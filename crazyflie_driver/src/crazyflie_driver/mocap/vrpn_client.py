@@ -75,7 +75,7 @@ class SessionStats:
 class VrpnSession:
     """Protocol state of one connection (id maps, stream buffer). No sockets: feed it bytes.
 
-    Callbacks run in the thread that calls :meth:``feed``; an exception in a callback is logged
+    Callbacks run in the thread that calls :meth:`feed`; an exception in a callback is logged
     and counted, never propagated. ``trackers``: only these sender names are reported (None:
     every sender except "VRPN Control").
     """

@@ -101,7 +101,7 @@ class VrpnTestServer:
     """Streams tracker poses to every connected client. Poses are Z-up unless ``y_up``.
 
     ``pose_fn(name, t)`` gives (position, quaternion xyzw) at Unix time t; default: the pose set
-    with :meth:``set_pose``, else tracker i resting at (i, 0, 0) with identity orientation.
+    with :meth:`set_pose`, else tracker i resting at (i, 0, 0) with identity orientation.
     """
 
     def __init__(self, trackers: Iterable[str] = ("cf1",), host: str = "127.0.0.1", port: int = 0,
@@ -175,7 +175,7 @@ class VrpnTestServer:
 
     # -- life cycle ------------------------------------------------------------------------------
     def start(self) -> Tuple[str, int]:
-        """Listen (on the same port after a :meth:``stop``) and start streaming; returns (host, port)."""
+        """Listen (on the same port after a :meth:`stop`) and start streaming; returns (host, port)."""
         if self._listener is not None:
             return self.host, self.port
         ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)

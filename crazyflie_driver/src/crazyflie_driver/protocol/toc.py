@@ -3,7 +3,7 @@
 Both ports describe their variables the same way: an info request gives the
 item count and a CRC, then each item is asked for by id, one request in
 flight. Protocol V1 (firmware before protocol version 4) uses 8-bit ids and
-commands 0/1; V2 uses 16-bit ids and commands 2/3. :class:``TocPortClient`` is
+commands 0/1; V2 uses 16-bit ids and commands 2/3. :class:`TocPortClient` is
 the part the parameter and log clients share: a port's TOC, fetched on demand.
 """
 from __future__ import annotations

@@ -1,18 +1,18 @@
 """One Crazyflie served by one thread: the work behind ``crazyflie_server``, without ROS.
 
-A :class:``CrazyflieWorker`` owns one :class:``~crazyflie_driver.protocol.crazyflie.Crazyflie`` (or any
+A :class:`CrazyflieWorker` owns one :class:`~crazyflie_driver.protocol.crazyflie.Crazyflie` (or any
 object with the same methods) and is the only thread that streams to it:
 
 * a new setpoint wakes the thread at once and is sent in the next radio round trip; only the
   latest setpoint counts (there is no queue that could add delay);
 * when no setpoint comes, null packets keep the link alive (at least every ``keepalive_period``)
   and fetch the log data the Crazyflie has queued, one packet per poll, paced by
-  :class:``~crazyflie_driver.server.poll_pacer.PollPacer``;
+  :class:`~crazyflie_driver.server.poll_pacer.PollPacer`;
 * link quality (acked / sent over a window, from the link's ``LinkStatistics``) is watched per
   Crazyflie, a listener is told when it drops below ``LINK_QUALITY_WARNING``;
 * a Crazyflie that stops answering is reported as lost and retried slowly, without holding the
   dongle for the others; when it answers again its log blocks are set up again;
-* :meth:``CrazyflieWorker.emergency`` works from any thread, at once, and is idempotent: no
+* :meth:`CrazyflieWorker.emergency` works from any thread, at once, and is idempotent: no
   setpoint is sent after it returns, the e-stop packet goes out, then only zero-thrust
   setpoints, until the worker is removed;
 * an unexpected error in the loop never ends the thread silently: it is logged once with its
@@ -20,7 +20,7 @@ object with the same methods) and is the only thread that streams to it:
   then stops the Crazyflie unless new setpoints come), the listener is told, and the loop restarts;
   after ``MAX_RESTARTS`` errors within ``RESTART_WINDOW`` the worker gives up and closes the link.
 
-The ROS side (``nodes/crazyflie_server.py``) subclasses :class:``WorkerListener`` to turn the
+The ROS side (``nodes/crazyflie_server.py``) subclasses :class:`WorkerListener` to turn the
 callbacks into messages; everything here is testable with a fake Crazyflie object.
 """
 from __future__ import annotations
@@ -210,7 +210,7 @@ class CrazyflieWorker:
         return self._emergency
 
     def start(self) -> None:
-        """Start the thread; the connect sequence runs in it. See :meth:``wait_ready``."""
+        """Start the thread; the connect sequence runs in it. See :meth:`wait_ready`."""
         if self._thread is not None:
             raise RuntimeError("worker for %s already started" % self.uri)
         self._thread = threading.Thread(target=self._run, name="crazyflie %s" % self.uri, daemon=True)

@@ -3,7 +3,7 @@
 ``LocalMedium`` lives in the process that owns the world: a registry of ``SimulatedCrazyflie`` by
 (channel, datarate, address), per-dongle fault injection (packet loss and ack loss in percent of
 round trips, added latency, unplug) and a per-Crazyflie RSSI model. ``RemoteMedium`` is the same
-interface for another process: it forwards every call to a world server (``sim.server``) over a
+interface for another process: it forwards every call to a world server (``sim.air.server``) over a
 loopback TCP connection with a small binary framing (see ``sim.air.server_framing``).
 """
 from __future__ import annotations

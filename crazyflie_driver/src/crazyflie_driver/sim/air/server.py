@@ -1,6 +1,6 @@
 """The world server: one process owning the simulated world that every tool and node shares.
 
-``WorldServer`` owns a world (``sim.world.World``), the ``LocalMedium`` and one ``SimulatedCrazyflie`` per
+``WorldServer`` owns a world (``sim.world.world.World``), the ``LocalMedium`` and one ``SimulatedCrazyflie`` per
 vehicle; it serves ``RemoteMedium`` clients on loopback TCP only, without authentication (one thread per
 connection, freed when the client hangs up), runs the
 firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
