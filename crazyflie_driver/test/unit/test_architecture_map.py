@@ -23,7 +23,7 @@ def modules_in_tree() -> Set[str]:
 
 def modules_in_map(text: str) -> Set[str]:
     """The first-column names of the tables under "## Module map". A name starting with a dot is a
-    sibling of the name before it in the same cell (`protocol.param`, `.log` -> protocol.log)."""
+    sibling of the name before it in the same cell (``protocol.param``, ``.log`` -> ``protocol.log``)."""
     section = text.split("\n## Module map", 1)[1].split("\n## ", 1)[0]
     listed: Set[str] = set()
     for line in section.splitlines():
