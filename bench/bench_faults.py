@@ -243,9 +243,9 @@ class Row:
     key: str
     title: str
     path: str                              # "chapter", "onboard" or KEEPALIVE
-    inject: Callable[["Bench"], None]
+    inject: Callable[[Bench], None]
     observe_s: float
-    cleanup: Callable[["Bench"], None] = lambda b: None
+    cleanup: Callable[[Bench], None] = lambda b: None
     result: Dict[str, Any] = field(default_factory=dict)
 
 
@@ -730,7 +730,7 @@ README_TABLE = "README table:"
 def previous_table(path: str) -> Tuple[List[str], Dict[str, Tuple[List[str], str]]]:
     """An earlier table file's head lines and its rows by key: (detail lines, README line); empty if none.
 
-    Rows are found by their title and path, as :func:``table`` and :func:``markdown`` write them."""
+    Rows are found by their title and path, as :func:`table` and :func:`markdown` write them."""
     try:
         with open(path) as f:
             text = f.read()
@@ -852,7 +852,7 @@ def main() -> int:
     core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     commit = subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
-                            universal_newlines=True).stdout.strip()[:100]
+                            text=True).stdout.strip()[:100]
     t_start = time.monotonic()
     results: List[Tuple[Row, Dict[str, Any]]] = []
     bench = None

@@ -198,7 +198,7 @@ def run_child(script: str, args: Sequence[str], timeout: float) -> dict:
     return result
 
 
-def ros_graph_with_sim_node(launch_text: str, measure: Callable[[dict, "subprocess.Popen"], None], out: str,
+def ros_graph_with_sim_node(launch_text: str, measure: Callable[[dict, subprocess.Popen], None], out: str,
                             prefix: str = "cf_bench_", env: Optional[Dict[str, str]] = None) -> None:
     """In the child: roslaunch ``launch_text`` on a free master port, then the ``crazyflie_sim`` node in
     this process (its parameters in the launch text, under ``crazyflie_sim/``), ``measure(result,

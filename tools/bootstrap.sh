@@ -73,6 +73,14 @@ if ! "$VENV/bin/ruff" --version 2>/dev/null | grep -qx "ruff $RUFF_VERSION"; the
   "$VENV/bin/pip" install -q --disable-pip-version-check "ruff==$RUFF_VERSION"
 fi
 
+# The type checker run by tools/run_tests.sh (configuration in mypy.ini), pinned likewise: 1.16.1 is
+# the last mypy that checks against Python 3.8 (Noetic's); later releases refuse python_version 3.8.
+MYPY_VERSION=1.16.1
+if ! "$VENV/bin/mypy" --version 2>/dev/null | grep -q "^mypy $MYPY_VERSION "; then
+  say "installing mypy $MYPY_VERSION into the venv"
+  "$VENV/bin/pip" install -q --disable-pip-version-check "mypy==$MYPY_VERSION"
+fi
+
 # cflib (Bitcraze's library) is an independent peer for the tests; it needs Python >= 3.10.
 if [ "$WITH_CFLIB" = 1 ]; then
   CFVENV="$WS/cflib-venv"

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of the stack on a fresh machine: installs what is missing, builds the
-# workspace, then runs the linter, the pytest unit tests and every rostest launch file
+# workspace, then runs the linter, the type checker, the pytest unit tests and every rostest launch file
 # (simulated Crazyflies, no hardware). Ends with one summary line "N passed, N failed"
-# (the lint counts as one check). Extra arguments go to pytest.
+# (the lint counts as one check, the type check another). Extra arguments go to pytest.
 #
 # pytest and the rostests run side by side, CRAZYFLIE_TEST_JOBS (default 3) at a time, the longest
 # first (expected seconds in tools/test_durations.txt), so the run ends on short tests. Most
@@ -39,6 +39,8 @@ export CRAZYFLIE_TOC_CACHE="$RESULTS/toc_cache"     # written atomically: concur
 
 echo "== lint (ruff, settings in ruff.toml) =="
 if "$REPO/.ws/venv/bin/ruff" check --no-cache "$REPO"; then lint_pass=1; lint_fail=0; else lint_pass=0; lint_fail=1; fi
+echo "== types (mypy, settings in mypy.ini) =="
+if (cd "$REPO" && "$REPO/.ws/venv/bin/mypy" ); then types_pass=1; types_fail=0; else types_pass=0; types_fail=1; fi
 
 # The jobs: "pytest" and every rostest as <pkg>/<file>.test.
 rostests=()
@@ -191,7 +193,7 @@ if [ "$pytest_rc" -ne 0 ] && [ "$py_fail" -eq 0 ]; then py_fail=1; fi
 echo "== summary =="
 echo "tests took $(( $(date +%s) - t0 )) s (up to $most_running at a time; starts held back $((held_passes / 2)) s" \
      "for want of $IDLE_CORES idle cores); load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
-echo "lint: $( [ "$lint_fail" -eq 0 ] && echo clean || echo FAILED ); pytest: $py_pass passed, $py_fail failed;" \
+echo "lint: $( [ "$lint_fail" -eq 0 ] && echo clean || echo FAILED ); types: $( [ "$types_fail" -eq 0 ] && echo clean || echo FAILED ); pytest: $py_pass passed, $py_fail failed;" \
      "rostest: $ros_pass passed, $ros_fail failed${failed:+ (failed:$failed)}"
-echo "$((lint_pass + py_pass + ros_pass)) passed, $((lint_fail + py_fail + ros_fail)) failed"
-[ $((lint_fail + py_fail + ros_fail)) -eq 0 ]
+echo "$((lint_pass + types_pass + py_pass + ros_pass)) passed, $((lint_fail + types_fail + py_fail + ros_fail)) failed"
+[ $((lint_fail + types_fail + py_fail + ros_fail)) -eq 0 ]

@@ -1,6 +1,6 @@
 """rospy node ``controller``: tf pose + ``goal`` in, ``cmd_vel`` out, ``takeoff`` / ``land`` services.
 
-Thin glue around :class:``PositionController``. The pose is the tf transform ``worldFrame → frame``;
+Thin glue around :class:`PositionController`. The pose is the tf transform ``worldFrame → frame``;
 its stamp is the pose's age, so a motion-capture stream that stops is noticed (the original used
 the latest transform whatever its age). The state and the safety status ("Automatic: ok",
 "Automatic: pose stale: holding level", ...) are published on ``~state`` (latched, on change).
@@ -93,7 +93,7 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
         try:
             gains[field] = PidGains.from_params(pids[axis], axis)
         except ValueError as e:
-            raise ConfigError("~PIDs/%s" % e)
+            raise ConfigError("~PIDs/%s" % e) from e
     extra = {}
     for name, field in EXTRA_PARAMS.items():
         if name in params:
@@ -105,12 +105,12 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
                 try:
                     value = float(value)
                 except (TypeError, ValueError):
-                    raise ConfigError("~%s must be a number, got %r" % (name, value))
+                    raise ConfigError("~%s must be a number, got %r" % (name, value)) from None
             extra[field] = value
     try:
         return ControllerConfig(gains["x"], gains["y"], gains["z"], gains["yaw"], **extra)
     except ValueError as e:
-        raise ConfigError(str(e))
+        raise ConfigError(str(e)) from e
 
 
 def emergency_of(values) -> Optional[bool]:
@@ -201,6 +201,7 @@ class ControllerNode:
         tf = newest_transform_of(msg.transforms, self.frame)
         if tf is None or rospy.get_time() - self._last_step < ON_POSE_MIN_GAP / self.frequency:
             return
+        pose: Optional[PoseSample]
         if tf.header.frame_id.strip("/") == self.world_frame:
             pose = self._pose_of(tf)
         else:                # our frame hangs below another one: let the buffer chain it to the world

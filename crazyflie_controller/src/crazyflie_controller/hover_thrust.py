@@ -35,7 +35,7 @@ def _solve3(a: List[List[float]], b: List[float]) -> Optional[List[float]]:
 
 
 class HoverThrustFit:
-    """Collects commanded thrusts and measured heights from ``start``; :meth:``estimate`` fits H."""
+    """Collects commanded thrusts and measured heights from ``start``; :meth:`estimate` fits H."""
 
     def __init__(self, start: float, gain: float, lag: float) -> None:
         if not gain > 0:

@@ -45,7 +45,7 @@ class PidGains:
                              % (self.integrator_min, self.integrator_max))
 
     @classmethod
-    def from_params(cls, params: dict, axis: str = "") -> "PidGains":
+    def from_params(cls, params: dict, axis: str = "") -> PidGains:
         """Builds gains from a ``{kp, kd, ki, minOutput, maxOutput, integratorMin, integratorMax}`` dict."""
         names = {"kp": "kp", "kd": "kd", "ki": "ki", "min_output": "minOutput", "max_output": "maxOutput",
                  "integrator_min": "integratorMin", "integrator_max": "integratorMax"}
@@ -56,11 +56,12 @@ class PidGains:
             try:
                 values[field_name] = float(params[key])
             except (TypeError, ValueError):
-                raise ValueError("PID %s: parameter %s must be a number, got %r" % (axis or "?", key, params[key]))
+                raise ValueError("PID %s: parameter %s must be a number, got %r"
+                                 % (axis or "?", key, params[key])) from None
         try:
             return cls(**values)
         except ValueError as e:
-            raise ValueError("PID %s: %s" % (axis or "?", e))
+            raise ValueError("PID %s: %s" % (axis or "?", e)) from e
 
 
 def clamp(value: float, low: float, high: float) -> float:
@@ -68,7 +69,7 @@ def clamp(value: float, low: float, high: float) -> float:
 
 
 class PID:
-    """A PID loop; call :meth:``update`` once per control cycle with a timestamp in seconds."""
+    """A PID loop; call :meth:`update` once per control cycle with a timestamp in seconds."""
 
     def __init__(self, gains: PidGains, derivative: str = "measurement", name: str = "") -> None:
         if derivative not in DERIVATIVE_MODES:

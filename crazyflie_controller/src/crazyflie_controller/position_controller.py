@@ -33,7 +33,7 @@ Differences from the original, each a fix:
   estimate and is then set to the hover thrust fitted over the next ``hover_refine_time`` s
   (``hover_thrust``), so the chapter's slow Z mode is not left ringing after the take-off.
 
-:meth:``ControllerConfig.original`` (takeoff_handover "original", derivative "error", goal_change
+:meth:`ControllerConfig.original` (takeoff_handover "original", derivative "error", goal_change
 "step", z_integration "always", no tilt compensation, hover_refine_time 0) reproduces the original.
 
 Sign conventions of the output follow crazyflie_ros' cmd_vel: linear.x = pitch command [deg]
@@ -104,7 +104,7 @@ class PoseSample(NamedTuple):
 
     @classmethod
     def from_quaternion(cls, stamp: float, position: Tuple[float, float, float],
-                        quaternion: Tuple[float, float, float, float]) -> "PoseSample":
+                        quaternion: Tuple[float, float, float, float]) -> PoseSample:
         """``quaternion`` is (x, y, z, w), as in ROS messages."""
         return cls(stamp, position[0], position[1], position[2], yaw_from_quaternion(*quaternion))
 
@@ -188,7 +188,7 @@ class ControllerConfig:
             raise ValueError("lost_pose_thrust_drop must be >= 0, got %r" % (self.lost_pose_thrust_drop,))
 
     @classmethod
-    def original(cls, x: PidGains, y: PidGains, z: PidGains, yaw: PidGains, **kw) -> "ControllerConfig":
+    def original(cls, x: PidGains, y: PidGains, z: PidGains, yaw: PidGains, **kw) -> ControllerConfig:
         """The original controller's take-off, goal-change, derivative and thrust behaviour (for comparison)."""
         kw.setdefault("takeoff_handover", "original")
         kw.setdefault("derivative", "error")
@@ -207,7 +207,7 @@ def _no_log(level: str, message: str) -> None:
 
 
 class PositionController:
-    """Feed it :meth:``update`` at the control rate; :meth:``takeoff``, :meth:``land``, :meth:``set_goal`` any time."""
+    """Feed it :meth:`update` at the control rate; :meth:`takeoff`, :meth:`land`, :meth:`set_goal` any time."""
 
     def __init__(self, config: ControllerConfig, log: Logger = _no_log) -> None:
         self.config = config
@@ -261,7 +261,7 @@ class PositionController:
         if not self._fresh(now):
             self._log("error", "takeoff refused: no pose newer than %.2f s" % self.config.pose_timeout)
             return False
-        self.start_z = self._pose.z
+        self.start_z = self._seen_pose().z
         self.thrust = 0.0
         self.liftoff_thrust = self.preload_thrust = self.refined_thrust = None
         self._hover_fit = None
@@ -317,7 +317,7 @@ class PositionController:
             return self._emit(self._stale_action(now, self._stale_reason(now)))
         if self._frozen():
             return self._emit(self._stale_action(now, "pose frozen: identical for %.2f s (limit %.2f s)" % (
-                self._pose.stamp - self._values_since, self.config.frozen_pose_timeout)))
+                self._seen_pose().stamp - self._values_since_frozen(), self.config.frozen_pose_timeout)))
         if self._stale_since is not None:
             self._recover(now)
             if self.state == State.IDLE:
@@ -374,6 +374,15 @@ class PositionController:
         self._velocity = ((pose.x - prev.x) / gap, (pose.y - prev.y) / gap, (pose.z - prev.z) / gap,
                           wrap_angle(pose.yaw - prev.yaw) / gap)
 
+    def _seen_pose(self) -> PoseSample:
+        """The newest pose, for the states that are entered only once a fresh pose was seen."""
+        assert self._pose is not None, "no pose seen yet"
+        return self._pose
+
+    def _values_since_frozen(self) -> float:
+        assert self._values_since is not None, "pose not frozen"
+        return self._values_since
+
     def _fresh(self, now: float) -> bool:
         return self._pose is not None and now - self._pose.stamp <= self.config.pose_timeout
 
@@ -390,7 +399,7 @@ class PositionController:
         return "pose is %.2f s old (limit %.2f s)" % (age, self.config.pose_timeout)
 
     def _lifted_off(self) -> bool:
-        return (self._pose.z > self.start_z + self.config.takeoff_height
+        return (self._seen_pose().z > self.start_z + self.config.takeoff_height
                 or self.thrust > self.config.takeoff_max_thrust)
 
     def _handover(self, now: float) -> None:
@@ -407,7 +416,7 @@ class PositionController:
         self._setpoint = None   # the first closed-loop cycle aims at the ramp or, without one, the goal
         self.pids["z"].set_i_term(self.preload_thrust)
         if self.goal is None:
-            p = self._pose
+            p = self._seen_pose()
             self.goal = Goal(p.x, p.y, p.z, p.yaw)
             self._log("warn", "no goal received: holding the lift-off position")
         self._log("info", "lift-off at thrust %.0f, z integrator preloaded with %.0f"
@@ -435,12 +444,13 @@ class PositionController:
 
     def _target(self) -> Goal:
         goal = self.goal
+        assert goal is not None, "flying without a goal"   # takeoff sets one
         if self.state == State.LANDING:
             goal = Goal(goal.x, goal.y, self.start_z + self.config.landing_height, goal.yaw)
         return goal
 
     def _closed_loop(self, now: float, dt: float) -> Command:
-        pose = self._pose
+        pose = self._seen_pose()
         goal = self._target()
         if self.state == State.LANDING and pose.z <= goal.z:
             self._set_state(State.IDLE, Safety.OK)
@@ -477,7 +487,7 @@ class PositionController:
         z = self.pids["z"].update(setpoint[2], pose.z, now, setpoint_rate[2], vel[2] if vel is not None else None,
                                   integrate=self._z_integrates(setpoint[2] - pose.z, setpoint_rate[2]))
         if self._hover_fit is not None:
-            self._refine_hover_thrust(now, z)
+            self._refine_hover_thrust(self._hover_fit, now, z)
         if self.config.tilt_compensation:
             z = self._tilt_compensated(z, x, y)
         yaw_target = yaw + wrap_angle(goal.yaw - yaw)
@@ -498,8 +508,9 @@ class PositionController:
         if gain is not None:
             self._hover_fit = HoverThrustFit(now, gain, cfg.liftoff_lag)
 
-    def _refine_hover_thrust(self, now: float, thrust: float) -> None:
-        fit = self._hover_fit
+    def _refine_hover_thrust(self, fit: HoverThrustFit, now: float, thrust: float) -> None:
+        preload = self.preload_thrust
+        assert preload is not None, "hover fit without a lift-off estimate"   # _start_hover_fit checks
         fit.record_command(now, thrust)
         if now - fit.start < self.config.hover_refine_time:
             return
@@ -507,14 +518,14 @@ class PositionController:
         estimate = fit.estimate()
         z = self.pids["z"]
         if estimate is None or not z.gains.min_output < estimate < z.gains.max_output \
-                or abs(estimate - self.preload_thrust) > MAX_HOVER_REFINEMENT:
+                or abs(estimate - preload) > MAX_HOVER_REFINEMENT:
             # e.g. the vehicle was pushed or grabbed during the window: keep what the integrator has
             self._log("warn", "hover thrust fit rejected (%s, lift-off estimate %.0f): the z integrator keeps %.0f"
-                      % ("none" if estimate is None else "%.0f" % estimate, self.preload_thrust, z.i_term))
+                      % ("none" if estimate is None else "%.0f" % estimate, preload, z.i_term))
             return
         self.refined_thrust = estimate
         self._log("info", "hover thrust fitted: %.0f (lift-off estimate %.0f, integrator %.0f)"
-                  % (estimate, self.preload_thrust, z.i_term))
+                  % (estimate, preload, z.i_term))
         z.set_i_term(estimate)
 
     def _glides_to(self, target: Tuple[float, float, float]) -> bool:
@@ -530,6 +541,7 @@ class PositionController:
     def _start_goal_glide(self) -> None:
         cfg = self.config
         if self._ramp is None:
+            assert self._setpoint is not None   # _glides_to starts a glide only from a setpoint
             self._ramp = SetpointRamp(self._setpoint, (0.0, 0.0, 0.0), cfg.goal_speed, cfg.goal_accel)
             self._glide_holds_integral = True
         else:   # the take-off glide goes on toward the new goal, at the goal glide's limits, and
@@ -592,7 +604,8 @@ class PositionController:
     def _recover(self, now: float) -> None:
         """A fresh pose after a stale spell: resume, or land closed loop after a blind descent."""
         blind = self._blind_since is not None
-        self._log("warn", "pose fresh again after %.2f s" % (now - self._stale_since))
+        stale_for = now - self._stale_since if self._stale_since is not None else 0.0
+        self._log("warn", "pose fresh again after %.2f s" % stale_for)
         self._stale_since = self._blind_since = None
         for pid in self.pids.values():
             pid.forget_derivative()

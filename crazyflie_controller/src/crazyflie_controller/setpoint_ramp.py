@@ -19,7 +19,7 @@ def _norm(v: Sequence[float]) -> float:
 
 
 class SetpointRamp:
-    """Position/velocity of a moving setpoint; :meth:``step`` advances it toward a goal."""
+    """Position/velocity of a moving setpoint; :meth:`step` advances it toward a goal."""
 
     def __init__(self, position: Sequence[float], velocity: Sequence[float], max_speed: float,
                  max_accel: float) -> None:
@@ -35,7 +35,7 @@ class SetpointRamp:
         self.arrived = False
 
     def step(self, goal: Sequence[float], dt: float) -> None:
-        """Moves the setpoint for ``dt`` seconds; sets :attr:``arrived`` once it rests on the goal.
+        """Moves the setpoint for ``dt`` seconds; sets :attr:`arrived` once it rests on the goal.
 
         The velocity changes by at most max_accel·dt per step, except the last step onto the goal
         (at most 2·max_accel·dt).

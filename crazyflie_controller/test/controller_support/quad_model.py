@@ -89,7 +89,7 @@ class QuadModel:
 
 
 class Flight:
-    """Runs a controller at ``rate`` Hz against a :class:``QuadModel``, recording z over time."""
+    """Runs a controller at ``rate`` Hz against a :class:`QuadModel`, recording z over time."""
 
     def __init__(self, controller: PositionController, model: QuadModel, rate: float = 50.0) -> None:
         self.controller, self.model = controller, model

@@ -1,4 +1,4 @@
-"""Flies a :class:``PositionController`` against the project's simulated world in process (tests, benchmarks).
+"""Flies a :class:`PositionController` against the project's simulated world in process (tests, benchmarks).
 
 No ROS and no radio: the controller's cmd_vel goes through crazyflie_server's cmd_vel -> RPYT
 mapping (``server.setpoint.setpoint_from_twist``) straight into ``Vehicle.set_rpyt``, and the pose

@@ -95,10 +95,10 @@ class JoyState:
     axes: List[float] = field(default_factory=list)
     buttons: List[int] = field(default_factory=list)
 
-    def copy(self) -> "JoyState":
+    def copy(self) -> JoyState:
         return JoyState(list(self.axes), list(self.buttons))
 
-    def neutral(self) -> "JoyState":
+    def neutral(self) -> JoyState:
         """Same shape, every axis centred and every button released."""
         return JoyState([0.0] * len(self.axes), [0] * len(self.buttons))
 

@@ -27,7 +27,7 @@ class JoystickController:
         self._takeoff = rospy.ServiceProxy("takeoff", Empty) if use_controller else None
         self._land = rospy.ServiceProxy("land", Empty) if use_controller else None
         self._edges = ButtonEdges()
-        self._jobs: "queue.Queue[str]" = queue.Queue()
+        self._jobs: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._work, name="joystick_actions", daemon=True).start()
         rospy.Subscriber(joy_topic, Joy, self._on_joy, queue_size=10)
 

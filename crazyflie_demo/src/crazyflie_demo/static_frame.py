@@ -58,7 +58,7 @@ def main() -> None:
         translation, q, frame, child = parse_args(argv)
     except ValueError as exc:
         print("static_transform_publisher: %s" % exc, file=sys.stderr)
-        raise SystemExit(2)
+        raise SystemExit(2) from None
     init_node("static_transform_publisher", anonymous=True)
     t = TransformStamped()
     t.header.stamp = rospy.Time.now()

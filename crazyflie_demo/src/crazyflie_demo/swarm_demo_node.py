@@ -128,7 +128,7 @@ def main() -> None:
         config = load_swarm_file(path)
     except Exception as e:          # SwarmConfigError names the file, the line and the fix
         rospy.logfatal("swarm_demo: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     names = [cf.name for cf in config.crazyflies]
     initial = {cf.name: cf.initial_position for cf in config.crazyflies}
     pub = rospy.Publisher("~phase", String, queue_size=10, latch=True)
@@ -143,7 +143,7 @@ def main() -> None:
         clock = topic_clock(topic) if topic else ros_clock()
     except RuntimeError as e:       # no /clock from the world
         rospy.logfatal("swarm_demo: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     ok = fly(names, initial, announce, clock, float(rospy.get_param("~timeout", 120.0)),
              float(rospy.get_param("~height", TAKEOFF_HEIGHT_M)))
     if not ok and not shutting_down():

@@ -46,7 +46,7 @@ class Phase:
                            "goals": {k: list(v) for k, v in self.goals.items()}})
 
     @staticmethod
-    def from_json(text: str) -> "Phase":
+    def from_json(text: str) -> Phase:
         d = json.loads(text)
         return Phase(str(d["phase"]), float(d.get("duration", 0.0)), float(d.get("height", 0.0)),
                      {k: tuple(float(c) for c in v) for k, v in (d.get("goals") or {}).items()})

@@ -140,7 +140,7 @@ def main() -> None:
         config = load_swarm_file(str(rospy.get_param("~swarm_file", "")))
     except Exception as e:
         rospy.logfatal("swarm_monitor: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     initial = {cf.name: cf.initial_position for cf in config.crazyflies}
     recorder = SwarmRecorder(initial, str(rospy.get_param("~sim_address", "127.0.0.1:19840")),
                              str(rospy.get_param("~phase_topic", "/swarm_demo/phase")),

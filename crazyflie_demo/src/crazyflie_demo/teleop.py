@@ -64,7 +64,7 @@ class TeleopConfig:
     z_min: Optional[float] = None      # lower bound of linear.z (None: no bound, as hector)
 
     @classmethod
-    def from_params(cls, get: Callable[[str, Any], Any]) -> "TeleopConfig":
+    def from_params(cls, get: Callable[[str, Any], Any]) -> TeleopConfig:
         """Build from a parameter getter ``get(name, default)`` such as ``rospy.get_param('~' + name)``."""
         def axis(name: str) -> int:
             value = get(name, DEFAULT_AXES[name])

@@ -21,7 +21,7 @@ class Waypoint:
     sleep: float
 
     @classmethod
-    def from_list(cls, values: Sequence[float]) -> "Waypoint":
+    def from_list(cls, values: Sequence[float]) -> Waypoint:
         if len(values) != 5:
             raise ValueError(f"a waypoint is [x, y, z, yaw_deg, sleep_s], got {list(values)}")
         return cls(*(float(v) for v in values))

@@ -89,7 +89,7 @@ class SimWorld:
         self._file: Optional[str] = None
         self.joined = False
 
-    def start_or_join(self) -> "SimWorld":
+    def start_or_join(self) -> SimWorld:
         state = _master_state()
         if state is not None:
             nodes, services = state

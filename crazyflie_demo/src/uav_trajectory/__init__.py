@@ -41,7 +41,7 @@ class Polynomial:
             value = value * t + c
         return float(value)
 
-    def derivative(self) -> "Polynomial":
+    def derivative(self) -> Polynomial:
         return Polynomial([k * c for k, c in enumerate(self.p)][1:] or [0.0])
 
 
@@ -64,7 +64,7 @@ class Polynomial4D:
         self.duration = float(duration)
         self.px, self.py, self.pz, self.pyaw = (Polynomial(c) for c in (px, py, pz, pyaw))
 
-    def derivative(self) -> "Polynomial4D":
+    def derivative(self) -> Polynomial4D:
         return Polynomial4D(self.duration, *(a.derivative().p for a in (self.px, self.py, self.pz, self.pyaw)))
 
     def eval(self, t: float) -> TrajectoryOutput:
@@ -101,7 +101,7 @@ class Trajectory:
     def n_pieces(self) -> int:
         return len(self.polynomials)
 
-    def loadcsv(self, filename: str) -> "Trajectory":
+    def loadcsv(self, filename: str) -> Trajectory:
         """Read ``filename`` (header line, then a row per piece); every fault names the row."""
         try:
             with open(filename, newline="") as f:
@@ -165,5 +165,5 @@ class Trajectory:
                 for i, p in enumerate(self.polynomials)]
 
     @classmethod
-    def from_pieces(cls, pieces: Iterable[Piece]) -> "Trajectory":
+    def from_pieces(cls, pieces: Iterable[Piece]) -> Trajectory:
         return cls(Polynomial4D(p.duration, p.x, p.y, p.z, p.yaw) for p in pieces)

@@ -36,7 +36,7 @@ ERROR_LINE = re.compile(r"\[ERROR\]|\]\[ERROR\]|\]\[FATAL\]|\[FATAL\]")
 NO_POSE_LINE = re.compile(r"no pose .*->|still no pose")
 
 
-def problem_lines(text: str, pattern: "re.Pattern[str]") -> List[str]:
+def problem_lines(text: str, pattern: re.Pattern[str]) -> List[str]:
     return [line for line in text.splitlines() if pattern.search(line)]
 
 

@@ -60,7 +60,7 @@ class CmdVelProbe:
             return self._last
 
 
-def wait_for_pipeline(ns: str, probe: "CmdVelProbe", timeout: float) -> None:
+def wait_for_pipeline(ns: str, probe: CmdVelProbe, timeout: float) -> None:
     """Block until joy -> quadrotor_teleop -> this test is connected in namespace ``ns``.
 
     joy_node publishes the initial stick state once, when it opens the device; a connection still

@@ -167,7 +167,7 @@ class PycrazyswarmScripts(unittest.TestCase):
         tool = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts", "upload_trajectory")
         takeoff_csv = os.path.join(SCRIPTS, "..", "..", "..", "trajectories", "takeoff.csv")
         p = subprocess.run([sys.executable, tool, takeoff_csv, "cf2", "--id", "2"], stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, universal_newlines=True, timeout=60)
+                           stderr=subprocess.STDOUT, text=True, timeout=60)
         print(p.stdout)
         self.assertEqual(p.returncode, 0, p.stdout)
         duration = Trajectory().loadcsv(takeoff_csv).duration

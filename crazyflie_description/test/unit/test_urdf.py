@@ -44,7 +44,7 @@ def ros_env() -> Dict[str, str]:
 @functools.lru_cache(maxsize=None)
 def _expanded_text(model: str, args: Tuple[str, ...]) -> str:
     out = subprocess.run([XACRO, os.path.join(URDF, model + ".urdf.xacro")] + list(args), env=ros_env(),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=60)
+                         capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, "xacro %s failed:\n%s" % (model, out.stderr)
     return out.stdout
 

@@ -20,10 +20,10 @@ def cflib_python() -> str:
             pytest.skip("cflib needs Python >= 3.10 (this is %d.%d)" % sys.version_info[:2])
         pytest.skip("cflib is not installed: run tools/bootstrap.sh --with-cflib")
     probe = subprocess.run([str(python), "-c", "import sys, cflib; print('%d.%d' % sys.version_info[:2])"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, timeout=30)
+                           capture_output=True, text=True, timeout=30)
     if probe.returncode != 0:
         version = subprocess.run([str(python), "-c", "import sys; print(sys.version_info >= (3, 10))"],
-                                 stdout=subprocess.PIPE, universal_newlines=True, timeout=30).stdout.strip()
+                                 stdout=subprocess.PIPE, text=True, timeout=30).stdout.strip()
         if version == "False":
             pytest.skip("cflib needs Python >= 3.10 (%s is older)" % python)
         pytest.skip("cflib is not importable by %s: run tools/bootstrap.sh --with-cflib" % python)

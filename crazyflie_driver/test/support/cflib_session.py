@@ -4,7 +4,7 @@
 Run with cflib's interpreter (cflib >= 0.1.28 needs Python >= 3.10), ``crazyflie_driver/src`` on
 PYTHONPATH and CRAZYFLIE_SIM_ADDRESS naming a running world server. For radio URIs this process
 wraps ``usb.core.find`` so that cflib's own Crazyradio driver talks to our fake Crazyradio
-(``sim.fake_usb.FakeUsbBackend`` on a ``sim.medium.RemoteMedium``); for udp:// URIs cflib's UDP driver
+(``sim.air.fake_usb.FakeUsbBackend`` on a ``sim.air.medium.RemoteMedium``); for udp:// URIs cflib's UDP driver
 talks to the server's UDP endpoint directly. Everything after that is cflib's public API:
 
   scan (radio only) -> SyncCrazyflie connect -> both TOCs -> every parameter value ->
@@ -50,7 +50,7 @@ class Step:
     def __init__(self, name: str) -> None:
         self.name = name
 
-    def __enter__(self) -> "Step":
+    def __enter__(self) -> Step:
         _active_steps.add(self.name)
         self.t0 = time.monotonic()
         return self

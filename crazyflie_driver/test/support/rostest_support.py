@@ -80,7 +80,7 @@ class RosoutRecorder:
             return [m for lvl, m in self.lines if text in m and lvl >= min_level]
 
 
-def rates_per_world_second(recorders: Dict[str, "TopicRecorder"], medium: RemoteMedium,
+def rates_per_world_second(recorders: Dict[str, TopicRecorder], medium: RemoteMedium,
                            seconds: float, during: Optional[Callable[[], Any]] = None) -> Dict[str, float]:
     """Messages per second of simulated time, per recorder, over ``seconds`` of world time.
 

@@ -37,7 +37,7 @@ class FakeBlock:
 
 
 class FakeLog:
-    def __init__(self, cf: "FakeCrazyflie"):
+    def __init__(self, cf: FakeCrazyflie):
         self.cf = cf
         self.toc: Optional[Toc] = None
         self.blocks: List[FakeBlock] = []
@@ -62,7 +62,7 @@ class FakeLog:
 
 
 class FakeParams:
-    def __init__(self, cf: "FakeCrazyflie"):
+    def __init__(self, cf: FakeCrazyflie):
         self.cf = cf
         self.toc: Optional[Toc] = None
         self.values = {k: v for k, (_, v) in PARAMS.items()}

@@ -34,8 +34,8 @@ def fault(address, *words):
     env.update(CRAZYFLIE_SIM_ADDRESS=address,
                PYTHONPATH=os.pathsep.join([os.path.join(REPO, "crazyflie_driver", "src"),
                                            os.path.join(REPO, "crazyflie_tools", "src")]))
-    return subprocess.run([sys.executable, SCRIPT] + list(words), env=env, stdout=subprocess.PIPE,
-                          stderr=subprocess.PIPE, universal_newlines=True, timeout=60)
+    return subprocess.run([sys.executable, SCRIPT] + list(words), env=env, capture_output=True,
+                          text=True, timeout=60)
 
 
 def test_unplug_and_replug_a_dongle(served):

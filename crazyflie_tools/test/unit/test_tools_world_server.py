@@ -40,7 +40,7 @@ def run_tool(sim_address, tmp_path, name, *args, sim_backend=True):
                PYTHONPATH=os.pathsep.join([os.path.join(REPO, "crazyflie_driver", "src"),
                                            os.path.join(REPO, "crazyflie_tools", "src")]))
     return subprocess.run([sys.executable, os.path.join(SCRIPTS, name)] + list(args), env=env,
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
+                          capture_output=True, text=True,
                           timeout=60)
 
 

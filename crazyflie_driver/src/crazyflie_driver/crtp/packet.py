@@ -65,7 +65,7 @@ class CRTPPacket:
         return bytes([self.header]) + bytes(self.data)
 
     @classmethod
-    def from_bytes(cls, raw: bytes) -> "CRTPPacket":
+    def from_bytes(cls, raw: bytes) -> CRTPPacket:
         if not raw:
             raise ValueError("empty CRTP packet")
         h = raw[0]

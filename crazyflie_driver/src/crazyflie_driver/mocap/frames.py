@@ -40,7 +40,7 @@ def y_up_to_z_up_vector(v: Sequence[float]) -> Vec3:
 
 
 def z_up_to_y_up_vector(v: Sequence[float]) -> Vec3:
-    """Inverse of :func:``y_up_to_z_up_vector`` (used by the fake mocap to stream Y-up)."""
+    """Inverse of :func:`y_up_to_z_up_vector` (used by the fake mocap to stream Y-up)."""
     return (v[0], v[2], -v[1])
 
 
@@ -50,7 +50,7 @@ def y_up_to_z_up_quaternion(q: Sequence[float]) -> Quat:
 
 
 def z_up_to_y_up_quaternion(q: Sequence[float]) -> Quat:
-    """Inverse of :func:``y_up_to_z_up_quaternion``."""
+    """Inverse of :func:`y_up_to_z_up_quaternion`."""
     return (q[0], q[2], -q[1], q[3])
 
 

@@ -75,7 +75,7 @@ class SessionStats:
 class VrpnSession:
     """Protocol state of one connection (id maps, stream buffer). No sockets: feed it bytes.
 
-    Callbacks run in the thread that calls :meth:``feed``; an exception in a callback is logged
+    Callbacks run in the thread that calls :meth:`feed`; an exception in a callback is logged
     and counted, never propagated. ``trackers``: only these sender names are reported (None:
     every sender except "VRPN Control").
     """
@@ -304,7 +304,7 @@ class VrpnClient:
     def connected(self) -> bool:
         return self._connected.is_set()
 
-    def start(self) -> "VrpnClient":
+    def start(self) -> VrpnClient:
         if self._thread is not None:
             return self
         self._stop.clear()
@@ -329,7 +329,7 @@ class VrpnClient:
     def wait_connected(self, timeout: float) -> bool:
         return self._connected.wait(timeout)
 
-    def __enter__(self) -> "VrpnClient":
+    def __enter__(self) -> VrpnClient:
         return self.start()
 
     def __exit__(self, *exc) -> None:

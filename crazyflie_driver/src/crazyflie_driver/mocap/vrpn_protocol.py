@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Iterator, List, Tuple
+from typing import Iterator, List, Sequence, Tuple
 
 DEFAULT_PORT = 3883
 
@@ -254,6 +254,18 @@ class Velocity:
     linear: Vec3
     rotation: Quat
     dt: float
+
+
+def vec3(values: Sequence[float]) -> Vec3:
+    """Three floats from any sequence of three numbers (ValueError for another length)."""
+    x, y, z = values
+    return float(x), float(y), float(z)
+
+
+def quat(values: Sequence[float]) -> Quat:
+    """Four floats (x, y, z, w) from any sequence of four numbers (ValueError for another length)."""
+    x, y, z, w = values
+    return float(x), float(y), float(z), float(w)
 
 
 def encode_pos_quat(report: PosQuat) -> bytes:

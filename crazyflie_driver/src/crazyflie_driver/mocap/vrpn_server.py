@@ -101,7 +101,7 @@ class VrpnTestServer:
     """Streams tracker poses to every connected client. Poses are Z-up unless ``y_up``.
 
     ``pose_fn(name, t)`` gives (position, quaternion xyzw) at Unix time t; default: the pose set
-    with :meth:``set_pose``, else tracker i resting at (i, 0, 0) with identity orientation.
+    with :meth:`set_pose`, else tracker i resting at (i, 0, 0) with identity orientation.
     """
 
     def __init__(self, trackers: Iterable[str] = ("cf1",), host: str = "127.0.0.1", port: int = 0,
@@ -163,7 +163,7 @@ class VrpnTestServer:
     def set_velocity(self, name: str, linear: Sequence[float], rotation: Sequence[float] = (0, 0, 0, 1),
                      dt: float = 0.01) -> None:
         with self._lock:
-            self._velocities[name] = vp.Velocity(0, tuple(linear), tuple(rotation), float(dt))
+            self._velocities[name] = vp.Velocity(0, vp.vec3(linear), vp.quat(rotation), float(dt))
 
     def hide(self, name: str, hidden: bool = True) -> None:
         """Stop (or resume) sending ``name``, as a mocap does with a body it cannot see."""
@@ -175,7 +175,7 @@ class VrpnTestServer:
 
     # -- life cycle ------------------------------------------------------------------------------
     def start(self) -> Tuple[str, int]:
-        """Listen (on the same port after a :meth:``stop``) and start streaming; returns (host, port)."""
+        """Listen (on the same port after a :meth:`stop`) and start streaming; returns (host, port)."""
         if self._listener is not None:
             return self.host, self.port
         ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -210,7 +210,7 @@ class VrpnTestServer:
             time.sleep(down_for)
         self.start()
 
-    def __enter__(self) -> "VrpnTestServer":
+    def __enter__(self) -> VrpnTestServer:
         self.start()
         return self
 
@@ -407,7 +407,7 @@ class VrpnTestServer:
             if self.y_up:
                 pos, quat = z_up_to_y_up_vector(pos), z_up_to_y_up_quaternion(quat)
             self._seq += 1
-            out.append(vp.encode_message(pq, sid, vp.encode_pos_quat(vp.PosQuat(0, tuple(pos), tuple(quat))),
+            out.append(vp.encode_message(pq, sid, vp.encode_pos_quat(vp.PosQuat(0, vp.vec3(pos), vp.quat(quat))),
                                          sec, usec, self._seq))
             if self.velocity:
                 v = velocities.get(name, vp.Velocity(0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), 0.01))
@@ -433,7 +433,7 @@ class VrpnTestServer:
                 pos, quat = z_up_to_y_up_vector(pos), z_up_to_y_up_quaternion(quat)
             self._seq += 1
             out.append(vp.encode_message(pq, self._sender_ids[name], vp.encode_pos_quat(
-                vp.PosQuat(0, tuple(float(v) for v in pos), tuple(float(v) for v in quat))), sec, usec, self._seq))
+                vp.PosQuat(0, vp.vec3(pos), vp.quat(quat))), sec, usec, self._seq))
         clients = self.client_count()
         if out and clients:
             self._broadcast(b"".join(out))

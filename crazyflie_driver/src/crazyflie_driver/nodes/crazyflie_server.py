@@ -212,9 +212,14 @@ class RosCrazyflie(WorkerListener):
         self._subscribers, self._services = [], []
 
     # -- ROS callbacks ------------------------------------------------------------------------------
+    def _attached(self) -> CrazyflieWorker:
+        """The worker, for the callbacks ``attach`` subscribes after setting it."""
+        assert self.worker is not None, "a callback before attach()"
+        return self.worker
+
     def _on_cmd_vel(self, msg: Twist) -> None:
         try:
-            setpoint = self.worker.setpoint_for_cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z)
+            setpoint = self._attached().setpoint_for_cmd_vel(msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.z)
         except ValueError as e:
             text = self._refusals.say(self.config.uri, "cmd_vel", str(e))     # once a second per field and rule
             if text is not None:
@@ -224,19 +229,19 @@ class RosCrazyflie(WorkerListener):
             text = self._refusals.say(self.config.uri, "cmd_vel held", "; ".join(setpoint.notes))
             if text is not None:
                 rospy.logwarn("%s: cmd_vel held to the firmware's limits: %s" % (self.config.uri, text))
-        if not self.worker.set_setpoint(setpoint) and not self._said_ignored:
+        if not self._attached().set_setpoint(setpoint) and not self._said_ignored:
             self._said_ignored = True       # once: the status topic keeps saying it
             rospy.logwarn("%s: cmd_vel ignored after emergency (the Crazyflie stays stopped until a reboot: "
                           "switch it off and on, then remove and add it again to fly)" % self.config.uri)
 
     def _on_emergency(self, _req) -> EmptyResponse:
-        self.worker.emergency()
+        self._attached().emergency()
         return EmptyResponse()
 
     def _on_update_params(self, req) -> UpdateParamsResponse:
         # names checked before the ROS parameter server (XML-RPC) sees them, as the swarm's /update_params does
         values, errors = param_values(req.params, (self.ns,), ros_param_or_none)
-        written, write_errors = self.worker.update_params(values)
+        written, write_errors = self._attached().update_params(values)
         errors.extend(write_errors)
         for name in written:
             rospy.loginfo("%s: parameter %s updated", self.config.uri, name)
@@ -395,11 +400,11 @@ class CrazyflieServer:
         ``~budget_pose_rate``) and the broadcasts added; a dongle that will be short is logged as a warning
         (``warn``)."""
         with self._lock:
-            served = [(key, ros) for key, ros in self._ros.items() if ros.worker is not None]
+            served = [(key, ros, ros.worker) for key, ros in self._ros.items() if ros.worker is not None]
             plan = list(self._broadcast_plan)
         demands = [radio_budget.CrazyflieDemand(ros.config.tf_prefix or key, parse_uri(key), self.budget_setpoint_rate,
-                                                self.budget_pose_rate, ros.worker.log_packet_rate)
-                   for key, ros in served]
+                                                self.budget_pose_rate, worker.log_packet_rate)
+                   for key, ros, worker in served]
         budget = radio_budget.check_budget(demands, plan)
         self._budget = budget
         for b in budget:
@@ -501,7 +506,7 @@ class CrazyflieServer:
             self.registry.canonical_uri(config.uri)      # a malformed URI is refused here
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)
-            raise rospy.ServiceException(str(e))
+            raise rospy.ServiceException(str(e)) from e
         self.add(config)
         return AddCrazyflieResponse()
 
@@ -524,7 +529,7 @@ class CrazyflieServer:
                 namespace(config.tf_prefix) + "/" + name, rospy.get_param("~" + name, default)))
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)
-            raise rospy.ServiceException(str(e))
+            raise rospy.ServiceException(str(e)) from e
         try:
             ros = RosCrazyflie(config, on_gave_up=lambda: self._remove_failed(key), late_cause=self.late_cause)
             worker = self.registry.add(config, ros, timeout=self.add_timeout)
@@ -536,7 +541,7 @@ class CrazyflieServer:
                 ros.detach()
             msg = "could not add %s: %s" % (key, e)
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from e
         try:
             ros.attach(worker)
         except Exception as e:      # a name the master refuses: never a Crazyflie without its emergency service
@@ -544,7 +549,7 @@ class CrazyflieServer:
             self.registry.remove(key)
             msg = "could not add %s: its topics or services could not be registered: %s" % (key, e)
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from e
         with self._lock:
             self._ros[key] = ros
             self._gone.pop(key, None)
@@ -566,7 +571,7 @@ class CrazyflieServer:
         except (ValueError, KeyError) as e:
             msg = "could not remove %s: %s" % (req.uri, str(e).strip("'\""))
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from e
         with self._lock:
             ros = self._ros.pop(key, None)
         if ros is not None:
@@ -659,7 +664,7 @@ def main() -> None:
         start_swarm(server)      # only with ~swarm_file
     except Exception as e:       # e.g. no usable USB backend, a bad swarm file
         rospy.logfatal("crazyflie_server cannot start: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     rospy.loginfo("crazyflie_server ready (backend: %s)", os.environ.get("CRAZYFLIE_BACKEND", "usb"))
     rospy.spin()
     server.land_all("shutdown")     # the process ends after this: never while a Crazyflie comes down

@@ -113,7 +113,7 @@ class RosOnboardCommands:
                 handler(req)
             except (ValueError, CrazyflieError) as e:
                 rospy.logerr("%s: %s: %s", self.uri, service, e)
-                raise rospy.ServiceException("%s: %s" % (service, e))
+                raise rospy.ServiceException("%s: %s" % (service, e)) from e
             return response()
         return callback
 

@@ -141,7 +141,7 @@ def shutting_down() -> bool:
     return bool(rospy.core.is_shutdown_requested())
 
 
-def publish_unless_shutting_down(publisher: "rospy.Publisher", msg: Any) -> bool:
+def publish_unless_shutting_down(publisher: rospy.Publisher, msg: Any) -> bool:
     """Publish ``msg``; False instead of an error when a shutdown has closed the topic."""
     try:
         publisher.publish(msg)

@@ -1,6 +1,6 @@
 """``crazyflie_sim_node``: the simulated world inside a ROS node, playing the motion-capture system too.
 
-It runs the world server (``sim.server.WorldServer``) that fake Crazyradios of other processes
+It runs the world server (``sim.air.server.WorldServer``) that fake Crazyradios of other processes
 connect to through ``CRAZYFLIE_SIM_ADDRESS`` (``~address``, default 127.0.0.1:19840), and publishes
 each vehicle's pose as the motion-capture bridges of the original stack did:
 
@@ -32,7 +32,7 @@ motion-capture PC would) and ``vrpn_port`` (default 3883 when free, else one the
 by where the system allows it, so host nodes on a busy machine cannot starve the world; 0: off;
 ``sim.priority``).
 
-The frames come from the world's own motion-capture model (``sim.mocap.MocapModel``), sampled on
+The frames come from the world's own motion-capture model (``sim.world.mocap.MocapModel``), sampled on
 world time; a vehicle added to the world at run time is reported too.
 
 Faults (docs/simulation.md, "Fault injection"): ``packet_loss`` and ``ack_loss`` (fraction 0..1 of
@@ -225,7 +225,7 @@ def dongles_needed(vehicles: Sequence[VehicleSpec], requested: Optional[int]) ->
 
 
 def mocap_model(world: Any, config: MocapConfig, seed: Optional[int] = None):
-    """The world's motion-capture model (``sim.mocap.MocapModel``) with the node's settings:
+    """The world's motion-capture model (``sim.world.mocap.MocapModel``) with the node's settings:
     position noise ``config.noise`` (m), no orientation noise, ``latency`` (s), ``dropout``."""
     from crazyflie_driver.sim.world.mocap import MocapModel
 
@@ -294,7 +294,7 @@ def world_status(realtime_factor: float, speed: float, vehicles: int, ticks_behi
                              % (realtime_factor, pacing.target))
     else:
         level, message = 0, "keeps real time (%.2fx)" % realtime_factor
-    values = (("real-time factor", "%.3f" % realtime_factor), ("speed", "%.3f" % speed),
+    values: Tuple[Tuple[str, str], ...] = (("real-time factor", "%.3f" % realtime_factor), ("speed", "%.3f" % speed),
               ("speed mode", pacing.mode), ("target speed", "%.3f" % pacing.target),
               ("vehicles", str(vehicles)), ("ticks behind", str(ticks_behind)), ("overruns", str(overruns)),
               ("world time [s]", "%.3f" % world_time))
@@ -391,7 +391,7 @@ class MocapPublisher:
         return body
 
     def publish(self, frames: Sequence[Any], world_time: float) -> int:
-        """frames: ``sim.mocap.MocapFrame`` s delivered since the last call; ``world_time`` now.
+        """frames: ``sim.world.mocap.MocapFrame`` s delivered since the last call; ``world_time`` now.
 
         vicon style stamps each frame with its capture time (ROS now minus its age in world time);
         vrpn style with the time of receipt, as vrpn_client_ros does. Returns the transforms sent.
@@ -570,7 +570,7 @@ def main() -> None:
         server.start()
     except (SimConfigError, PacingError, ValueError, CrazyflieError) as e:
         rospy.logfatal("crazyflie_sim: %s", e)
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     if clock_pub is not None:
         _publish_clock(world, clock_pub, Clock)
     world.start()
@@ -593,7 +593,7 @@ def main() -> None:
         rospy.logfatal("crazyflie_sim: ~faults: %s", e)
         server.stop()
         world.stop()
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     _advertise_fault_service(server.control)
     stop = threading.Event()
     delivered: List[Any] = []
@@ -616,7 +616,7 @@ def main() -> None:
                            "0 for any)", vrpn_port, e.strerror or e)
             server.stop()
             world.stop()
-            raise SystemExit(1)
+            raise SystemExit(1) from None
         rospy.loginfo("crazyflie_sim: motion capture served as VRPN on 127.0.0.1:%d (trackers %s)", vrpn.port,
                       ", ".join(names))
     if mocap.style != "none":

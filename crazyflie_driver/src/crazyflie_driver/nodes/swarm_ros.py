@@ -226,7 +226,7 @@ class RosSwarm:
                 handler(req)
             except (ValueError, CrazyflieError) as e:
                 rospy.logerr("swarm: %s refused: %s", name, e)
-                raise rospy.ServiceException("%s: %s" % (name, e))
+                raise rospy.ServiceException("%s: %s" % (name, e)) from e
             return response()
         return callback
 

@@ -64,14 +64,14 @@ def milli_int16(name: str, value) -> int:
 
 def byte(name: str, value) -> int:
     """An unsigned byte 0..255 (identifiers, flags)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value <= 0xFF:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= int(value) <= 0xFF:
         raise CommandValueError("%s must be an integer 0..255, got %r" % (name, value))
     return int(value)
 
 
 def group_mask(value) -> int:
     """A group mask: 0 (all Crazyflies) or a bit set of groups 0..7."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value <= GROUP_MASK_MAX:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= int(value) <= GROUP_MASK_MAX:
         raise CommandValueError("group mask must be an integer 0..%d (0 = all Crazyflies, bit i = group i), "
                                 "got %r" % (GROUP_MASK_MAX, value))
     return int(value)

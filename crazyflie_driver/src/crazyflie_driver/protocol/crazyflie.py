@@ -82,7 +82,7 @@ class Crazyflie:
         self.connected = False
         self.link.close()
 
-    def __enter__(self) -> "Crazyflie":
+    def __enter__(self) -> Crazyflie:
         self.connect()
         return self
 

@@ -57,7 +57,7 @@ def firmware_error(code: int) -> str:
 class LogBlock:
     """A block created on the Crazyflie. Its callback runs in the link's polling thread."""
 
-    def __init__(self, client: "LogClient", ident: int, variables: List[TocEntry],
+    def __init__(self, client: LogClient, ident: int, variables: List[TocEntry],
                  period_ms: int, callback: LogCallback) -> None:
         self.client = client
         self.ident = ident
@@ -82,7 +82,7 @@ class LogBlock:
     def delete(self) -> None:
         self.client._delete(self)
 
-    def decode(self, data: bytes) -> "tuple[int, List[float]]":
+    def decode(self, data: bytes) -> tuple[int, List[float]]:
         """``[ts u24, values...]`` (block id stripped) -> (timestamp ms, values)."""
         if len(data) < 3 + self._size:
             raise ProtocolError("log block %d: %d value bytes, expected %d"
@@ -178,7 +178,7 @@ class LogClient(TocPortClient):
         try:
             period = int(period_ms)
         except (TypeError, ValueError):
-            raise LogConfigError("log period %r is not a number of milliseconds" % (period_ms,))
+            raise LogConfigError("log period %r is not a number of milliseconds" % (period_ms,)) from None
         if self.protocol_version >= START_V2_FROM:
             if not 1 <= period <= LOG_PERIOD_V2_MAX_MS:
                 raise LogConfigError("log period %r ms is out of range 1..%d ms"
@@ -196,6 +196,9 @@ class LogClient(TocPortClient):
         items = []
         for entry in block.variables:
             code = ctype(entry.ctype).log_code
+            if code is None:
+                raise LogConfigError("%s is a %s, which the log cannot carry: log another variable"
+                                     % (entry.name, entry.ctype))
             type_byte = (code << 4) | code
             if v2:
                 items.append(struct.pack("<BH", type_byte, entry.ident))

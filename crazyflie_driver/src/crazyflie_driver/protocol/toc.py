@@ -3,7 +3,7 @@
 Both ports describe their variables the same way: an info request gives the
 item count and a CRC, then each item is asked for by id, one request in
 flight. Protocol V1 (firmware before protocol version 4) uses 8-bit ids and
-commands 0/1; V2 uses 16-bit ids and commands 2/3. :class:``TocPortClient`` is
+commands 0/1; V2 uses 16-bit ids and commands 2/3. :class:`TocPortClient` is
 the part the parameter and log clients share: a port's TOC, fetched on demand.
 """
 from __future__ import annotations
@@ -138,7 +138,7 @@ def parse_item(kind: str, version: int, data: bytes) -> TocEntry:
         group = parts[0].decode("ascii")
         name = parts[1].decode("ascii")
     except UnicodeDecodeError:
-        raise ProtocolError("%s TOC item %d: name is not ASCII: %s" % (kind, ident, data.hex(" ")))
+        raise ProtocolError("%s TOC item %d: name is not ASCII: %s" % (kind, ident, data.hex(" "))) from None
     if kind == "param":
         ct = BY_PARAM_CODE.get(type_byte & 0x0F)
         readonly = bool(type_byte & PARAM_READONLY)
@@ -184,7 +184,7 @@ class TocFetcher:
                 extra = data[6:8]
         except struct.error:
             raise ProtocolError("%s: %s TOC info reply too short: %s"
-                                % (self.link.uri, self._label, data.hex(" ")))
+                                % (self.link.uri, self._label, data.hex(" "))) from None
         if len(extra) == 2:
             return TocInfo(count, crc, extra[0], extra[1])
         return TocInfo(count, crc)
@@ -214,7 +214,7 @@ class TocFetcher:
                                 "announced it" % (self.link.uri, self._label, ident))
         return parse_item(self.kind, self.version, reply.data)
 
-    def fetch(self) -> "tuple[Toc, TocInfo]":
+    def fetch(self) -> tuple[Toc, TocInfo]:
         """The whole TOC: from the cache when its CRC is known, else item by item."""
         info = self.fetch_info()
         if self.cache is not None:

@@ -42,7 +42,7 @@ class TocCache:
         """The cached entries, or None when absent, unreadable or not ``count`` long."""
         path = self.path(kind, crc)
         try:
-            with open(path, "r", encoding="utf-8") as f:
+            with open(path, encoding="utf-8") as f:
                 doc = json.load(f)
         except FileNotFoundError:
             return None

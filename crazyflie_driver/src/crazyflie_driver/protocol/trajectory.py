@@ -84,7 +84,9 @@ def pack_poly4d(pieces: Sequence[Piece]) -> bytes:
 
 def evaluate(piece: Piece, t: float) -> Tuple[float, float, float, float]:
     """(x, y, z, yaw) of ``piece`` at ``t`` seconds after its start."""
-    return tuple(sum(c * t ** k for k, c in enumerate(axis)) for axis in (piece.x, piece.y, piece.z, piece.yaw))
+    def at_t(axis: Sequence[float]) -> float:
+        return float(sum(c * t ** k for k, c in enumerate(axis)))
+    return at_t(piece.x), at_t(piece.y), at_t(piece.z), at_t(piece.yaw)
 
 
 def bezier_points(coefficients: Sequence[float], duration: float) -> List[float]:

@@ -92,7 +92,7 @@ class BroadcastLink:
         self._lock = threading.Lock()
 
     @classmethod
-    def for_uri(cls, uri: RadioUri, manager: Optional[RadioManager] = None, **options) -> "BroadcastLink":
+    def for_uri(cls, uri: RadioUri, manager: Optional[RadioManager] = None, **options) -> BroadcastLink:
         """The broadcast link reaching the Crazyflie at ``uri`` (same dongle, channel and rate)."""
         return cls(uri.index, uri.channel, uri.datarate, manager, **options)
 
@@ -113,7 +113,7 @@ class BroadcastLink:
         if shared is not None:
             self.manager.release(shared)
 
-    def __enter__(self) -> "BroadcastLink":
+    def __enter__(self) -> BroadcastLink:
         self.open()
         return self
 

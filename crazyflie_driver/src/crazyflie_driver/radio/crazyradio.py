@@ -60,7 +60,7 @@ class RadioAck(NamedTuple):
 class RadioInfo(NamedTuple):
     """A Crazyradio on the bus, as ``list_radios`` reports it."""
 
-    index: int
+    index: int   # type: ignore[assignment]  # the dongle's number: shadows tuple.index, long public
     serial: Optional[str]   # None when the dongle could not be opened (permissions)
     version: float
 
@@ -339,7 +339,7 @@ class Crazyradio:
             except usb.core.USBError:
                 pass
 
-    def __enter__(self) -> "Crazyradio":
+    def __enter__(self) -> Crazyradio:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -6,7 +6,7 @@ import math
 import threading
 import time
 from collections import deque
-from typing import Callable
+from typing import Any, Callable, Tuple
 
 #: Time constant (s) of the decaying average that measures the capped turns' share of the dongle:
 #: about ten motion-capture bursts at 100 Hz, short enough to react within a few frames.
@@ -73,6 +73,7 @@ class FairLock:
                 return False
             waiter = threading.Lock()
             waiter.acquire()
+            entry: Tuple[Any, object]      # (waiter, capped) or (waiter, queued at)
             if urgent:
                 queue, entry = self._urgent, (waiter, capped)
             elif background:

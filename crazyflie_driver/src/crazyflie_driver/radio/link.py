@@ -137,7 +137,7 @@ class RadioLink:
         if shared is not None:
             self.manager.release(shared)
 
-    def __enter__(self) -> "RadioLink":
+    def __enter__(self) -> RadioLink:
         self.open()
         return self
 
@@ -280,7 +280,7 @@ class RadioLink:
                 sent0, acked0 = self.stats.sent, self.stats.acked
                 first_packet = self.downlink_packets
                 seen, last_data = first_packet, start
-                acked = self.send(packet)
+                acked: int = self.send(packet)   # then the count acked since
                 next_resend = start + resend_interval
                 while waiter.result is None:
                     if waiter.error is not None:

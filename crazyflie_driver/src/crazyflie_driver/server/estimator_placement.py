@@ -8,7 +8,7 @@ So a swarm takeoff waits a moment for the placements it needs and is refused for
 from __future__ import annotations
 
 import threading
-from typing import Iterable, List
+from typing import Iterable, List, Set
 
 from crazyflie_driver.clock import WALL, Clock
 
@@ -22,7 +22,7 @@ class EstimatorPlacement:
 
     def __init__(self, clock: Clock = WALL) -> None:
         self._clock = clock
-        self._placed = set()
+        self._placed: Set[str] = set()
         self._cond = threading.Condition()
 
     def placed(self, name: str) -> None:

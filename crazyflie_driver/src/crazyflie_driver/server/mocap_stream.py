@@ -89,7 +89,7 @@ class MocapStream:
         self._stats_lock = threading.Lock()
         self._fixed: set = set()
         self._last_good: Dict[str, Tuple[float, Position]] = {}     # name -> (time s, position m) accepted
-        self._fixes: "queue.Queue[Optional[Tuple[str, Position]]]" = queue.Queue()
+        self._fixes: queue.Queue[Optional[Tuple[str, Position]]] = queue.Queue()
         self._stopping = False
         self._paused = False
         self._threads: List[threading.Thread] = []
@@ -169,7 +169,7 @@ class MocapStream:
                 self._pending[radio] = {}
             return frame
 
-    def start(self) -> "MocapStream":
+    def start(self) -> MocapStream:
         targets = [(lambda radio=radio: self._run(radio), "mocap stream %s" % (radio,)) for radio in self._pending]
         for target, name in targets + [(self._run_fixes, "mocap first fixes")]:
             t = threading.Thread(target=target, name=name, daemon=True)

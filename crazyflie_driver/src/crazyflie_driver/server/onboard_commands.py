@@ -56,7 +56,7 @@ class OnboardCommands:
     one sent since the last notify-setpoints-stop holds the firmware's priority again; ``group_mask``:
     the Crazyflie's groups as last read (``hlCommander.groupmask``; 0 after a restart)."""
 
-    def __init__(self, cf, stream: Callable[[CRTPPacket], bool], emergency_active: Callable[[], bool],
+    def __init__(self, cf, stream: Callable[[Optional[CRTPPacket]], bool], emergency_active: Callable[[], bool],
                  label: str = "", on_pose: Optional[Callable[[], None]] = None,
                  low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0) -> None:
         self.cf = cf

@@ -28,7 +28,7 @@ class RadioLanes:
         self._pools: Dict[int, ThreadPoolExecutor] = {}
         self._closed = False
 
-    def submit(self, radio: int, fn: Callable[..., _R], *args) -> "Future[_R]":
+    def submit(self, radio: int, fn: Callable[..., _R], *args) -> Future[_R]:
         with self._lock:
             if self._closed:
                 raise RuntimeError("%s: shut down" % self._name)
@@ -55,7 +55,7 @@ class RadioLanes:
         for pool in pools:
             pool.shutdown(wait=wait)
 
-    def __enter__(self) -> "RadioLanes":
+    def __enter__(self) -> RadioLanes:
         return self
 
     def __exit__(self, *exc) -> None:

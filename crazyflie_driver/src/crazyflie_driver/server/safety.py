@@ -92,7 +92,7 @@ class SafetyConfig:
     emergency_watchdog: bool = False    # send the emergency-stop watchdog keep-alive
 
     @classmethod
-    def off(cls) -> "SafetyConfig":
+    def off(cls) -> SafetyConfig:
         """No reaction at all (the library's default: a worker without a server does what it is told)."""
         return cls(setpoint_silence=False, battery=False, land_on_shutdown=False)
 
@@ -110,7 +110,7 @@ class SafetyConfig:
                              % (self.battery_critical_v, self.battery_warning_v))
 
     @classmethod
-    def from_params(cls, get: Callable[[str, Any], Any], prefix: str = "safety/") -> "SafetyConfig":
+    def from_params(cls, get: Callable[[str, Any], Any], prefix: str = "safety/") -> SafetyConfig:
         """Each field from ``get(prefix + name, default)`` (e.g. ``rospy.get_param`` with ``~safety/``)."""
         values = {}
         for f in fields(cls):
@@ -135,7 +135,7 @@ def checked_landing(height: float, duration_s: float, current_z: Optional[float]
         raise CommandValueError("%sland refused: %s: the firmware stops the motors at the end of the landing "
                                 "plan, so a landing of no time drops the Crazyflie from where it is; give it the "
                                 "time to come down (about %.1f s per metre)"
-                                % (where, e, 1.0 / SafetyConfig.descent_rate))
+                                % (where, e, 1.0 / SafetyConfig.descent_rate)) from e
     if current_z is not None and height > current_z + LAND_CLIMB_TOLERANCE_M:
         raise CommandValueError("%sland refused: target height %.2f m is above the Crazyflie (%.2f m): it would climb "
                                 "there, then stop its motors and fall; land to the floor (height 0) and use go_to to "
@@ -375,9 +375,9 @@ class SafetyMonitor:
             elif self.reaction == Reaction.LANDING:
                 # past refusal() (a broadcast, or sent while the reaction began): the firmware flies that
                 # command now, so the landing starts again from here; it is never ended in the air
-                self._plan_landing(now)
+                _, duration = self._plan_landing(now)
                 self._event(LOG.error, "%s: a %s replaced the landing in the firmware: landing again in %.1f s"
-                            % (self.reason, what, self._pending_land))
+                            % (self.reason, what, duration))
             elif self.reaction not in (Reaction.HOLD, Reaction.DESCENT):
                 self._land_until = 0.0
 

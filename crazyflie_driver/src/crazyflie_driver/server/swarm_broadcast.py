@@ -32,10 +32,10 @@ Pose = Tuple[float, float, float, float, float, float, float]     # x, y, z, qx,
 LinkKey = Tuple[int, int, int]                                   # dongle, channel, data rate
 
 
-def group_by_link(uris: Iterable[RadioUri]) -> "OrderedDict[LinkKey, List[int]]":
+def group_by_link(uris: Iterable[RadioUri]) -> OrderedDict[LinkKey, List[int]]:
     """The broadcast links a swarm needs and the packed-item ids each one reaches, in first-seen order.
     Two Crazyflies with the same id on one link would both take each other's poses: refused."""
-    groups: "OrderedDict[LinkKey, List[int]]" = OrderedDict()
+    groups: OrderedDict[LinkKey, List[int]] = OrderedDict()
     for uri in uris:
         key = (uri.index, uri.channel, uri.datarate)
         ident = address_id(uri.address)
@@ -71,7 +71,7 @@ class SwarmBroadcaster:
         for link in self.links.values():
             link.close()
 
-    def __enter__(self) -> "SwarmBroadcaster":
+    def __enter__(self) -> SwarmBroadcaster:
         self.open()
         return self
 

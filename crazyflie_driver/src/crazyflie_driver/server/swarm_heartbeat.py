@@ -38,7 +38,7 @@ class Heartbeat:
         self.sent = 0
         self.errors = 0
 
-    def start(self) -> "Heartbeat":
+    def start(self) -> Heartbeat:
         if self._thread is None:
             self._thread = threading.Thread(target=self._run, name="swarm heartbeat", daemon=True)
             self._thread.start()

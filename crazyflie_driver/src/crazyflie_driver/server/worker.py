@@ -1,18 +1,18 @@
 """One Crazyflie served by one thread: the work behind ``crazyflie_server``, without ROS.
 
-A :class:``CrazyflieWorker`` owns one :class:``~crazyflie_driver.protocol.crazyflie.Crazyflie`` (or any
+A :class:`CrazyflieWorker` owns one :class:`~crazyflie_driver.protocol.crazyflie.Crazyflie` (or any
 object with the same methods) and is the only thread that streams to it:
 
 * a new setpoint wakes the thread at once and is sent in the next radio round trip; only the
   latest setpoint counts (there is no queue that could add delay);
 * when no setpoint comes, null packets keep the link alive (at least every ``keepalive_period``)
   and fetch the log data the Crazyflie has queued, one packet per poll, paced by
-  :class:``~crazyflie_driver.server.poll_pacer.PollPacer``;
+  :class:`~crazyflie_driver.server.poll_pacer.PollPacer`;
 * link quality (acked / sent over a window, from the link's ``LinkStatistics``) is watched per
   Crazyflie, a listener is told when it drops below ``LINK_QUALITY_WARNING``;
 * a Crazyflie that stops answering is reported as lost and retried slowly, without holding the
   dongle for the others; when it answers again its log blocks are set up again;
-* :meth:``CrazyflieWorker.emergency`` works from any thread, at once, and is idempotent: no
+* :meth:`CrazyflieWorker.emergency` works from any thread, at once, and is idempotent: no
   setpoint is sent after it returns, the e-stop packet goes out, then only zero-thrust
   setpoints, until the worker is removed;
 * an unexpected error in the loop never ends the thread silently: it is logged once with its
@@ -20,7 +20,7 @@ object with the same methods) and is the only thread that streams to it:
   then stops the Crazyflie unless new setpoints come), the listener is told, and the loop restarts;
   after ``MAX_RESTARTS`` errors within ``RESTART_WINDOW`` the worker gives up and closes the link.
 
-The ROS side (``nodes/crazyflie_server.py``) subclasses :class:``WorkerListener`` to turn the
+The ROS side (``nodes/crazyflie_server.py``) subclasses :class:`WorkerListener` to turn the
 callbacks into messages; everything here is testable with a fake Crazyflie object.
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.packet import CRTPPacket
@@ -52,6 +52,9 @@ from crazyflie_driver.server import safety_actions
 from crazyflie_driver.server.safety import SafetyConfig, SafetyMonitor
 
 LOG = logging.getLogger("crazyflie_driver.server")
+
+# What the worker streams: an RPYT setpoint it encodes, or a prepared port-7 packet (onboard modes).
+StreamedSetpoint = Union[Setpoint, CRTPPacket]
 
 MAX_RESTARTS = 5            # unexpected loop errors within RESTART_WINDOW before the worker gives up
 RESTART_WINDOW = 30.0       # s
@@ -166,7 +169,7 @@ class CrazyflieWorker:
         self.reports = Reports()                 # entries other parts add to /diagnostics and the status
 
         self._cond = threading.Condition()
-        self._pending: Optional[Setpoint] = None
+        self._pending: Optional[StreamedSetpoint] = None
         self._send_lock = threading.Lock()       # a setpoint check-and-send vs. emergency
         self._emergency = False
         self._server_exiting = False     # set by server_exiting(): a world that stops now is expected
@@ -207,7 +210,7 @@ class CrazyflieWorker:
         return self._emergency
 
     def start(self) -> None:
-        """Start the thread; the connect sequence runs in it. See :meth:``wait_ready``."""
+        """Start the thread; the connect sequence runs in it. See :meth:`wait_ready`."""
         if self._thread is not None:
             raise RuntimeError("worker for %s already started" % self.uri)
         self._thread = threading.Thread(target=self._run, name="crazyflie %s" % self.uri, daemon=True)
@@ -260,7 +263,7 @@ class CrazyflieWorker:
 
     # ------------------------------------------------------------------ commands (any thread)
 
-    def set_setpoint(self, setpoint: Setpoint) -> bool:
+    def set_setpoint(self, setpoint: StreamedSetpoint) -> bool:
         """Latest setpoint wins; wakes the worker at once. False (ignored) after emergency."""
         if self._emergency:
             return False
@@ -477,9 +480,9 @@ class CrazyflieWorker:
                     continue
                 topics.append((name, period, variables))
             for name, host, variables in DIAGNOSTIC_LOG_TOPICS:     # for /diagnostics, in the hosts' blocks
-                period = [p for t, p, _ in topics if t == host]
-                if period and all(v in types for v in variables):
-                    topics.append((name, period[0], variables))
+                host_periods = [p for t, p, _ in topics if t == host]
+                if host_periods and all(v in types for v in variables):
+                    topics.append((name, host_periods[0], variables))
             plan.extend(plan_log_blocks(topics, types, share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
         plan.extend(plan_log_blocks(custom, types, share=False))
@@ -630,8 +633,9 @@ class CrazyflieWorker:
                 self._after_round_trip(acked, now)
                 if acked and self._downlink_packets == downlink_before:
                     self._onboard_clock.drained()
-            if not self._emergency and self.watchdog.due(now) is not None:
-                self._say_watchdog_cut(now)
+            silent = self.watchdog.due(now)
+            if not self._emergency and silent is not None:
+                self._say_watchdog_cut(now, silent)
             if self.safety.config.emergency_watchdog and now >= self._watchdog_due:
                 self._watchdog_due = now + safety_actions.WATCHDOG_KEEPALIVE_PERIOD_S
                 safety_actions.send_watchdog_keepalive(self.cf)
@@ -641,7 +645,7 @@ class CrazyflieWorker:
         memory and high-level replies, console text) that shares the queue with it."""
         return getattr(self.cf.link, "downlink_packets", self._downlink_packets)
 
-    def _safety_step(self, setpoint: Optional[Setpoint]) -> Optional[Setpoint]:
+    def _safety_step(self, setpoint: Optional[StreamedSetpoint]) -> Optional[StreamedSetpoint]:
         """The setpoint to send this round trip: the user's, or a safety reaction's (see server.safety)."""
         if self._emergency:
             return setpoint
@@ -684,7 +688,7 @@ class CrazyflieWorker:
     def safe_to_close(self) -> bool:
         return self._emergency or self.state != WorkerState.RUNNING or self.safety.finished(self._clock())
 
-    def _round_trip(self, setpoint: Optional[Setpoint]) -> Optional[bool]:
+    def _round_trip(self, setpoint: Optional[StreamedSetpoint]) -> Optional[bool]:
         """One packet to the Crazyflie. Returns acked, or None when the dongle failed."""
         try:
             with self._send_lock:
@@ -752,10 +756,9 @@ class CrazyflieWorker:
     def _protocol_version(self) -> int:
         return getattr(self.cf, "protocol_version", -1)      # -1 until connected
 
-    def _say_watchdog_cut(self, now: float) -> None:
-        """The setpoints stopped 2 s ago while asking for thrust: the firmware has stopped the motors.
-        Where it has a supervisor (and the link is up) it is asked whether it is locked."""
-        silent = self.watchdog.due(now)
+    def _say_watchdog_cut(self, now: float, silent: float) -> None:
+        """The setpoints stopped ``silent`` s ago while asking for thrust: the firmware has stopped the
+        motors. Where it has a supervisor (and the link is up) it is asked whether it is locked."""
         link_down = self.state == WorkerState.LOST
         locked = None
         if not link_down and self._protocol_version() >= SUPERVISOR_FROM:

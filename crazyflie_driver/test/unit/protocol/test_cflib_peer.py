@@ -57,8 +57,7 @@ def run_session(python, server, uri, *args):
                PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
-    proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                          universal_newlines=True, timeout=SESSION_TIMEOUT_S + 10)
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=SESSION_TIMEOUT_S + 10)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
     assert lines, "no JSON from the cflib session (exit %d)\nstderr:\n%s" % (proc.returncode, proc.stderr[-3000:])
     result = json.loads(lines[-1])

@@ -118,8 +118,8 @@ def cflib_results():
     calls += [{"api": "quaternion", "args": q} for q in QUATS]
     piece_bytes = pack_poly4d([make_piece(1.0 + i, *POLY) for i in range(3)])
     calls.append({"api": "mem_write", "args": [3, 396, piece_bytes.hex()]})
-    proc = subprocess.run([python, str(ENCODERS)], input=json.dumps(calls), stdout=subprocess.PIPE,
-                          stderr=subprocess.PIPE, universal_newlines=True, timeout=60)
+    proc = subprocess.run([python, str(ENCODERS)], input=json.dumps(calls), capture_output=True,
+                          text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr[-3000:]
     results = json.loads(proc.stdout)
     return {"cases": results[:len(CASES)], "quats": results[len(CASES):len(CASES) + len(QUATS)],
@@ -166,8 +166,8 @@ def test_compressed_elements_match_cflib(cflib_results):
     yaws = [yaw_end * (1 if i == 7 else 0) for i in range(1, 8)]   # t^7 over [0, T]: only the last point
     calls = [{"api": "compressed_start", "args": [0.25, 1.0, 0.5, 0.0]},
              {"api": "compressed_segment", "args": [2.0, xs, [], zs, yaws]}]
-    proc = subprocess.run([python, str(ENCODERS)], input=json.dumps(calls), stdout=subprocess.PIPE,
-                          stderr=subprocess.PIPE, universal_newlines=True, timeout=60)
+    proc = subprocess.run([python, str(ENCODERS)], input=json.dumps(calls), capture_output=True,
+                          text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr[-3000:]
     (start,), (segment,) = json.loads(proc.stdout)
     assert ours.hex() == start + segment + "000000"   # our end marker: a segment of duration 0

@@ -24,8 +24,8 @@ HOVER = 36344
 CURRENT_FW = 12
 
 
-def monitor(config=SafetyConfig(), protocol=2, params=None):
-    return SafetyMonitor(config, "cf", lambda: protocol, lambda: params or {})
+def monitor(config=None, protocol=2, params=None):
+    return SafetyMonitor(config or SafetyConfig(), "cf", lambda: protocol, lambda: params or {})
 
 
 def hover_for(m, t0, seconds, thrust=HOVER, period=0.02):

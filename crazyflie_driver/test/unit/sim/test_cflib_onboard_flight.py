@@ -60,7 +60,7 @@ def fly(python, server, uri, sim_uri, *args):
                PYTHONUNBUFFERED="1")
     env.pop("CRAZYFLIE_BACKEND", None)
     cmd = [python, str(SESSION), "--uri", uri, "--sim-uri", sim_uri, "--timeout", str(SESSION_TIMEOUT_S)] + list(args)
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     SESSIONS.append(proc.pid)
     try:
         stdout, stderr = proc.communicate(timeout=SESSION_TIMEOUT_S + 15)

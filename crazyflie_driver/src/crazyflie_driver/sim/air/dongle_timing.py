@@ -23,7 +23,7 @@ class DongleTiming:
     control_transfer_s: float = 0.0015
 
     @classmethod
-    def instant(cls) -> "DongleTiming":
+    def instant(cls) -> DongleTiming:
         """No modelled delay at all (unit tests, as-fast-as-possible simulation)."""
         return cls(0.0, 0.0, 0.0)
 
@@ -47,6 +47,6 @@ class DongleClock:
         self.clock.sleep(seconds)
 
     @classmethod
-    def world_paced(cls, medium) -> "DongleClock":
+    def world_paced(cls, medium) -> DongleClock:
         """Paced by the world speed ``medium.speed`` that the world server's replies carry."""
         return cls(ScaledClock(lambda: medium.speed))

@@ -244,6 +244,7 @@ class FakeUsbBackend(usb.backend.IBackend):
                           data) -> int:
         if rtype == 0x80 and req == _GET_DESCRIPTOR:
             dtype, index = wValue >> 8, wValue & 0xFF
+            raw: Optional[bytes]
             if dtype == DESC_DEVICE:
                 raw = device_descriptor_bytes(d.model, d.product_id)
             elif dtype == DESC_CONFIG and index == 0:

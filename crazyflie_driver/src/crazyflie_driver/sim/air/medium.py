@@ -3,7 +3,7 @@
 ``LocalMedium`` lives in the process that owns the world: a registry of ``SimulatedCrazyflie`` by
 (channel, datarate, address), per-dongle fault injection (packet loss and ack loss in percent of
 round trips, added latency, unplug) and a per-Crazyflie RSSI model. ``RemoteMedium`` is the same
-interface for another process: it forwards every call to a world server (``sim.server``) over a
+interface for another process: it forwards every call to a world server (``sim.air.server``) over a
 loopback TCP connection with a small binary framing (see ``sim.air.server_framing``).
 """
 from __future__ import annotations
@@ -249,14 +249,15 @@ class RemoteMedium:
         """One request/response; reconnects once if the connection dropped since the last call."""
         with self._lock:
             for attempt in (0, 1):
-                fresh = self._conn is None
-                if fresh:
-                    self._conn = self._connect()
+                conn = self._conn
+                fresh = conn is None
+                if conn is None:
+                    conn = self._conn = self._connect()
                 try:
-                    self._conn.send(op, body)
-                    return self._conn.receive()
+                    conn.send(op, body)
+                    return conn.receive()
                 except (OSError, EOFError) as e:
-                    self._conn.close()
+                    conn.close()
                     self._conn = None
                     if fresh or attempt:
                         raise WorldNotRunning("simulated world at %s went away (%s)" % (self.address, e)) from None

@@ -1,6 +1,6 @@
 """The world server: one process owning the simulated world that every tool and node shares.
 
-``WorldServer`` owns a world (``sim.world.World``), the ``LocalMedium`` and one ``SimulatedCrazyflie`` per
+``WorldServer`` owns a world (``sim.world.world.World``), the ``LocalMedium`` and one ``SimulatedCrazyflie`` per
 vehicle; it serves ``RemoteMedium`` clients on loopback TCP only, without authentication (one thread per
 connection, freed when the client hangs up), runs the
 firmware timers from a world tick listener and, if asked, opens UDP endpoints for cflib.
@@ -338,7 +338,7 @@ class WorldServer:
             if parts:
                 out.append(("dongle %d" % d, ", ".join(parts)))
         now = float(self.world.time)
-        mocap_faults = self.mocap.body_faults(now) if self.mocap is not None else {}
+        mocap_faults: Dict[str, Any] = self.mocap.body_faults(now) if self.mocap is not None else {}
         for e in self.entries():
             parts = []
             if not e.crazyflie.powered:
@@ -382,7 +382,8 @@ class WorldServer:
         except OSError as e:
             sock.close()
             raise CrazyflieError("cannot serve the simulated world on %s:%d: %s (is another crazyflie_world_server "
-                                 "running? choose another with --address)" % (self.host, self.port, e.strerror or e))
+                                 "running? choose another with --address)"
+                                 % (self.host, self.port, e.strerror or e)) from e
         sock.listen(16)
         sock.settimeout(0.2)
         self._listener = sock
@@ -398,9 +399,11 @@ class WorldServer:
         return "%s:%d" % (self.host, self.port)
 
     def _accept_loop(self) -> None:
+        listener = self._listener
+        assert listener is not None, "started by serve()"
         while self._running.is_set():
             try:
-                client, _ = self._listener.accept()
+                client, _ = listener.accept()
             except socket.timeout:
                 continue
             except OSError:
@@ -608,9 +611,9 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
     signal.signal(signal.SIGTERM, on_signal)
     world.start()
     pacer = start_pacing(world, pacing)
-    for e in server.entries():
-        _log.info("%s (%s firmware) on %s%s", e.name, e.crazyflie.profile.generation, e.uri,
-                  " and %s" % e.udp.uri if e.udp is not None else "")
+    for entry in server.entries():
+        _log.info("%s (%s firmware) on %s%s", entry.name, entry.crazyflie.profile.generation, entry.uri,
+                  " and %s" % entry.udp.uri if entry.udp is not None else "")
     if vrpn is not None:
         _log.info("motion capture served as VRPN on 127.0.0.1:%d (%.0f Hz, one tracker per vehicle)", vrpn.port,
                   args.mocap_rate)

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import socket
 import struct
-from typing import Tuple
+from typing import Callable, Tuple, TypeVar
+
+Reply = TypeVar("Reply")
 
 OP_TRANSMIT = 1
 OP_CONTROL = 2
@@ -42,7 +44,7 @@ def encode_air_reply(reply, speed: float = 1.0) -> bytes:
     return _REPLY.pack(flags, reply.retries & 0xFF, reply.latency_s, speed) + bytes(reply.payload)
 
 
-def decode_air_reply(body: bytes, cls) -> Tuple[object, float]:
+def decode_air_reply(body: bytes, cls: Callable[..., Reply]) -> Tuple[Reply, float]:
     """The ``cls`` (``AirReply``) of a reply body and the world's speed it carried."""
     flags, retries, latency, speed = _REPLY.unpack_from(body)
     return (cls(acked=bool(flags & 1), payload=bytes(body[_REPLY.size:]), retries=retries,

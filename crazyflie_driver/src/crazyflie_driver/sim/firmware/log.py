@@ -102,7 +102,9 @@ class LogService:
                 self._send(header, bytes([cmd, ident, self._type_of(ident)]) + self._name(ident))
 
     def _type_of(self, ident: int) -> int:
-        return T.CTYPES[self.entries[ident].ctype].log_code
+        code = T.CTYPES[self.entries[ident].ctype].log_code
+        assert code is not None, "%s is in the log table but its type cannot be logged" % self.entries[ident].ctype
+        return code
 
     def _name(self, ident: int) -> bytes:
         return T.toc_item_name(self.entries[ident])

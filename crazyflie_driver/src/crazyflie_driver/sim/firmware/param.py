@@ -27,7 +27,7 @@ MISC_GET_DEFAULT = 6
 MISC_GET_EXTENDED_TYPE_V2 = 7
 MISC_GET_DEFAULT_V2 = 8
 
-Send = Callable[[int, bytes], None]
+Send = Callable[[int, bytes], bool]   # as ports.Send: whether the packet went out
 _log = logging.getLogger(__name__)
 
 
@@ -182,38 +182,37 @@ class ParamService:
             return  # the 2016 firmware knew only SET_BY_NAME
         ident = struct.unpack_from("<H", data, 1)[0]
         prefix = data[:3]
-        known = ident < len(self.entries)
-        e = self.entries[ident] if known else None
+        e = self.entries[ident] if ident < len(self.entries) else None
         if cmd == MISC_GET_EXTENDED_TYPE:
-            if known and e.persistent:
+            if e is not None and e.persistent:
                 self._send(header, prefix + bytes([T.EXTENDED_PERSISTENT]))
             else:
                 self._send(header, prefix + bytes([ENOENT]))
         elif cmd == MISC_GET_EXTENDED_TYPE_V2 and self.protocol_version >= 11:
-            if known and e.persistent:
+            if e is not None and e.persistent:
                 self._send(header, prefix + bytes([0, T.EXTENDED_PERSISTENT]))
             else:
                 self._send(header, prefix + bytes([ENOENT]))
         elif cmd in (MISC_GET_DEFAULT, MISC_GET_DEFAULT_V2):
             if cmd == MISC_GET_DEFAULT_V2 and self.protocol_version < 11:
                 return
-            if not known or e.readonly:
+            if e is None or e.readonly:
                 self._send(header, prefix + bytes([ENOENT]))
                 return
             value = T.pack(self.default_of(ident), T.CTYPES[e.ctype])
             self._send(header, prefix + (b"\x00" if cmd == MISC_GET_DEFAULT_V2 else b"") + value)
         elif cmd == MISC_PERSISTENT_STORE:
-            ok = known and e.persistent
+            ok = e is not None and e.persistent
             if ok:
                 self.stored[ident] = self.values[ident]
             self._send(header, prefix + bytes([0 if ok else ENOENT]))
         elif cmd == MISC_PERSISTENT_CLEAR:
-            ok = known and e.persistent
+            ok = e is not None and e.persistent
             if ok:
                 self.stored.pop(ident, None)
             self._send(header, prefix + bytes([0 if ok else ENOENT]))
         elif cmd == MISC_PERSISTENT_GET_STATE:
-            if not (known and e.persistent):
+            if not (e is not None and e.persistent):
                 self._send(header, prefix + bytes([ENOENT]))
                 return
             ct = T.CTYPES[e.ctype]

@@ -38,6 +38,15 @@ class BatteryStates(Rows):
         "state": ((), np.int8),
     }
 
+    # The columns (one row per vehicle; shapes and dtypes in FIELDS), declared for the type checker.
+    charge: np.ndarray
+    capacity_mah: np.ndarray
+    current: np.ndarray
+    vbat: np.ndarray
+    low_time: np.ndarray
+    critical_time: np.ndarray
+    state: np.ndarray
+
     def add(self, charge: float = 1.0, capacity_mah: float = CAPACITY_MAH) -> int:
         if not 0.0 <= charge <= 1.0:
             raise ValueError("battery charge must be within 0..1, got %r" % (charge,))

@@ -20,7 +20,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from crazyflie_driver.sim.world.vehicle_rows import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows, Vector
 
 COMPLEMENTARY, KALMAN = 1, 2
 GRAVITY = 9.81                      # m/s²
@@ -71,6 +71,24 @@ class EstimatorStates(Rows):
         "resets": ((), np.int32),
     }
 
+    # The columns (one row per vehicle; shapes and dtypes in FIELDS), declared for the type checker.
+    kind: np.ndarray
+    err: np.ndarray
+    verr: np.ndarray
+    var: np.ndarray
+    last_meas: np.ndarray
+    drift_acc: np.ndarray
+    std_pos: np.ndarray
+    std_quat: np.ndarray
+    pnacc: np.ndarray
+    initial: np.ndarray
+    max_pos: np.ndarray
+    max_vel: np.ndarray
+    ext_pos: np.ndarray
+    ext_quat: np.ndarray
+    ext_tick: np.ndarray
+    resets: np.ndarray
+
 
 class Estimator:
     """Estimates of all vehicles; methods are called under the world lock."""
@@ -78,7 +96,7 @@ class Estimator:
     def __init__(self) -> None:
         self.s = EstimatorStates()
 
-    def add(self, rng: np.random.Generator, position: Sequence[float], now: float) -> int:
+    def add(self, rng: np.random.Generator, position: Vector, now: float) -> int:
         i = self.s.append_row()
         heading = rng.uniform(0.0, 2.0 * math.pi)
         tilt = GRAVITY * math.radians(TILT_ERROR_DEG)
@@ -86,7 +104,7 @@ class Estimator:
         self.boot(i, position, now)
         return i
 
-    def boot(self, i: int, truth: Sequence[float], now: float) -> None:
+    def boot(self, i: int, truth: Vector, now: float) -> None:
         s = self.s
         s.kind[i] = COMPLEMENTARY
         s.std_pos[i] = DEFAULTS["locSrv.extPosStdDev"]
@@ -100,7 +118,7 @@ class Estimator:
         s.ext_tick[i] = 0.0
         self.reset(i, truth, now)
 
-    def reset(self, i: int, truth: Sequence[float], now: float) -> None:
+    def reset(self, i: int, truth: Vector, now: float) -> None:
         """The Kalman filter re-initialised: position at kalman.initialX/Y/Z, large uncertainty."""
         s = self.s
         s.err[i] = s.initial[i, :3] - np.asarray(truth, dtype=float)

@@ -18,6 +18,7 @@ from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RA
 from crazyflie_driver.sim.world.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS, MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import IDLE, Evaluation, Piece, Plan
+from crazyflie_driver.sim.world.vehicle_rows import Vector
 from crazyflie_driver.sim.world.stabilizer import firmware_attitude
 from crazyflie_driver.sim.world.position_control import (CONTROLLER_PID, M_X, M_Y, NULL_MODES, POSITION_EVERY,
                                                          PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl)
@@ -51,7 +52,7 @@ class OnboardFlight:
         """The row containers the world adds to and deletes from."""
         return (self.estimator.s, self.control.s, self.hl)
 
-    def add(self, rng: np.random.Generator, position: Sequence[float], now: float) -> None:
+    def add(self, rng: np.random.Generator, position: Vector, now: float) -> None:
         self.estimator.add(rng, position, now)
         self.control.add()
         self.hl.append_row()

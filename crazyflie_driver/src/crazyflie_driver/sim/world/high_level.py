@@ -110,18 +110,18 @@ class HighLevelPlans:
 
     def go_to(self, i: int, start: Evaluation, goal: Sequence[float], yaw: float, duration: float, relative: bool,
               linear: bool, now: float) -> int:
-        goal = np.asarray(goal, dtype=float)
+        target = np.asarray(goal, dtype=float)
         if relative:
-            goal = goal + start.pos
+            target = target + start.pos
             yaw = yaw + start.yaw
         if linear and duration > 0:
             # constant velocity and yaw rate at both ends; the yaw turns the short way
-            v = (goal - start.pos) / duration
+            v = (target - start.pos) / duration
             yaw_rate = yaw_turn(start.yaw, yaw)[1] / duration
             begin = Evaluation(start.pos, v, np.zeros(3), start.yaw, yaw_rate)
-            piece = online_piece(duration, begin, goal, yaw, v, yaw_rate)
+            piece = online_piece(duration, begin, target, yaw, v, yaw_rate)
         else:
-            piece = online_piece(duration, start, goal, yaw)
+            piece = online_piece(duration, start, target, yaw)
         return self._begin(i, Plan(FLYING, [piece], now))
 
     def start_trajectory(self, i: int, start: Evaluation, pieces: List[Piece], timescale: float, reversed_: bool,

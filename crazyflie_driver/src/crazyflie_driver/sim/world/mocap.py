@@ -23,7 +23,7 @@ import math
 import threading
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import Callable, Deque, Dict, List, Optional, Tuple
+from typing import Callable, Deque, Dict, FrozenSet, List, Optional, Tuple
 
 import numpy as np
 
@@ -105,7 +105,7 @@ class MocapModel:
         self._listeners: List[Callable[[List[MocapFrame]], None]] = []
         self._next_sample = 0.0
         self._attached = False
-        self._hidden: set = set()
+        self._hidden: FrozenSet[str] = frozenset()
         self._faults: Dict[str, BodyFaults] = {}      # replaced whole: the stepping thread reads it
         self._frozen: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}   # pose a frozen body keeps reporting
         self._next_body_sample: Dict[str, float] = {}                 # bodies with a lower rate
@@ -114,7 +114,7 @@ class MocapModel:
         self.frames_superseded = 0      # in flight when a lower latency let a newer frame overtake them
 
     # --- driving -----------------------------------------------------------------------------
-    def attach(self) -> "MocapModel":
+    def attach(self) -> MocapModel:
         """Run from the world's ticks: a capture every 1/rate s of world time, each delivered ``latency`` later."""
         if not self._attached:
             period = 1.0 / self.rate

@@ -96,7 +96,7 @@ class WorldVrpnServer:
             self._thread = None
         self._server.stop()
 
-    def __enter__(self) -> "WorldVrpnServer":
+    def __enter__(self) -> WorldVrpnServer:
         self.start()
         return self
 

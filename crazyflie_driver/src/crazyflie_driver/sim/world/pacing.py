@@ -152,7 +152,7 @@ def read_schedstat(pids: Iterable[int]) -> Schedstat:
 def sibling_pids() -> List[int]:
     """The processes with this one's parent, but not this one: under roslaunch, the launch's other nodes."""
     me, parent = os.getpid(), os.getppid()
-    out = []
+    out: List[int] = []
     try:
         names = os.listdir("/proc")
     except OSError:
@@ -246,7 +246,7 @@ class AutoPacer:
             except Exception:      # pacing must never take the world down
                 _log.exception("world pacing failed; the world keeps speed %.2f", self.world.speed)
 
-    def start(self) -> "AutoPacer":
+    def start(self) -> AutoPacer:
         self.host.sample()                       # the first reading: the next one is measured from it
         self._thread = threading.Thread(target=self._run, name="world-pacing", daemon=True)
         self._thread.start()

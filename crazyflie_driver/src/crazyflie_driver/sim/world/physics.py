@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 
-from crazyflie_driver.sim.world.vehicle_rows import Rows
+from crazyflie_driver.sim.world.vehicle_rows import Rows, Vector
 
 GRAVITY = 9.81
 MAX_COMMAND = 65535
@@ -96,7 +96,29 @@ class BodyStates(Rows):
         "gravity_vector": ((3,), float),     # (0, 0, g)
     }
 
-    def add(self, params: VehicleParams, position: Sequence[float] = (0.0, 0.0, 0.0), yaw: float = 0.0) -> int:
+    # The columns (one row per vehicle; shapes and dtypes in FIELDS), declared for the type checker.
+    position: np.ndarray
+    velocity: np.ndarray
+    quaternion: np.ndarray
+    omega: np.ndarray
+    thrust: np.ndarray
+    specific_force: np.ndarray
+    acceleration: np.ndarray
+    on_ground: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    torque_scale: np.ndarray
+    thrust_coeffs: np.ndarray
+    rotor_speed_coeffs: np.ndarray
+    yaw_torque_coeff: np.ndarray
+    motor_tau: np.ndarray
+    body_drag: np.ndarray
+    gravity: np.ndarray
+    inv_mass: np.ndarray
+    inv_inertia: np.ndarray
+    gravity_vector: np.ndarray
+
+    def add(self, params: VehicleParams, position: Vector = (0.0, 0.0, 0.0), yaw: float = 0.0) -> int:
         pos = np.asarray(position, dtype=float).reshape(3)
         g = params.gravity
         return self.append_row(

@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
+
+from crazyflie_driver.sim.world.vehicle_rows import Vector
 
 DEGREE = 7
 N_COEFFS = DEGREE + 1
@@ -48,7 +50,7 @@ def _basis(t: float, derivative: int) -> np.ndarray:
     return row
 
 
-def poly7_nojerk(duration: float, start: Sequence[float], end: Sequence[float]) -> np.ndarray:
+def poly7_nojerk(duration: float, start: Vector, end: Vector) -> np.ndarray:
     """Coefficients of the degree-7 polynomial with (p, v, a) = ``start`` at 0 and ``end`` at ``duration``
     and zero jerk at both ends. ``duration`` <= 0 gives the constant end position."""
     if not duration > 0:
@@ -84,7 +86,7 @@ def evaluate_with_jerk(piece: Piece, t: float) -> Tuple[np.ndarray, np.ndarray, 
     return p, v, a, j
 
 
-def body_rates(acc: Sequence[float], jerk: Sequence[float], yaw: float, yaw_rate: float) -> Tuple[float, float, float]:
+def body_rates(acc: Vector, jerk: Vector, yaw: float, yaw_rate: float) -> Tuple[float, float, float]:
     """The body rates (rad/s) of a differentially flat quadrotor following the plan (Mellinger & Kumar
     2011): the body z axis along acc + g, the jerk's part across it over the thrust per mass gives the
     x/y rates; the z rate is the yaw derivative times the body z axis' vertical component."""
@@ -120,8 +122,8 @@ def yaw_turn(start_yaw: float, goal_yaw: float) -> Tuple[float, float]:
     return start, shortest_angle(start, normalize_radians(goal_yaw))
 
 
-def online_piece(duration: float, start: Evaluation, goal_pos: Sequence[float], goal_yaw: float,
-                 goal_vel: Sequence[float] = (0.0, 0.0, 0.0), goal_yaw_rate: float = 0.0) -> Piece:
+def online_piece(duration: float, start: Evaluation, goal_pos: Vector, goal_yaw: float,
+                 goal_vel: Vector = (0.0, 0.0, 0.0), goal_yaw_rate: float = 0.0) -> Piece:
     """One piece from ``start`` (its velocity, acceleration and yaw rate kept) to the goal. The yaw
     starts from the start yaw normalised to about [-pi, pi] and turns the short way."""
     yaw0, turn = yaw_turn(start.yaw, goal_yaw)
@@ -153,6 +155,7 @@ class Plan:
         origin), and only a forward plan is rotated."""
         self.shift, self.rotation = np.zeros(3), 0.0
         first = self.evaluate(self.t_begin)
+        assert first is not None, "a plan shifted before it has pieces"
         self.shift = np.asarray(start.pos, dtype=float) - first.pos
         if relative_yaw:
             self.rotation = shortest_angle(normalize_radians(first.yaw), normalize_radians(start.yaw))

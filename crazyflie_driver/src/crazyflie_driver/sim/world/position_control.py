@@ -119,6 +119,37 @@ class PositionStates(Rows):
         "mel_integ": ((3,), float),
     }
 
+    # The columns (one row per vehicle; shapes and dtypes in FIELDS), declared for the type checker.
+    active: np.ndarray
+    priority: np.ndarray
+    kind: np.ndarray
+    modes: np.ndarray
+    prev_modes: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
+    att: np.ndarray
+    rate: np.ndarray
+    quat: np.ndarray
+    quat_yaw: np.ndarray
+    thrust_sp: np.ndarray
+    vbody: np.ndarray
+    pos_gains: np.ndarray
+    vel_gains: np.ndarray
+    thrust_base: np.ndarray
+    thrust_min: np.ndarray
+    rp_limit: np.ndarray
+    vel_max: np.ndarray
+    pos_integ: np.ndarray
+    pos_prev: np.ndarray
+    vel_integ: np.ndarray
+    vel_prev: np.ndarray
+    vel_target: np.ndarray
+    out: np.ndarray
+    controller: np.ndarray
+    mel_gains: np.ndarray
+    mel_integ: np.ndarray
+
     def __init__(self) -> None:
         super().__init__()
         self.version = 0                  # changes whenever the set of rows or their roles may have changed
@@ -281,8 +312,10 @@ class PositionControl:
             return []
         arrays = all_inputs() if mel or len(pid) > SCALAR_ROWS else None
         if mel:
+            assert arrays is not None
             self._update_mellinger(self._row_arrays[1], arrays, stab_sp, stab_yaw_sp, mel_axes, mel_rate_sp)
         if len(pid) > SCALAR_ROWS:
+            assert arrays is not None
             est_pos, est_vel, yaw_deg, thrust_on, _ = arrays
             self._update_pid(self._row_arrays[0], est_pos, est_vel, yaw_deg, stab_sp, stab_yaw_sp, thrust_on)
         else:
@@ -333,7 +366,8 @@ class PositionControl:
                                 absolute)
         # velocity setpoint: the position PID output, or the setpoint's own velocity
         vel_sp = (svx, svy, svz) if s.vbody[i] else (svx * c + svy * sn, svy * c - svx * sn, svz)
-        vel_sp = tuple(pos_out[k] if absolute[k] else vel_sp[k] for k in range(3))
+        vel_sp = (pos_out[0] if absolute[0] else vel_sp[0], pos_out[1] if absolute[1] else vel_sp[1],
+                  pos_out[2] if absolute[2] else vel_sp[2])
         body_v = (vx * c + vy * sn, -vx * sn + vy * c, vz)
         rp = s.rp_limit[i].tolist()
         limits = (rp[1] * LIMIT_OVERHEAD, rp[0] * LIMIT_OVERHEAD, VZ_OUTPUT_LIMIT)

@@ -43,6 +43,14 @@ class SensorStates(Rows):
         "temperature": ((), float),      # °C
     }
 
+    # The columns (one row per vehicle; shapes and dtypes in FIELDS), declared for the type checker.
+    gyro_bias: np.ndarray
+    gyro_raw_offset: np.ndarray
+    acc_bias: np.ndarray
+    mag_bias: np.ndarray
+    baro_offset: np.ndarray
+    temperature: np.ndarray
+
     def add(self, rng: np.random.Generator) -> int:
         return self.append_row(
             gyro_bias=rng.normal(0.0, GYRO_RESIDUAL_BIAS_DPS, 3),

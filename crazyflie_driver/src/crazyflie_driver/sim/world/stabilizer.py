@@ -134,6 +134,40 @@ class OnboardStates(Rows):
         "mel_prev": ((4,), float),          # last roll, pitch rate and their setpoints (rad/s)
     }
 
+    # The columns (one row per vehicle; shapes and dtypes in FIELDS), declared for the type checker.
+    gen2016: np.ndarray
+    att_gains: np.ndarray
+    rate_gains: np.ndarray
+    att_ilimit: np.ndarray
+    rate_ilimit: np.ndarray
+    sp: np.ndarray
+    sp_time: np.ndarray
+    thrust_locked: np.ndarray
+    generic: np.ndarray
+    lock: np.ndarray
+    lock_time: np.ndarray
+    yaw_sp: np.ndarray
+    att_integ: np.ndarray
+    att_prev: np.ndarray
+    rate_integ: np.ndarray
+    rate_prev: np.ndarray
+    rate_desired: np.ndarray
+    rate_out: np.ndarray
+    attitude: np.ndarray
+    attitude_desired: np.ndarray
+    thrust: np.ndarray
+    motors: np.ndarray
+    tilt_time: np.ndarray
+    upside_time: np.ndarray
+    motor_power_enable: np.ndarray
+    motor_power: np.ndarray
+    moment_law: np.ndarray
+    mel_axes: np.ndarray
+    mel_rate_sp: np.ndarray
+    mel_gains: np.ndarray
+    mel_integ_m: np.ndarray
+    mel_prev: np.ndarray
+
     def reset_pids(self, rows, attitude: np.ndarray) -> None:
         """The firmware PID controller's re-initialisation on a change of setpoint modes: the attitude
         PIDs restart from ``attitude`` (n,3, deg, firmware convention; integrals 0, last measurement =
@@ -252,9 +286,10 @@ class OnboardController:
             return s.motors
         # supervisor: watchdog and battery
         age = now - s.sp_time
-        level = age > WATCHDOG_LEVEL_S
+        watched = age > WATCHDOG_LEVEL_S
+        level: Optional[np.ndarray] = watched
         self._cut_soon = False
-        if np.count_nonzero(level):
+        if np.count_nonzero(watched):
             flying = s.sp[:, 3] > 0.0
             cut = (age > WATCHDOG_SHUTDOWN_S) & flying
             if np.count_nonzero(cut):

@@ -6,15 +6,28 @@ deletes one row in every array.
 """
 from __future__ import annotations
 
-from typing import Any, Dict, Tuple
+from typing import Any, Dict, Sequence, Tuple, Union
 
 import numpy as np
 
+# A short vector (a position, a polynomial's boundary values) as the models take it: numbers in a
+# sequence, numpy scalars among them, or an array.
+Vector = Union[Sequence[Union[float, "np.floating[Any]"]], np.ndarray]
 
 class Rows:
     """Named arrays sharing their first axis. Subclasses list ``FIELDS = {name: (tail shape, dtype)}``."""
 
     FIELDS: Dict[str, Tuple[Tuple[int, ...], Any]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        # The columns are set with setattr, so the type checker sees them only through the
+        # subclass's annotations: a field without one would escape it.
+        super().__init_subclass__(**kwargs)
+        declared = {name for klass in cls.__mro__ for name in getattr(klass, "__annotations__", {})}
+        undeclared = sorted(set(cls.FIELDS) - declared)
+        if undeclared:
+            raise TypeError("%s: declare the field(s) %s as 'name: np.ndarray' beside FIELDS"
+                            % (cls.__name__, ", ".join(undeclared)))
 
     def __init__(self) -> None:
         for name, (tail, dtype) in self.FIELDS.items():

@@ -22,7 +22,7 @@ from crazyflie_driver.sim.world import flight as _flight
 from crazyflie_driver.sim.world.stabilizer import (GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE,
                                                    LOCK_TUMBLE, TUMBLE_TILT_COS, OnboardController, check_generation,
                                                    default_params)
-from crazyflie_driver.sim.world.physics import BodyStates, RigidBodyBackend, VehicleParams, quat_to_matrix
+from crazyflie_driver.sim.world.physics import BodyStates, Drive, RigidBodyBackend, VehicleParams, quat_to_matrix
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
@@ -41,7 +41,7 @@ _ONES4 = np.ones(4)
 class Vehicle:
     """One simulated Crazyflie as the firmware side sees it. Thread safe."""
 
-    def __init__(self, world: "World", name: str, firmware: str, params: VehicleParams) -> None:
+    def __init__(self, world: World, name: str, firmware: str, params: VehicleParams) -> None:
         self.name = name
         self.firmware = firmware
         self.params = params
@@ -287,7 +287,7 @@ class World:
         self._listeners_due = math.inf             # earliest next_time of the listeners
         self._thread: Optional[threading.Thread] = None
         self._stop = threading.Event()
-        self._drive = None                         # physics drive of the current motor commands
+        self._drive: Optional[Drive] = None        # physics drive of the current motor commands
         self.realtime_factor = 0.0                 # measured by the background thread
         self.overruns = 0                          # times the thread could not keep up and let go
         self._anchor: Optional[Tuple[float, float]] = None     # the thread's schedule: (host time.time(), world time)
