@@ -53,6 +53,8 @@ class SharedRadio:
         ``background`` ones (idle keep-alives) after every other waiting round trip (FairLock).
         """
         def trip(radio: Crazyradio) -> RadioAck:
+            if radio.inline_capable:
+                return radio.send_inline(channel, datarate, address, data)   # settings travel with the packet
             if channel != radio._channel or datarate != radio._datarate or address != radio._address:
                 radio.configure(channel, datarate, address)
             if not radio.ack_enabled:
