@@ -57,7 +57,7 @@ def _sim_backend(address: str):
         backend = _sim_backends.get((host, port))
         if backend is None:
             medium = RemoteMedium(host, port)
-            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()),
+            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()), model=medium.dongle_model(),
                                      clock=DongleClock.world_paced(medium))
             _sim_backends[(host, port)] = backend
         return backend

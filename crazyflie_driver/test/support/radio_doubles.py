@@ -48,6 +48,9 @@ class ScriptedMedium:
     def dongle_count(self) -> int:
         return self.dongles
 
+    def dongle_model(self) -> str:
+        return "PA"
+
 
 class NrfPeer:
     """The Crazyflie's nRF side as docs/protocol.md ("Safelink, empty acks and RSSI") describes it: safelink,

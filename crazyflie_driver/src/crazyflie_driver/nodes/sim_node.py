@@ -564,7 +564,8 @@ def main() -> None:
         host, port = parse_address(str(params.get("address", "127.0.0.1:19840")))
         seed = params.get("seed")
         world = World(speed=pacing.target, seed=None if seed is None else int(seed))
-        server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed))
+        server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed),
+                             dongle_model=str(params.get("dongle_model", "PA")))
         for v in vehicles:
             server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw)
         server.start()

@@ -219,6 +219,9 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
             super().__init__(dongles=2)
             created.append((host, port))
 
+        def dongle_model(self):
+            return "2.0"                                     # the world plugs Crazyradio 2.0s
+
     module = types.ModuleType("crazyflie_driver.sim.air.medium")
     module.RemoteMedium = RemoteMedium
     module.parse_address = parse_address                 # the world's own address rules (loopback only)
@@ -231,6 +234,7 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
     assert usb_backend.get_backend() is backend          # one per address and process
     assert created == [("127.0.0.1", 19999)]
     assert len(backend.dongles) == 2
+    assert [d.model.name for d in backend.dongles] == ["2.0", "2.0"]
     monkeypatch.setenv("CRAZYFLIE_SIM_ADDRESS", "nonsense")
     with pytest.raises(CrazyflieError, match="host:port"):
         usb_backend.get_backend()

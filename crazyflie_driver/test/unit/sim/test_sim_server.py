@@ -250,3 +250,16 @@ def test_plug_change_is_stamped_with_world_time(served):
     row = medium.control("dongle_faults", dongle=1)[0]
     assert row["plug_changed_at"] == 5.0 and not row["unplugged"]
     assert medium.control("dongle_faults", dongle=0)[0]["plug_changed_at"] is None
+
+
+def test_the_world_says_which_crazyradio_model_is_plugged_in():
+    server = WorldServer(FakeWorld(), dongles=1, port=0, dongle_model="2.0")
+    host, port = server.start()
+    medium = RemoteMedium(host, port)
+    try:
+        assert medium.dongle_model() == "2.0"
+    finally:
+        medium.close()
+        server.stop()
+    with pytest.raises(ValueError, match="unknown Crazyradio model 'PA2'"):
+        WorldServer(FakeWorld(), dongles=1, port=0, dongle_model="PA2")

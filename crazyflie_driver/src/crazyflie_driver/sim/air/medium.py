@@ -19,6 +19,7 @@ from typing import Any, Dict, List, Optional, Tuple
 from crazyflie_driver.errors import CrazyflieError, RadioMediumGone
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.sim.air import server_framing as framing
+from crazyflie_driver.sim.air.usb_descriptors import MODELS
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 19840
@@ -87,9 +88,12 @@ def key_of(uri: str) -> Key:
 class LocalMedium:
     """The air in this process. Thread safe: every dongle may transmit from its own thread."""
 
-    def __init__(self, dongles: int = 1, seed: Optional[int] = None) -> None:
+    def __init__(self, dongles: int = 1, seed: Optional[int] = None, dongle_model: str = "PA") -> None:
         if dongles < 0:
             raise ValueError("dongles must be >= 0, got %d" % dongles)
+        if dongle_model not in MODELS:
+            raise ValueError("unknown Crazyradio model %r, use one of %s" % (dongle_model, ", ".join(sorted(MODELS))))
+        self._dongle_model = dongle_model
         self._lock = threading.Lock()
         self._rng = random.Random(seed)
         self._faults: List[DongleFaults] = [DongleFaults() for _ in range(dongles)]
@@ -135,6 +139,10 @@ class LocalMedium:
     # --- dongles -----------------------------------------------------------------------------
     def dongle_count(self) -> int:
         return len(self._faults)
+
+    def dongle_model(self) -> str:
+        """The Crazyradio model plugged in (``usb_descriptors.MODELS``): "PA" or "2.0" (inline mode)."""
+        return self._dongle_model
 
     def set_dongle_count(self, n: int) -> None:
         with self._lock:
@@ -294,6 +302,9 @@ class RemoteMedium:
 
     def dongle_count(self) -> int:
         return int(self.control("dongle_count"))
+
+    def dongle_model(self) -> str:
+        return str(self.control("dongle_model"))
 
     def dongle_faults(self, dongle: int) -> DongleFaults:
         row = self.control("dongle_faults", dongle=dongle)[0]
