@@ -7,7 +7,8 @@ that flies real hardware is the code under test.
 Emulated (facts and sources in docs/simulation.md, "The fake Crazyradio"):
 
 * a Crazyradio PA with firmware 0.53 (default) or a Crazyradio 2.0 with firmware 5.4
-  (``model="2.0"``: 250K and channels above 100 are accepted but never sent, the IN reply is 0x00);
+  (``model="2.0"``: 250K and channels above 100 are accepted but never sent, the IN reply is 0x00;
+  inline mode);
 * full device/configuration/interface/endpoint descriptors; string descriptors (LANGID,
   manufacturer, product, serial) answered through ``ctrl_transfer`` as pyusb's ``get_string`` reads them;
 * every vendor request of the 0.53 firmware, STALL (``USBError`` errno EPIPE) for unknown ones;
@@ -23,7 +24,8 @@ Emulated (facts and sources in docs/simulation.md, "The fake Crazyradio"):
 This module is the pyusb side (enumeration, handles, transfers); ``usb_descriptors`` holds the
 descriptors, ``dongle`` the dongle's state and firmware.
 
-Not emulated: the 2.0's inline and sniffer modes (0x23-0x26 STALL), the Microsoft OS descriptors of
+The 2.0's inline mode (0x23, values 1 and 2 from firmware 5.4) is emulated in ``dongle``. Not emulated:
+the 2.0's sniffer mode (0x24-0x26 STALL), the Microsoft OS descriptors of
 development builds, the nRF bootloader's own protocol (after LAUNCH_BOOTLOADER and a reset the dongle
 re-enumerates as 0x1915/0x0101 and stalls every radio request).
 """
@@ -62,8 +64,9 @@ class _Handle:
 class FakeUsbBackend(usb.backend.IBackend):
     """pyusb backend with ``dongles`` emulated Crazyradios attached to ``medium``.
 
-    ``model`` is "PA" (firmware 0.53) or "2.0" (firmware 5.4). ``clock`` needs ``time()`` and
-    ``sleep(s)``; tests inject a fake one to check the timing model without waiting.
+    ``model`` is a name of ``usb_descriptors.MODELS``: "PA" (firmware 0.53), "PA-99.55", "2.0" (firmware
+    5.4, inline mode) or "2.0-5.0". ``timing`` defaults to the model's (``DongleTiming``). ``clock`` needs
+    ``time()`` and ``sleep(s)``; tests inject a fake one to check the timing model without waiting.
     Dongle ids (``FakeDongle.ident``, the ``dongle`` argument of ``Medium.transmit``) are
     ``first_id .. first_id + dongles - 1`` and stable for the backend's lifetime.
     """
@@ -77,10 +80,12 @@ class FakeUsbBackend(usb.backend.IBackend):
         if dongles < 0:
             raise ValueError("dongles must be >= 0, got %d" % dongles)
         self.medium = medium
-        self.timing = timing if timing is not None else DongleTiming()
+        m = MODELS[model]
+        if timing is None:
+            timing = DongleTiming.crazyradio_2() if m.is_crazyradio_2 else DongleTiming()
+        self.timing = timing
         self.clock = clock if clock is not None else DongleClock()
         self.firmware = DongleFirmware(medium, self.timing, self.clock, fault_request)
-        m = MODELS[model]
         self.dongles = [FakeDongle(first_id + i, m, self._serial_for(first_id + i, m))
                         for i in range(dongles)]
 
