@@ -568,6 +568,8 @@ def main() -> None:
                              dongle_model=str(params.get("dongle_model", "PA")))
         for v in vehicles:
             server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw)
+        for name in str(params.get("usb", "")).replace(",", " ").split():
+            server.plug_usb(name)          # also on a USB cable: usb://0, usb://1, ... in this order
         server.start()
     except (SimConfigError, PacingError, ValueError, CrazyflieError) as e:
         rospy.logfatal("crazyflie_sim: %s", e)

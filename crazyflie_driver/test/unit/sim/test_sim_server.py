@@ -263,3 +263,17 @@ def test_the_world_says_which_crazyradio_model_is_plugged_in():
         server.stop()
     with pytest.raises(ValueError, match="unknown Crazyradio model 'PA2'"):
         WorldServer(FakeWorld(), dongles=1, port=0, dongle_model="PA2")
+
+
+def test_a_crazyflie_on_a_usb_cable_through_the_world_server(served):
+    world, server, medium = served
+    assert medium.usb_count() == 0
+    assert server.plug_usb("cf1") == 0
+    assert medium.usb_count() == 1
+    assert medium.usb_send(0, b"\xfc\x2a")                       # port 15 ch 0: an echo, straight to the STM
+    assert medium.usb_receive(0) == b"\xfc\x2a"
+    assert medium.usb_receive(0) is None
+    with pytest.raises(CrazyflieError, match="no simulated Crazyflie usb://1"):
+        medium.usb_receive(1)
+    with pytest.raises(ValueError, match="no simulated Crazyflie of that name.*cf1, cf2"):
+        server.plug_usb("cf9")

@@ -94,6 +94,7 @@ class LocalMedium:
         if dongle_model not in MODELS:
             raise ValueError("unknown Crazyradio model %r, use one of %s" % (dongle_model, ", ".join(sorted(MODELS))))
         self._dongle_model = dongle_model
+        self._usb: List[Any] = []        # Crazyflies on a USB cable, usb://0 first
         self._lock = threading.Lock()
         self._rng = random.Random(seed)
         self._faults: List[DongleFaults] = [DongleFaults() for _ in range(dongles)]
@@ -143,6 +144,28 @@ class LocalMedium:
     def dongle_model(self) -> str:
         """The Crazyradio model plugged in (``usb_descriptors.MODELS``): "PA" or "2.0" (inline mode)."""
         return self._dongle_model
+
+    # --- Crazyflies on a USB cable -------------------------------------------------------------------
+    def plug_usb(self, crazyflie) -> int:
+        """Put a simulated Crazyflie on a USB cable to the host; returns its number N (``usb://N``)."""
+        with self._lock:
+            self._usb.append(crazyflie)
+            return len(self._usb) - 1
+
+    def usb_count(self) -> int:
+        return len(self._usb)
+
+    def usb_send(self, index: int, data: bytes) -> bool:
+        """One CRTP packet down the cable to its STM (no nRF, no radio faults); False when it is off."""
+        cf = self._usb[index]
+        if not cf.powered:
+            return False
+        cf.handle_crtp(bytes(data))
+        return True
+
+    def usb_receive(self, index: int) -> Optional[bytes]:
+        """The next packet the Crazyflie on cable ``index`` sends up, None when it has none."""
+        return self._usb[index].pop_outgoing(packet_link=True)
 
     def set_dongle_count(self, n: int) -> None:
         with self._lock:
@@ -305,6 +328,16 @@ class RemoteMedium:
 
     def dongle_model(self) -> str:
         return str(self.control("dongle_model"))
+
+    def usb_count(self) -> int:
+        return int(self.control("usb_count"))
+
+    def usb_send(self, index: int, data: bytes) -> bool:
+        return bool(self.control("usb_send", index=index, data=bytes(data).hex()))
+
+    def usb_receive(self, index: int) -> Optional[bytes]:
+        text = self.control("usb_receive", index=index)
+        return None if text is None else bytes.fromhex(text)
 
     def dongle_faults(self, dongle: int) -> DongleFaults:
         row = self.control("dongle_faults", dongle=dongle)[0]
