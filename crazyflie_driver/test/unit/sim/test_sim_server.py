@@ -277,3 +277,22 @@ def test_a_crazyflie_on_a_usb_cable_through_the_world_server(served):
         medium.usb_receive(1)
     with pytest.raises(ValueError, match="no simulated Crazyflie of that name.*cf1, cf2"):
         server.plug_usb("cf9")
+
+
+def test_the_stack_connects_to_usb_0_of_a_world_in_another_process(served):
+    from crazyflie_driver.protocol.crazyflie import Crazyflie
+    from crazyflie_driver.radio.shared_radio import RadioManager
+    from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+    from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+
+    world, server, medium = served
+    server.plug_usb(URI2)                                        # the 2016 firmware, by its URI
+    backend = FakeUsbBackend(medium, dongles=1, timing=DongleTiming.instant(), usb_crazyflies=medium.usb_count())
+    cf = Crazyflie("usb://0", radio_manager=RadioManager(backend), timeout=2.0)
+    cf.connect()
+    try:
+        assert cf.protocol_version == server.crazyflie(URI2).profile.protocol_version
+        assert backend.cables[0].bulk_in > 0 and backend.dongles[0].bulk_out == 0
+    finally:
+        cf.close()
+    assert not backend.cables[0].crtp_to_usb
