@@ -105,3 +105,20 @@ def test_the_server_registry_serves_a_simulated_crazyflie_on_the_cable(tmp_path)
         assert backend.cables[0].bulk_out > 10 and rig.medium.round_trips == 0      # all of it over the cable
     finally:
         reg.shutdown()
+
+
+def test_cflib_finds_and_connects_the_simulated_crazyflie_on_the_cable():
+    import json
+    import pathlib
+    import subprocess
+
+    from support.cflib_python import cflib_python
+
+    session = pathlib.Path(__file__).resolve().parents[2] / "support" / "cflib_usb_session.py"
+    run = subprocess.run([cflib_python(), str(session)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         universal_newlines=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    seen = json.loads(run.stdout.strip().splitlines()[-1])
+    assert seen["found"] == ["usb://0"]
+    assert seen["ring.effect"] == "6"                       # cflib reads the parameter TOC and value over USB
+    assert seen["radio_round_trips"] == 0 and seen["cable_out"] > 10
