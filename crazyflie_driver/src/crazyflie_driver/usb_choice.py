@@ -19,6 +19,7 @@ from typing import Optional
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.radio.shared_radio import RadioManager
+from crazyflie_driver.radio.usb_crazyflie import UsbCrazyflie
 
 ENV_BACKEND = "CRAZYFLIE_BACKEND"
 ENV_SIM_ADDRESS = "CRAZYFLIE_SIM_ADDRESS"
@@ -57,7 +58,8 @@ def _sim_backend(address: str):
         backend = _sim_backends.get((host, port))
         if backend is None:
             medium = RemoteMedium(host, port)
-            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()),
+            backend = FakeUsbBackend(medium, dongles=max(1, medium.dongle_count()), model=medium.dongle_model(),
+                                     usb_crazyflies=medium.usb_count(),
                                      clock=DongleClock.world_paced(medium))
             _sim_backends[(host, port)] = backend
         return backend
@@ -94,6 +96,11 @@ def open_radio(index: int) -> Crazyradio:
     return Crazyradio(index, backend=get_backend())
 
 
+def open_usb_crazyflie(index: int):
+    """Crazyflie ``usb://index`` on the backend chosen now (a ``usb_crazyflie.UsbCrazyflie``)."""
+    return UsbCrazyflie(index, backend=get_backend())
+
+
 def radio_manager() -> RadioManager:
     """The process-wide ``RadioManager`` of an entry point: every Crazyflie of the process shares
     its dongles, each opened through ``open_radio`` when a link first needs it (a simulated world
@@ -101,5 +108,5 @@ def radio_manager() -> RadioManager:
     global _manager
     with _lock:
         if _manager is None:
-            _manager = RadioManager(radio_factory=open_radio)
+            _manager = RadioManager(radio_factory=open_radio, usb_factory=open_usb_crazyflie)
         return _manager

@@ -48,6 +48,12 @@ class ScriptedMedium:
     def dongle_count(self) -> int:
         return self.dongles
 
+    def dongle_model(self) -> str:
+        return "PA"
+
+    def usb_count(self) -> int:
+        return 0
+
 
 class NrfPeer:
     """The Crazyflie's nRF side as docs/protocol.md ("Safelink, empty acks and RSSI") describes it: safelink,

@@ -1,4 +1,5 @@
-"""scan: the dongle's version line, then every Crazyflie that answers on any data rate and channel at one address."""
+"""scan: the dongle's version line, then every Crazyflie that answers on any data rate and channel at one address,
+then every Crazyflie on a USB cable (usb://N)."""
 from __future__ import annotations
 
 import sys
@@ -7,6 +8,7 @@ from typing import List, Optional
 from crazyflie_driver import usb_choice
 from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.radio.scan import parse_address, scan
+from crazyflie_driver.radio.usb_crazyflie import list_usb_crazyflies
 from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri
 
 from .common import parser, run
@@ -25,7 +27,8 @@ def uri_line(uri: RadioUri) -> str:
 
 def _scan(args) -> int:
     address = parse_address(args.address)
-    radio = Crazyradio(args.radio, usb_choice.get_backend())
+    backend = usb_choice.get_backend()
+    radio = Crazyradio(args.radio, backend)
     try:
         print(dongle_line(radio.version), flush=True)
         found = scan(args.radio, address, radio=radio)
@@ -33,7 +36,10 @@ def _scan(args) -> int:
         radio.close()
     for uri in found:
         print(uri_line(uri))
-    if not found:
+    cabled = list_usb_crazyflies(backend)
+    for info in cabled:
+        print(info.uri)
+    if not found and not cabled:
         print("no Crazyflie answered at address %s" % address.hex().upper(), file=sys.stderr)
     return 0
 

@@ -97,6 +97,20 @@ def test_scan_lists_each_answering_uri(sim, capsys):
     assert capsys.readouterr().out.splitlines() == [dongle, URI2]
 
 
+def test_scan_lists_a_crazyflie_on_the_usb_cable_after_the_radio_ones(monkeypatch, capsys):
+    s = Sim()
+    try:
+        on_radio = s.add(URI1)
+        s.medium.plug_usb(on_radio)
+        s.medium.plug_usb(s.add(URI2))
+        backend = FakeUsbBackend(s.medium, dongles=1, timing=DongleTiming.instant(), usb_crazyflies=2)
+        with usb_backend.use_backend(backend):
+            assert scan.main(["--address", "E7E7E7E701"]) == 0
+    finally:
+        s.stop()
+    assert capsys.readouterr().out.splitlines() == ["Configured Dongle with version 0.53", URI1, "usb://0", "usb://1"]
+
+
 def test_scan_default_address_finds_nothing_here(sim, capsys):
     sim.add(URI1)
     assert scan.main([]) == 0

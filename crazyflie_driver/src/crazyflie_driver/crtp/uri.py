@@ -1,4 +1,5 @@
-"""Crazyflie radio URIs: ``radio://<dongle>/<channel>/<rate>[/<address>]``.
+"""Crazyflie URIs: ``radio://<dongle>/<channel>/<rate>[/<address>]`` and ``usb://<n>`` (the n-th
+Crazyflie on a USB cable; ``parse_link_uri``).
 
 Parsing is strict on purpose: a typo in a launch file should be refused with a
 message that names the bad part, not turned into a silent default that makes
@@ -7,6 +8,7 @@ the Crazyflie "not answer".
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional, Union
 
 from crazyflie_driver.errors import UriError
 
@@ -40,6 +42,39 @@ class RadioUri:
             self.index, self.channel, DATARATE_NAMES[self.datarate], self.address.hex().upper())
 
 
+@dataclass(frozen=True)
+class UsbUri:
+    """A Crazyflie on a USB cable: the ``index``-th one on the bus (CRTP over USB, no radio)."""
+
+    index: int
+
+    def __str__(self) -> str:
+        return "usb://%d" % self.index
+
+
+LinkUri = Union[RadioUri, UsbUri]
+_USB_FORMAT = "usb://<n>, n the n-th Crazyflie on a USB cable from 0"
+
+
+def parse_link_uri(text: str) -> LinkUri:
+    """A radio URI (``parse_uri``) or ``usb://<n>``; raises UriError naming the malformed part."""
+    if not isinstance(text, str):
+        raise UriError("Crazyflie URI must be a string, got %r" % (text,))
+    scheme, sep, rest = text.strip().partition("://")
+    if scheme.lower() != "usb" or not sep:
+        return parse_uri(text)
+    rest = rest[:-1] if rest.endswith("/") else rest
+    if not rest or not rest.isdigit() or not rest.isascii():
+        raise UriError("URI %r: %r is not a Crazyflie number (%s)" % (text, rest, _USB_FORMAT))
+    return UsbUri(int(rest))
+
+
+def radio_uri_of(text: str) -> Optional[RadioUri]:
+    """The radio URI of a link URI, None for a Crazyflie on a USB cable (it takes no radio's time)."""
+    uri = parse_link_uri(text)
+    return uri if isinstance(uri, RadioUri) else None
+
+
 def parse_uri(text: str) -> RadioUri:
     """Parse a radio URI; raises UriError naming the malformed part."""
     if not isinstance(text, str):
@@ -50,8 +85,9 @@ def parse_uri(text: str) -> RadioUri:
         raise UriError("malformed Crazyflie URI %r: expected %s" % (text, _FORMAT))
     scheme = scheme.lower()
     if scheme == "usb":
-        raise UriError("URI %r: usb:// (a Crazyflie on a USB cable) is not supported by this driver; "
-                       "use a Crazyradio URI like radio://0/80/2M/E7E7E7E7E7" % (text,))
+        raise UriError("URI %r: a Crazyflie on a USB cable has no radio channel, rate or address; here a "
+                       "Crazyradio URI like radio://0/80/2M/E7E7E7E7E7 is needed (usb:// links are opened "
+                       "through parse_link_uri)" % (text,))
     if scheme != "radio":
         raise UriError("URI %r: unknown scheme %r, expected 'radio' (%s)" % (text, scheme, _FORMAT))
     if "?" in rest or "#" in rest:

@@ -45,7 +45,7 @@ from crazyflie_driver.server.diagnostics import (UNKNOWN_BOTTLENECK, BottleneckF
                                                  CrazyflieDiagnostics, Entry, RadioFigures, bottleneck_entry,
                                                  radio_entry, world_speed_share)
 from crazyflie_driver.server import radio_budget
-from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.crtp.uri import parse_uri, radio_uri_of
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
@@ -400,7 +400,8 @@ class CrazyflieServer:
         ``~budget_pose_rate``) and the broadcasts added; a dongle that will be short is logged as a warning
         (``warn``)."""
         with self._lock:
-            served = [(key, ros, ros.worker) for key, ros in self._ros.items() if ros.worker is not None]
+            served = [(key, ros, ros.worker) for key, ros in self._ros.items()
+                      if ros.worker is not None and radio_uri_of(key) is not None]     # usb:// takes no radio
             plan = list(self._broadcast_plan)
         demands = [radio_budget.CrazyflieDemand(ros.config.tf_prefix or key, parse_uri(key), self.budget_setpoint_rate,
                                                 self.budget_pose_rate, worker.log_packet_rate)
@@ -444,7 +445,9 @@ class CrazyflieServer:
             except Exception as e:      # one Crazyflie's bookkeeping must not hide the others
                 arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, hardware_id=key, message=(
                     "diagnostics failed: %r" % e), name="crazyflie_server: %s" % (ros.config.tf_prefix or key)))
-            by_dongle.setdefault(parse_uri(key).index, []).append((key, ros))
+            radio = radio_uri_of(key)
+            if radio is not None:                  # a Crazyflie on a USB cable takes no radio's time
+                by_dongle.setdefault(radio.index, []).append((key, ros))
         now = self.clock.now()
         loads: List[Tuple[int, float]] = []
         for index in sorted(set(by_dongle) | set(broadcasts)):

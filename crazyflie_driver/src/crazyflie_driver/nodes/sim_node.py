@@ -564,9 +564,12 @@ def main() -> None:
         host, port = parse_address(str(params.get("address", "127.0.0.1:19840")))
         seed = params.get("seed")
         world = World(speed=pacing.target, seed=None if seed is None else int(seed))
-        server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed))
+        server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed),
+                             dongle_model=str(params.get("dongle_model", "PA")))
         for v in vehicles:
             server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw)
+        for name in str(params.get("usb", "")).replace(",", " ").split():
+            server.plug_usb(name)          # also on a USB cable: usb://0, usb://1, ... in this order
         server.start()
     except (SimConfigError, PacingError, ValueError, CrazyflieError) as e:
         rospy.logfatal("crazyflie_sim: %s", e)

@@ -7,6 +7,7 @@ timeout; a silent Crazyflie raises ``LinkTimeout`` naming the URI and the step.
 """
 from __future__ import annotations
 
+import functools
 import logging
 from typing import Optional, Union
 
@@ -19,12 +20,13 @@ from crazyflie_driver.protocol.memory import MemoryClient
 from crazyflie_driver.protocol.setpoints import SetpointSender
 from crazyflie_driver.protocol.supervisor import Supervisor
 from crazyflie_driver.radio.link import RadioLink
-from crazyflie_driver.radio.shared_radio import RadioManager
+from crazyflie_driver.radio.shared_radio import RadioManager, default_manager
+from crazyflie_driver.radio.usb_crazyflie import UsbCrazyflie, UsbLink
 from crazyflie_driver.protocol.log import LogClient
 from crazyflie_driver.protocol.param import ParamClient
 from crazyflie_driver.protocol.platform import Platform, toc_version
 from crazyflie_driver.protocol.toccache import TocCache
-from crazyflie_driver.crtp.uri import RadioUri, parse_uri
+from crazyflie_driver.crtp.uri import LinkUri, UsbUri, parse_link_uri
 
 _LOG = logging.getLogger(__name__)
 
@@ -32,15 +34,22 @@ _LOG = logging.getLogger(__name__)
 class Crazyflie:
     """Facade composing link, platform, params, log, console and commander."""
 
-    def __init__(self, uri: Union[str, RadioUri], radio_manager: Optional[RadioManager] = None,
+    def __init__(self, uri: Union[str, LinkUri], radio_manager: Optional[RadioManager] = None,
                  cache_dir: Optional[str] = None, timeout: float = 1.0, link=None, clock: Clock = WALL) -> None:
         """``link`` replaces the radio link altogether (tests, other transports); ``clock`` times the
         radio link's request timeouts (``timeout`` s of its time)."""
         if timeout <= 0:
             raise ValueError("timeout must be > 0, got %r" % (timeout,))
-        self.uri: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
+        self.uri: LinkUri = parse_link_uri(uri) if isinstance(uri, str) else uri
         self.timeout = timeout
-        self.link = link if link is not None else RadioLink(self.uri, radio_manager, clock=clock)
+        if link is None:
+            if isinstance(self.uri, UsbUri):                   # a Crazyflie on a USB cable
+                manager = radio_manager or default_manager()
+                opener = manager.usb_factory or functools.partial(UsbCrazyflie, backend=manager.backend)
+                link = UsbLink(self.uri, opener, clock=clock)
+            else:
+                link = RadioLink(self.uri, radio_manager, clock=clock)
+        self.link = link
         self.cache = TocCache(cache_dir)
         self.protocol_version = -1
         self.connected = False

@@ -26,6 +26,7 @@ SET_RADIO_ARC = 0x06
 ACK_ENABLE = 0x10
 SET_CONT_CARRIER = 0x20
 SCAN_CHANNELS = 0x21
+SET_INLINE_MODE = 0x23
 
 DR_250KPS, DR_1MPS, DR_2MPS = 0, 1, 2
 P_M18DBM, P_M12DBM, P_M6DBM, P_0DBM = 0, 1, 2, 3
@@ -35,6 +36,16 @@ DEFAULT_ADDRESS = b"\xe7\xe7\xe7\xe7\xe7"
 #: radio packets of half its length each (the "99.55" image; 0.53 drops the bytes past 32).
 TWO_PER_TRANSFER_FROM = 99.55
 MAX_RADIO_PACKET = 32
+#: Crazyradio 2.0 firmware from which SET_INLINE_MODE exists: each bulk OUT then carries its own
+#: rate, ack flag, channel and address (docs/protocol.md, "Inline mode"). PA firmware versions are
+#: 0.x releases and the 99.x development images, so the range below holds only the 2.0.
+INLINE_MODE_FROM = 5.1
+INLINE_MODE_BELOW = 99.0
+INLINE_MODE_ON = 1
+#: Bytes of the inline-mode OUT header: total length, rate | ack << 4, channel, 5 address bytes.
+INLINE_HEADER = 8
+_INLINE_ACK_BIT = 0x10
+_INLINE_INVALID_SETTINGS = 0x04
 UDEV_RULES_FILE = "99-crazyradio.rules"
 _TYPE_VENDOR_OUT = 0x40
 _TYPE_VENDOR_IN = 0xC0
@@ -68,6 +79,22 @@ class RadioInfo(NamedTuple):
 def _version_of(bcd: int) -> float:
     """bcdDevice as the float drivers use: 0x0053 -> 0.53, 0x0504 -> 5.4, 0x9955 -> 99.55."""
     return float("%x.%x" % (bcd >> 8, bcd & 0xFF))
+
+
+def inline_frame(channel: int, datarate: int, address: bytes, data: bytes, ack: bool = True) -> bytes:
+    """The bulk OUT of one radio packet in the Crazyradio 2.0's inline mode."""
+    return bytes((INLINE_HEADER + len(data), datarate | (_INLINE_ACK_BIT if ack else 0), channel)) + address + data
+
+
+def parse_inline_reply(reply: bytes, arc: int) -> RadioAck:
+    """The IN reply of an inline-mode packet (mode 1: [length, status] + ack payload) as a RadioAck.
+
+    A lost packet or settings the radio cannot send (status bit 2) count as unacked after ``arc`` retries.
+    """
+    if len(reply) < 2 or not reply[1] & 1 or reply[1] & _INLINE_INVALID_SETTINGS:
+        return RadioAck(False, False, arc, b"")
+    status = reply[1]
+    return RadioAck(True, bool(status & 2), status >> 4, bytes(reply[2:reply[0]]))
 
 
 def _find(backend) -> list:
@@ -139,6 +166,9 @@ class Crazyradio:
         self._datarate = -1
         self.arc = 3
         self.ack_enabled = True
+        #: True when the firmware can carry the settings in each packet (Crazyradio 2.0 from 5.1).
+        self.inline_capable = INLINE_MODE_FROM <= self.version < INLINE_MODE_BELOW
+        self._inline = False    # the firmware leaves inline mode on any channel/address/rate/ack request
         try:
             self._dev.set_configuration(1)
             usb.util.claim_interface(self._dev, 0)
@@ -176,6 +206,8 @@ class Crazyradio:
     # -- vendor requests ---------------------------------------------------------------------------
     def _control(self, request: int, value: int, index: int = 0, data: bytes = b"") -> None:
         self.control_transfers += 1
+        if request in (SET_RADIO_CHANNEL, SET_RADIO_ADDRESS, SET_DATA_RATE, ACK_ENABLE):
+            self._inline = False
         try:
             self._dev.ctrl_transfer(_TYPE_VENDOR_OUT, request, value, index, data, self.usb_timeout_ms)
         except usb.core.USBError as exc:
@@ -281,7 +313,37 @@ class Crazyradio:
         # Some hosts see 64 bytes for an empty scan (RF issue #9): keep only plausible channels.
         return [c for c in bytes(hits) if start <= c <= stop]
 
+    def set_inline_mode(self, on: bool) -> None:
+        """Switch the Crazyradio 2.0's inline mode (``inline_capable`` only)."""
+        if on and not self.inline_capable:
+            raise CrazyflieError("Crazyradio %d (firmware %.2f) has no inline mode: it needs a Crazyradio 2.0 with "
+                                 "firmware %.1f or later" % (self.index, self.version, INLINE_MODE_FROM))
+        self._control(SET_INLINE_MODE, INLINE_MODE_ON if on else 0)
+        self._inline = bool(on)
+
     # -- packets ---------------------------------------------------------------------------------
+    def send_inline(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
+        """One acked radio packet to (channel, datarate, address) in inline mode: no control transfer,
+        whatever the previous packet's settings (one SET_INLINE_MODE when the mode was off)."""
+        dev = self._dev
+        if dev is None:
+            raise RadioUnplugged("Crazyradio %d is closed" % self.index)
+        if not 0 < len(data) <= MAX_RADIO_PACKET:
+            raise ValueError("a radio packet has 1-32 bytes, got %d" % len(data))
+        if not self._inline:
+            self.set_inline_mode(True)
+        try:
+            dev.write(_EP_OUT, inline_frame(channel, datarate, address, data), self.usb_timeout_ms)
+            # The firmware keeps the packet's settings (and acks on) once it has taken the OUT.
+            self._channel, self._datarate, self._address, self.ack_enabled = channel, datarate, address, True
+            buf = self._buffer
+            n = dev.read(_EP_IN, buf, self.usb_timeout_ms)
+        except usb.core.USBTimeoutError:
+            return RadioAck(False, False, self.arc, b"")
+        except usb.core.USBError as exc:
+            raise self._usb_error(exc, "sending a packet") from exc
+        return parse_inline_reply(buf[:n].tobytes(), self.arc)
+
     def send_packet(self, data: bytes) -> RadioAck:
         """One radio packet (1-32 bytes) and its ack. A USB timeout counts as an unacked packet."""
         dev = self._dev

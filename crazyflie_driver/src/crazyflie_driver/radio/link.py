@@ -296,7 +296,7 @@ class RadioLink:
                     if self.safelink:
                         resend = not acked
                     else:
-                        resend = now >= next_resend
+                        resend = self.needs_resending and now >= next_resend
                     if resend:
                         acked = self.send(packet)
                         next_resend = now + resend_interval

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Callable, Dict, Optional, TypeVar
+from typing import Any, Callable, Dict, Optional, TypeVar
 
 from crazyflie_driver.crtp.packet import is_motor_command
 from crazyflie_driver.errors import CrazyflieError, RadioUnplugged
@@ -53,6 +53,8 @@ class SharedRadio:
         ``background`` ones (idle keep-alives) after every other waiting round trip (FairLock).
         """
         def trip(radio: Crazyradio) -> RadioAck:
+            if radio.inline_capable:
+                return radio.send_inline(channel, datarate, address, data)   # settings travel with the packet
             if channel != radio._channel or datarate != radio._datarate or address != radio._address:
                 radio.configure(channel, datarate, address)
             if not radio.ack_enabled:
@@ -113,12 +115,15 @@ class RadioManager:
     """One ``SharedRadio`` per dongle index, reference counted.
 
     ``backend`` is the pyusb backend for the dongles (None: pyusb's default, libusb);
-    ``radio_factory(index)`` replaces how a dongle is opened altogether.
+    ``radio_factory(index)`` replaces how a dongle is opened altogether; ``usb_factory(index)`` opens a
+    Crazyflie on a USB cable (None: ``usb_crazyflie.UsbCrazyflie`` on ``backend``).
     """
 
-    def __init__(self, backend=None, radio_factory: Optional[Callable[[int], Crazyradio]] = None):
+    def __init__(self, backend=None, radio_factory: Optional[Callable[[int], Crazyradio]] = None,
+                 usb_factory: Optional[Callable[[int], Any]] = None):
         self.backend = backend
         self._factory = radio_factory
+        self.usb_factory = usb_factory
         self._lock = threading.Lock()
         self._radios: Dict[int, SharedRadio] = {}
 

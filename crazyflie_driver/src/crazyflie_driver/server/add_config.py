@@ -15,7 +15,7 @@ from typing import Any, List, Mapping, Tuple
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.server.setpoint import check_trim
 from crazyflie_driver.server.log_plan import LogBlockSpec, check_custom_log_limits, validate_log_block_specs
-from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.crtp.uri import parse_link_uri
 from crazyflie_driver.server.worker import WorkerConfig
 
 
@@ -127,7 +127,7 @@ def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
         raise AddConfigError("parameter ~uri is required (e.g. radio://0/80/2M/E7E7E7E7E7)")
     uri = params["uri"]
     try:
-        parse_uri(uri)
+        parse_link_uri(uri)
     except UriError as e:
         raise AddConfigError("parameter ~uri: %s" % e) from None
     try:

@@ -12,7 +12,7 @@ import threading
 from typing import Any, Callable, Dict, List, Optional
 
 from crazyflie_driver.server.log_plan import validate_log_block_specs
-from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.crtp.uri import parse_link_uri
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 
 #: s a failed add waits for its worker's connect sequence to end once the link is closed under it (one
@@ -36,7 +36,7 @@ class CrazyflieRegistry:
 
     @staticmethod
     def canonical_uri(uri: str) -> str:
-        return str(parse_uri(uri))
+        return str(parse_link_uri(uri))
 
     def add(self, config: WorkerConfig, listener: Optional[WorkerListener] = None,
             timeout: float = 20.0) -> CrazyflieWorker:

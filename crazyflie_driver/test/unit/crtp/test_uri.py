@@ -5,7 +5,7 @@ import dataclasses
 import pytest
 
 from crazyflie_driver.errors import UriError
-from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri, parse_uri
+from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri, UsbUri, parse_link_uri, parse_uri
 
 
 def test_full_uri():
@@ -66,9 +66,21 @@ def test_malformed_names_the_bad_part(text, names):
     assert isinstance(info.value, ValueError)
 
 
-def test_usb_uri_refused_clearly():
-    with pytest.raises(UriError, match="usb:// .* not supported"):
+def test_usb_uri_refused_where_a_radio_is_needed():
+    with pytest.raises(UriError, match="no radio channel, rate or address.*parse_link_uri"):
         parse_uri("usb://0")
+
+
+def test_link_uri_is_usb_or_radio():
+    assert parse_link_uri("usb://0") == UsbUri(0)
+    assert parse_link_uri(" USB://12/ ") == UsbUri(12)
+    assert str(UsbUri(3)) == "usb://3"
+    assert parse_link_uri("radio://0/80/2M/E7E7E7E701") == parse_uri("radio://0/80/2M/E7E7E7E701")
+    for bad in ("usb://", "usb://x", "usb://-1", "usb://0/1"):
+        with pytest.raises(UriError, match="Crazyflie number"):
+            parse_link_uri(bad)
+    with pytest.raises(UriError, match="unknown scheme"):
+        parse_link_uri("serial://0")
 
 
 def test_non_string_refused():

@@ -82,6 +82,7 @@ class RecordingRadio:
     def __init__(self, version):
         self.version = version
         self.two_per_transfer = version >= 99.55
+        self.inline_capable = False
         self._channel, self._datarate, self._address = 2, 2, b"\xe7" * 5
         self.ack_enabled = True
         self.transfers = []

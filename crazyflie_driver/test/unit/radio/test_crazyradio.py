@@ -9,7 +9,7 @@ import pytest
 import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
-from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, list_radios
+from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, inline_frame, list_radios, parse_inline_reply
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
@@ -219,6 +219,9 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
             super().__init__(dongles=2)
             created.append((host, port))
 
+        def dongle_model(self):
+            return "2.0"                                     # the world plugs Crazyradio 2.0s
+
     module = types.ModuleType("crazyflie_driver.sim.air.medium")
     module.RemoteMedium = RemoteMedium
     module.parse_address = parse_address                 # the world's own address rules (loopback only)
@@ -231,9 +234,70 @@ def test_sim_backend_attaches_to_a_remote_medium(monkeypatch):
     assert usb_backend.get_backend() is backend          # one per address and process
     assert created == [("127.0.0.1", 19999)]
     assert len(backend.dongles) == 2
+    assert [d.model.name for d in backend.dongles] == ["2.0", "2.0"]
     monkeypatch.setenv("CRAZYFLIE_SIM_ADDRESS", "nonsense")
     with pytest.raises(CrazyflieError, match="host:port"):
         usb_backend.get_backend()
     monkeypatch.setenv("CRAZYFLIE_SIM_ADDRESS", "192.168.1.5:19840")
     with pytest.raises(CrazyflieError, match="only loopback"):
         usb_backend.get_backend()
+
+
+class WireBackend(FakeUsbBackend):
+    """The fake dongle, recording every bulk OUT as the bytes on the wire."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.outs = []
+
+    def bulk_write(self, dev_handle, ep, intf, data, timeout):
+        self.outs.append(bytes(data))
+        return super().bulk_write(dev_handle, ep, intf, data, timeout)
+
+
+def test_inline_frame_and_reply_bytes():
+    assert inline_frame(80, 2, b"\xe7\xe7\xe7\xe7\x01", b"\x3c\x01") == b"\x0a\x12\x50\xe7\xe7\xe7\xe7\x01\x3c\x01"
+    assert parse_inline_reply(b"\x04\x23\x3c\x01", 3) == RadioAck(True, True, 2, b"\x3c\x01")
+    assert parse_inline_reply(b"\x02\x30", 3) == RadioAck(False, False, 3, b"")
+    assert parse_inline_reply(b"\x02\x04", 3) == RadioAck(False, False, 3, b"")   # invalid settings
+    assert parse_inline_reply(b"", 3) == RadioAck(False, False, 3, b"")
+
+
+@pytest.mark.parametrize("model, capable", [("PA", False), ("PA-99.55", False), ("2.0-5.0", False), ("2.0", True)])
+def test_inline_mode_is_chosen_by_firmware_version(medium, model, capable):
+    radio = Crazyradio(0, FakeUsbBackend(medium, model=model, timing=DongleTiming.instant()))
+    assert radio.inline_capable is capable
+    if not capable:
+        with pytest.raises(CrazyflieError, match="no inline mode"):
+            radio.set_inline_mode(True)
+    radio.close()
+
+
+def test_inline_packets_to_two_crazyflies_need_no_vendor_request_between_them(medium):
+    backend = WireBackend(medium, model="2.0", timing=DongleTiming.instant())
+    radio = Crazyradio(0, backend)
+    a, b = b"\xe7\xe7\xe7\xe7\x01", b"\xe7\xe7\xe7\xe7\x02"
+    backend.dongles[0].vendor_requests.clear()
+    medium.push(AirReply(True, b"\x01"), AirReply(True, b""), AirReply(True, b"\x02"), AirReply(False))
+    acks = [radio.send_inline(80, 2, a, b"\xff"), radio.send_inline(20, 1, b, b"\xff"),
+            radio.send_inline(80, 2, a, b"\xff"), radio.send_inline(20, 1, b, b"\xfe")]
+    assert requests(backend) == [(0x23, 1, 0, b"")]                 # inline mode on once, then none
+    assert backend.outs == [b"\x09\x12\x50" + a + b"\xff", b"\x09\x11\x14" + b + b"\xff",
+                            b"\x09\x12\x50" + a + b"\xff", b"\x09\x11\x14" + b + b"\xfe"]
+    assert [(k.ack, k.data) for k in acks] == [(True, b"\x01"), (True, b""), (True, b"\x02"), (False, b"")]
+    assert (radio.channel, radio.datarate, radio.address) == (20, 1, b)
+    radio.close()
+
+
+def test_a_legacy_setting_request_leaves_inline_mode_and_the_next_packet_reenters(medium):
+    backend = WireBackend(medium, model="2.0", timing=DongleTiming.instant())
+    radio = Crazyradio(0, backend)
+    a = b"\xe7\xe7\xe7\xe7\x01"
+    radio.send_inline(80, 2, a, b"\xff")
+    radio.send_no_ack(b"\xff\x01")                                   # a broadcast: ACK_ENABLE 0 leaves inline mode
+    assert backend.dongles[0].inline_mode == 0
+    backend.dongles[0].vendor_requests.clear()
+    assert radio.send_inline(80, 2, a, b"\xff").ack
+    assert requests(backend) == [(0x23, 1, 0, b"")]
+    assert backend.outs[-1] == b"\x09\x12\x50" + a + b"\xff"
+    radio.close()

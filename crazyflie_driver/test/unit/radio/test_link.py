@@ -533,3 +533,22 @@ def test_a_greeting_nobody_acks_is_a_timeout_with_nothing_acknowledged():
     with pytest.raises(LinkTimeout) as info:
         open_link(URI, manager, safelink_attempts=3)
     assert info.value.acked == 0 and "switched on" in str(info.value)
+
+
+def test_links_to_crazyflies_on_two_channels_share_a_crazyradio_2_without_vendor_requests():
+    one, two = NrfPeer(channel=80), NrfPeer(channel=20, address=b"\xe7\xe7\xe7\xe7\x02")
+    medium = ScriptedMedium(Air(one, two))
+    backend = FakeUsbBackend(medium, model="2.0", timing=DongleTiming.instant())
+    manager = RadioManager(backend)
+    links = [RadioLink(URI, manager), RadioLink("radio://0/20/2M/E7E7E7E702", manager)]
+    for link in links:
+        link.open()
+    backend.dongles[0].vendor_requests.clear()
+    for i in range(3):
+        for link in links:
+            assert link.send(CRTPPacket(3, 0, bytes([i])))
+    assert list(backend.dongles[0].vendor_requests) == []
+    assert [p[1:] for p in one.received[-3:]] == [bytes([i]) for i in range(3)]
+    assert [p[1:] for p in two.received[-3:]] == [bytes([i]) for i in range(3)]
+    for link in links:
+        link.close()

@@ -395,3 +395,79 @@ def test_install_find_patch_overrides_any_backend(backend):
 def test_invalid_construction(medium):
     with pytest.raises(ValueError, match="model"):
         FakeUsbBackend(medium, model="3.0")
+
+
+def test_crazyradio_2_inline_mode_frames(medium):
+    backend = FakeUsbBackend(medium, model="2.0", timing=DongleTiming.instant())
+    dev = open_dev(backend)
+    d = backend.dongles[0]
+    ctrl(dev, 0x23, 1)
+    assert d.inline_mode == 1
+    medium.push(AirReply(True, b"\x3c\x01", retries=2, power_detector=True), AirReply(False))
+    # [total length 10, 2M | ack, channel 80, address E7E7E7E701] + payload 3C 01
+    dev.write(1, b"\x0a\x12\x50\xe7\xe7\xe7\xe7\x01\x3c\x01")
+    assert dev.read(0x81, 64).tobytes() == b"\x04\x23\x3c\x01"   # length 4, 2 retries | RPD | ack
+    dev.write(1, b"\x09\x11\x14\xe7\xe7\xe7\xe7\x02\xff")           # 1M, channel 20, another address
+    assert dev.read(0x81, 64).tobytes() == b"\x02\x30"               # lost after ARC 3 retries
+    assert [(t.channel, t.datarate, t.address, t.data) for t in medium.transmits] == [
+        (80, 2, b"\xe7\xe7\xe7\xe7\x01", b"\x3c\x01"), (20, 1, b"\xe7\xe7\xe7\xe7\x02", b"\xff")]
+    assert [r[1] for r in d.vendor_requests] == [0x23]              # no setup between packets
+    assert (d.channel, d.datarate, d.address, d.inline_mode) == (20, 1, b"\xe7\xe7\xe7\xe7\x02", 1)
+
+
+def test_crazyradio_2_inline_mode_invalid_settings_no_ack_and_rssi(medium):
+    backend = FakeUsbBackend(medium, model="2.0", timing=DongleTiming.instant())
+    dev = open_dev(backend)
+    ctrl(dev, 0x23, 1)
+    dev.write(1, b"\x09\x02\x65\xe7\xe7\xe7\xe7\xe7\xff")           # channel 101: never sent
+    assert dev.read(0x81, 64).tobytes() == b"\x02\x04"
+    dev.write(1, b"\x09\x02\x50\xff\xff\xff\xff\xff\xff")           # ack bit off: sent once, still a reply
+    assert dev.read(0x81, 64).tobytes() == b"\x02\x00"
+    assert [(t.channel, t.ack_enabled) for t in medium.transmits] == [(80, False)]
+    ctrl(dev, 0x23, 2)                                             # mode 2: one RSSI byte after the status
+    medium.push(AirReply(True, b"\x01", power_detector=True))
+    dev.write(1, b"\x09\x12\x50\xe7\xe7\xe7\xe7\xe7\xff")
+    reply = dev.read(0x81, 64).tobytes()
+    assert (reply[0], reply[1], reply[3:]) == (4, 0x03, b"\x01") and reply[2] < 64
+
+
+@pytest.mark.parametrize("request_", [(0x01, 80, b""), (0x02, 0, b"\xe7" * 5), (0x03, 2, b""), (0x10, 1, b"")])
+def test_crazyradio_2_settings_requests_leave_inline_mode(medium, request_):
+    backend = FakeUsbBackend(medium, model="2.0", timing=DongleTiming.instant())
+    dev = open_dev(backend)
+    ctrl(dev, 0x23, 1)
+    ctrl(dev, request_[0], request_[1], data=request_[2])
+    assert backend.dongles[0].inline_mode == 0
+    dev.write(1, b"\xff")                                          # the legacy format again
+    assert dev.read(0x81, 64).tobytes() == b"\x03"
+
+
+@pytest.mark.parametrize("model, mode", [("PA", 1), ("2.0-5.0", 1), ("2.0", 3)])
+def test_inline_mode_stalls_where_the_firmware_lacks_it(medium, model, mode):
+    backend = FakeUsbBackend(medium, model=model, timing=DongleTiming.instant())
+    dev = open_dev(backend)
+    with pytest.raises(usb.core.USBError) as err:
+        ctrl(dev, 0x23, mode)
+    assert err.value.errno == errno.EPIPE
+
+
+def test_crazyradio_2_fault_request_works_in_inline_mode(medium):
+    backend = FakeUsbBackend(medium, model="2.0", timing=DongleTiming.instant())
+    dev = open_dev(backend)
+    ctrl(dev, 0x23, 1)
+    ctrl(dev, 0x30, data=b"\x0a\x05")
+    assert medium.faults == [(0, 10.0, 5.0, None, None)]
+    assert backend.dongles[0].inline_mode == 1
+
+
+def test_inline_mode_timing_is_one_bulk_round_trip(medium):
+    clock = FakeClock()
+    timing = DongleTiming(bulk_round_trip_s=0.0008, retransmission_s=0.0007, control_transfer_s=0.0015)
+    backend = FakeUsbBackend(medium, model="2.0", timing=timing, clock=clock)
+    dev = open_dev(backend)
+    ctrl(dev, 0x23, 1)
+    medium.push(AirReply(True, b"", retries=1))
+    t0 = clock.now
+    dev.write(1, b"\x09\x12\x50\xe7\xe7\xe7\xe7\xe7\xff")
+    dev.read(0x81, 64)
+    assert clock.now - t0 == pytest.approx(0.0008 + 0.0007)

@@ -250,3 +250,49 @@ def test_plug_change_is_stamped_with_world_time(served):
     row = medium.control("dongle_faults", dongle=1)[0]
     assert row["plug_changed_at"] == 5.0 and not row["unplugged"]
     assert medium.control("dongle_faults", dongle=0)[0]["plug_changed_at"] is None
+
+
+def test_the_world_says_which_crazyradio_model_is_plugged_in():
+    server = WorldServer(FakeWorld(), dongles=1, port=0, dongle_model="2.0")
+    host, port = server.start()
+    medium = RemoteMedium(host, port)
+    try:
+        assert medium.dongle_model() == "2.0"
+    finally:
+        medium.close()
+        server.stop()
+    with pytest.raises(ValueError, match="unknown Crazyradio model 'PA2'"):
+        WorldServer(FakeWorld(), dongles=1, port=0, dongle_model="PA2")
+
+
+def test_a_crazyflie_on_a_usb_cable_through_the_world_server(served):
+    world, server, medium = served
+    assert medium.usb_count() == 0
+    assert server.plug_usb("cf1") == 0
+    assert medium.usb_count() == 1
+    assert medium.usb_send(0, b"\xfc\x2a")                       # port 15 ch 0: an echo, straight to the STM
+    assert medium.usb_receive(0) == b"\xfc\x2a"
+    assert medium.usb_receive(0) is None
+    with pytest.raises(CrazyflieError, match="no simulated Crazyflie usb://1"):
+        medium.usb_receive(1)
+    with pytest.raises(ValueError, match="no simulated Crazyflie of that name.*cf1, cf2"):
+        server.plug_usb("cf9")
+
+
+def test_the_stack_connects_to_usb_0_of_a_world_in_another_process(served):
+    from crazyflie_driver.protocol.crazyflie import Crazyflie
+    from crazyflie_driver.radio.shared_radio import RadioManager
+    from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+    from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+
+    world, server, medium = served
+    server.plug_usb(URI2)                                        # the 2016 firmware, by its URI
+    backend = FakeUsbBackend(medium, dongles=1, timing=DongleTiming.instant(), usb_crazyflies=medium.usb_count())
+    cf = Crazyflie("usb://0", radio_manager=RadioManager(backend), timeout=2.0)
+    cf.connect()
+    try:
+        assert cf.protocol_version == server.crazyflie(URI2).profile.protocol_version
+        assert backend.cables[0].bulk_in > 0 and backend.dongles[0].bulk_out == 0
+    finally:
+        cf.close()
+    assert not backend.cables[0].crtp_to_usb

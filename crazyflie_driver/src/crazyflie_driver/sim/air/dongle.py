@@ -16,10 +16,10 @@ import usb.core
 
 # The dongle's USB identity and vendor requests are shared with the host driver.
 from crazyflie_driver.radio.crazyradio import (
-    ACK_ENABLE, PRODUCT_ID, SCAN_CHANNELS, SET_CONT_CARRIER, SET_DATA_RATE, SET_RADIO_ADDRESS,
-    SET_RADIO_ARC, SET_RADIO_ARD, SET_RADIO_CHANNEL, SET_RADIO_POWER)
+    ACK_ENABLE, INLINE_HEADER, PRODUCT_ID, SCAN_CHANNELS, SET_CONT_CARRIER, SET_DATA_RATE, SET_INLINE_MODE,
+    SET_RADIO_ADDRESS, SET_RADIO_ARC, SET_RADIO_ARD, SET_RADIO_CHANNEL, SET_RADIO_POWER)
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
-from crazyflie_driver.sim.air.usb_descriptors import CRAZYRADIO_2_54, PA_9955, PA_MODELS, DongleModel
+from crazyflie_driver.sim.air.usb_descriptors import PA_9955, PA_MODELS, DongleModel
 
 BOOTLOADER_PRODUCT_ID = 0x0101
 # Requests the host driver does not use
@@ -79,6 +79,7 @@ class FakeDongle:
         self.ack_enabled = True
         self.cont_carrier = False
         self.scan_hits = b""
+        self.inline_mode = 0             # Crazyradio 2.0: 0 off, 1 inline, 2 inline with RSSI
 
     def pulled_out(self) -> None:
         """The medium reported this dongle unplugged (a world fault): it leaves the bus."""
@@ -108,14 +109,16 @@ class DongleFirmware:
         self.fault_request = fault_request
 
     def vendor_out(self, d: FakeDongle, req: int, wValue: int, wIndex: int, data: bytes) -> int:
-        is_v2 = d.model is CRAZYRADIO_2_54
+        is_v2 = d.model.is_crazyradio_2
         if req == SET_RADIO_CHANNEL:
             if wValue <= 125:
                 d.channel = wValue
+            d.inline_mode = 0            # the 2.0 leaves inline mode on channel, address, rate, ack
         elif req == SET_RADIO_ADDRESS:
             if is_v2:
                 if len(data) == 5:
                     d.address = data
+                    d.inline_mode = 0
             elif 3 <= len(data) <= 5:
                 d.address = data + d.address[len(data):]
             else:
@@ -123,6 +126,9 @@ class DongleFirmware:
         elif req == SET_DATA_RATE:
             if wValue < 3:
                 d.datarate = wValue
+                d.inline_mode = 0
+        elif req == SET_INLINE_MODE and wValue <= d.model.inline_modes:
+            d.inline_mode = wValue
         elif req == SET_RADIO_POWER:
             d.power = min(wValue, 3) if is_v2 else wValue & 3
         elif req == SET_RADIO_ARD:
@@ -132,6 +138,7 @@ class DongleFirmware:
             d.arc = wValue & 0x0F
         elif req == ACK_ENABLE:
             d.ack_enabled = wValue != 0
+            d.inline_mode = 0
         elif req == SET_CONT_CARRIER:
             d.cont_carrier = wValue != 0
         elif req == SCAN_CHANNELS:
@@ -177,7 +184,7 @@ class DongleFirmware:
             self.clock.sleep(spent)
 
     def radio_allowed(self, d: FakeDongle, channel: int) -> bool:
-        if d.model is CRAZYRADIO_2_54:
+        if d.model.is_crazyradio_2:
             return d.datarate != 0 and channel <= 100
         return True
 
@@ -189,6 +196,9 @@ class DongleFirmware:
     def send_packet(self, d: FakeDongle, data, start: float) -> None:
         """One bulk OUT (``data``, an array of at least one byte, sent at ``start``): its radio packet
         on the air, the IN reply left in ``d.reply`` (none when acks are off), ready at ``d.reply_ready_at``."""
+        if d.inline_mode:
+            self.send_inline(d, data, start)
+            return
         packet = data[:MAX_RADIO_PAYLOAD].tobytes() if len(data) > MAX_RADIO_PAYLOAD else data.tobytes()
         if not self.radio_allowed(d, d.channel):
             d.reply = b"\x00"  # Crazyradio 2.0: invalid settings, nothing sent, "no ack"
@@ -224,6 +234,40 @@ class DongleFirmware:
         else:
             d.reply = b"\x00"
         d.reply_ready_at = start + self.air_time(d, reply)
+
+    def send_inline(self, d: FakeDongle, data, start: float) -> None:
+        """One bulk OUT in the 2.0's inline mode: an 8-byte header [total length, rate | ack << 4,
+        channel, 5 address bytes] then the payload. The settings stay in force afterwards, and an
+        IN reply [total length, status] (+ the ack's RSSI in mode 2) + ack payload always follows,
+        acks on or off; status bit 2 flags settings the radio cannot send (250K, channel > 100)."""
+        raw = data.tobytes()
+        if len(raw) < INLINE_HEADER:
+            raise stall("inline-mode OUT of %d bytes, shorter than its %d-byte header" % (len(raw), INLINE_HEADER))
+        end = min(max(raw[0], INLINE_HEADER), len(raw))
+        d.datarate = raw[1] & 0x03
+        d.ack_enabled = bool(raw[1] & 0x10)
+        d.channel = raw[2]
+        d.address = raw[3:INLINE_HEADER]
+        packet = raw[INLINE_HEADER:end][:MAX_RADIO_PAYLOAD]
+        head = 3 if d.inline_mode == 2 else 2
+        if not self.radio_allowed(d, d.channel):
+            d.reply = bytes((head, 0x04)) + (b"\x00" if head == 3 else b"")
+            d.reply_ready_at = start + self.timing.bulk_round_trip_s
+            return
+        reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, packet, d.ack_enabled, d.arc)
+        if reply.unplugged:
+            d.pulled_out()
+            raise no_device()
+        status, payload = 0, b""
+        if d.ack_enabled and reply.acked:
+            payload = reply.payload[:MAX_RADIO_PAYLOAD]
+            status = 1 | (0x02 if reply.power_detector else 0) | ((reply.retries & 0x0F) << 4)
+        elif d.ack_enabled:
+            status = (d.arc & 0x0F) << 4    # the 2.0 reports the retries it spent on a lost packet
+        rssi = (b"\x28" if reply.power_detector else b"\x50") if head == 3 else b""
+        d.reply = bytes((head + len(payload), status)) + rssi + payload
+        busy = self.air_time(d, reply) if d.ack_enabled else self.timing.bulk_round_trip_s + reply.latency_s
+        d.reply_ready_at = start + busy
 
 
 def fill(buff, raw: bytes) -> int:

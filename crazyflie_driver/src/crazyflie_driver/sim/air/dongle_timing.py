@@ -9,6 +9,10 @@ from dataclasses import dataclass
 from crazyflie_driver.clock import WALL, Clock, ScaledClock
 
 
+#: Seconds one vendor request takes on a Crazyradio 2.0 (a user's measurement, docs/simulation.md).
+CRAZYRADIO_2_CONTROL_TRANSFER_S = 0.0025
+
+
 @dataclass
 class DongleTiming:
     """Seconds the fake dongle takes for each kind of transfer (every figure a knob).
@@ -21,6 +25,12 @@ class DongleTiming:
     bulk_round_trip_s: float = 0.0008
     retransmission_s: float = 0.00067
     control_transfer_s: float = 0.0015
+
+    @classmethod
+    def crazyradio_2(cls) -> DongleTiming:
+        """The Crazyradio 2.0: the same bulk round trip, control transfers of about 2.5 ms (its
+        setup requests go through the firmware's command queue; docs/simulation.md)."""
+        return cls(control_transfer_s=CRAZYRADIO_2_CONTROL_TRANSFER_S)
 
     @classmethod
     def instant(cls) -> DongleTiming:

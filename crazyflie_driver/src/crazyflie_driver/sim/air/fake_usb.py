@@ -7,7 +7,8 @@ that flies real hardware is the code under test.
 Emulated (facts and sources in docs/simulation.md, "The fake Crazyradio"):
 
 * a Crazyradio PA with firmware 0.53 (default) or a Crazyradio 2.0 with firmware 5.4
-  (``model="2.0"``: 250K and channels above 100 are accepted but never sent, the IN reply is 0x00);
+  (``model="2.0"``: 250K and channels above 100 are accepted but never sent, the IN reply is 0x00;
+  inline mode);
 * full device/configuration/interface/endpoint descriptors; string descriptors (LANGID,
   manufacturer, product, serial) answered through ``ctrl_transfer`` as pyusb's ``get_string`` reads them;
 * every vendor request of the 0.53 firmware, STALL (``USBError`` errno EPIPE) for unknown ones;
@@ -23,7 +24,8 @@ Emulated (facts and sources in docs/simulation.md, "The fake Crazyradio"):
 This module is the pyusb side (enumeration, handles, transfers); ``usb_descriptors`` holds the
 descriptors, ``dongle`` the dongle's state and firmware.
 
-Not emulated: the 2.0's inline and sniffer modes (0x23-0x26 STALL), the Microsoft OS descriptors of
+The 2.0's inline mode (0x23, values 1 and 2 from firmware 5.4) is emulated in ``dongle``. Not emulated:
+the 2.0's sniffer mode (0x24-0x26 STALL), the Microsoft OS descriptors of
 development builds, the nRF bootloader's own protocol (after LAUNCH_BOOTLOADER and a reset the dongle
 re-enumerates as 0x1915/0x0101 and stalls every radio request).
 """
@@ -38,7 +40,9 @@ import usb.core
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
+from crazyflie_driver.sim.air import fake_cable
 from crazyflie_driver.sim.air.dongle_timing import DongleClock, DongleTiming
+from crazyflie_driver.sim.air.fake_cable import FakeCableCrazyflie
 from crazyflie_driver.sim.air.usb_descriptors import (
     DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_MODELS, DongleModel, config_descriptor_bytes,
     configuration_descriptor, device_descriptor, device_descriptor_bytes, endpoint_descriptor,
@@ -62,27 +66,32 @@ class _Handle:
 class FakeUsbBackend(usb.backend.IBackend):
     """pyusb backend with ``dongles`` emulated Crazyradios attached to ``medium``.
 
-    ``model`` is "PA" (firmware 0.53) or "2.0" (firmware 5.4). ``clock`` needs ``time()`` and
-    ``sleep(s)``; tests inject a fake one to check the timing model without waiting.
+    ``model`` is a name of ``usb_descriptors.MODELS``: "PA" (firmware 0.53), "PA-99.55", "2.0" (firmware
+    5.4, inline mode) or "2.0-5.0". ``timing`` defaults to the model's (``DongleTiming``). ``clock`` needs
+    ``time()`` and ``sleep(s)``; tests inject a fake one to check the timing model without waiting.
     Dongle ids (``FakeDongle.ident``, the ``dongle`` argument of ``Medium.transmit``) are
     ``first_id .. first_id + dongles - 1`` and stable for the backend's lifetime.
     """
 
     def __init__(self, medium, dongles: int = 1, model: str = "PA",
                  timing: Optional[DongleTiming] = None, clock=None, first_id: int = 0,
-                 fault_request: bool = True):
+                 fault_request: bool = True, usb_crazyflies: int = 0):
         super().__init__()
         if model not in MODELS:
             raise ValueError("unknown Crazyradio model %r, use 'PA' or '2.0'" % (model,))
         if dongles < 0:
             raise ValueError("dongles must be >= 0, got %d" % dongles)
         self.medium = medium
-        self.timing = timing if timing is not None else DongleTiming()
+        m = MODELS[model]
+        if timing is None:
+            timing = DongleTiming.crazyradio_2() if m.is_crazyradio_2 else DongleTiming()
+        self.timing = timing
         self.clock = clock if clock is not None else DongleClock()
         self.firmware = DongleFirmware(medium, self.timing, self.clock, fault_request)
-        m = MODELS[model]
         self.dongles = [FakeDongle(first_id + i, m, self._serial_for(first_id + i, m))
                         for i in range(dongles)]
+        # Simulated Crazyflies on a USB cable (the medium's usb_send/usb_receive), usb://0 first.
+        self.cables = [FakeCableCrazyflie(first_id + dongles + i, i) for i in range(usb_crazyflies)]
 
     @staticmethod
     def _serial_for(ident: int, model: DongleModel) -> str:
@@ -120,7 +129,7 @@ class FakeUsbBackend(usb.backend.IBackend):
         for d in self.dongles:
             if d.pulled_by_medium and self._plugged_in_again(d.ident):
                 self.replug(d.ident)     # the host sees a new device, as after a real re-plug
-        return [d for d in self.dongles if not d.unplugged]
+        return [d for d in self.dongles if not d.unplugged] + [c for c in self.cables if not c.unplugged]
 
     def _plugged_in_again(self, ident: int) -> bool:
         """A dongle the world unplugged (``Medium.set_dongle_faults``) is back when the world says so."""
@@ -130,6 +139,8 @@ class FakeUsbBackend(usb.backend.IBackend):
             return False
 
     def get_device_descriptor(self, dev: FakeDongle):
+        if isinstance(dev, FakeCableCrazyflie):
+            return fake_cable.device_descriptor(dev)
         return device_descriptor(dev.model, dev.ident, dev.product_id)
 
     def get_configuration_descriptor(self, dev: FakeDongle, config: int):
@@ -236,6 +247,10 @@ class FakeUsbBackend(usb.backend.IBackend):
             if d.in_bootloader:
                 raise stall("vendor request 0x%02X to the bootloader" % bRequest)
             d.vendor_requests.append((bmRequestType, bRequest, wValue, wIndex, bytes(data)))
+            if isinstance(d, FakeCableCrazyflie):
+                if bmRequestType & 0x80 or not fake_cable.vendor_out(d, bRequest, wValue, wIndex):
+                    raise stall("vendor request 0x%02X to a Crazyflie" % bRequest)
+                return 0
             if bmRequestType & 0x80:
                 return self.firmware.vendor_in(d, bRequest, wValue, wIndex, data)
             return self.firmware.vendor_out(d, bRequest, wValue, wIndex, bytes(data))
@@ -245,7 +260,9 @@ class FakeUsbBackend(usb.backend.IBackend):
         if rtype == 0x80 and req == _GET_DESCRIPTOR:
             dtype, index = wValue >> 8, wValue & 0xFF
             raw: Optional[bytes]
-            if dtype == DESC_DEVICE:
+            if isinstance(d, FakeCableCrazyflie):
+                raw = self._cable_descriptor(d, dtype, index, wValue)
+            elif dtype == DESC_DEVICE:
                 raw = device_descriptor_bytes(d.model, d.product_id)
             elif dtype == DESC_CONFIG and index == 0:
                 raw = config_descriptor_bytes(d.model)
@@ -268,9 +285,23 @@ class FakeUsbBackend(usb.backend.IBackend):
             return 0
         raise stall("standard request 0x%02X/0x%02X not supported" % (rtype, req))
 
+    def _cable_descriptor(self, cf: FakeCableCrazyflie, dtype: int, index: int, wValue: int) -> bytes:
+        raw = None
+        if dtype == DESC_DEVICE:
+            raw = fake_cable.device_descriptor_bytes()
+        elif dtype == DESC_CONFIG and index == 0:
+            raw = config_descriptor_bytes(cf.model)
+        elif dtype == DESC_STRING:
+            raw = fake_cable.string_descriptor(cf, index)
+        if raw is None:
+            raise stall("descriptor 0x%04X not available" % wValue)
+        return raw
+
     # -- bulk transfers -----------------------------------------------------------------------------
     def bulk_write(self, dev_handle: _Handle, ep: int, intf: int, data, timeout: int) -> int:
         d = self._live(dev_handle)
+        if isinstance(d, FakeCableCrazyflie):          # a Crazyflie on a USB cable, not a dongle
+            return self._cable_write(d, ep, data)
         if ep != 0x01:
             raise stall("bulk OUT to endpoint 0x%02X" % ep)
         with d.lock:
@@ -290,6 +321,8 @@ class FakeUsbBackend(usb.backend.IBackend):
 
     def bulk_read(self, dev_handle: _Handle, ep: int, intf: int, buff, timeout: int) -> int:
         d = self._live(dev_handle)
+        if isinstance(d, FakeCableCrazyflie):          # a Crazyflie on a USB cable, not a dongle
+            return self._cable_read(d, ep, buff, timeout)
         if ep != 0x81:
             raise stall("bulk IN from endpoint 0x%02X" % ep)
         with d.lock:
@@ -310,6 +343,30 @@ class FakeUsbBackend(usb.backend.IBackend):
             d.bulk_in += 1
             n = min(len(reply), len(buff))
             buff[:n] = array.array("B", reply[:n])
+            return n
+
+    def _cable_write(self, cf: FakeCableCrazyflie, ep: int, data) -> int:
+        """One CRTP packet down the cable (dropped by a Crazyflie that is off, as its USB is unpowered)."""
+        if ep != 0x01:
+            raise stall("bulk OUT to endpoint 0x%02X" % ep)
+        with cf.lock:
+            cf.bulk_out += 1
+            if len(data):
+                self.medium.usb_send(cf.index, data.tobytes()[:32])
+            return len(data)
+
+    def _cable_read(self, cf: FakeCableCrazyflie, ep: int, buff, timeout: int) -> int:
+        """The Crazyflie's next packet while its CRTP goes to USB; a timeout when it has none."""
+        if ep != 0x81:
+            raise stall("bulk IN from endpoint 0x%02X" % ep)
+        with cf.lock:
+            packet = self.medium.usb_receive(cf.index) if cf.crtp_to_usb else None
+            if packet is None:
+                self.clock.sleep(timeout / 1000.0 if timeout else 1.0)
+                raise usb_timeout()
+            cf.bulk_in += 1
+            n = min(len(packet), len(buff))
+            buff[:n] = array.array("B", packet[:n])
             return n
 
     def intr_write(self, dev_handle, ep, intf, data, timeout):

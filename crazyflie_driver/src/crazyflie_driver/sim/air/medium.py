@@ -19,6 +19,7 @@ from typing import Any, Dict, List, Optional, Tuple
 from crazyflie_driver.errors import CrazyflieError, RadioMediumGone
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.sim.air import server_framing as framing
+from crazyflie_driver.sim.air.usb_descriptors import MODELS
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 19840
@@ -87,9 +88,13 @@ def key_of(uri: str) -> Key:
 class LocalMedium:
     """The air in this process. Thread safe: every dongle may transmit from its own thread."""
 
-    def __init__(self, dongles: int = 1, seed: Optional[int] = None) -> None:
+    def __init__(self, dongles: int = 1, seed: Optional[int] = None, dongle_model: str = "PA") -> None:
         if dongles < 0:
             raise ValueError("dongles must be >= 0, got %d" % dongles)
+        if dongle_model not in MODELS:
+            raise ValueError("unknown Crazyradio model %r, use one of %s" % (dongle_model, ", ".join(sorted(MODELS))))
+        self._dongle_model = dongle_model
+        self._usb: List[Any] = []        # Crazyflies on a USB cable, usb://0 first
         self._lock = threading.Lock()
         self._rng = random.Random(seed)
         self._faults: List[DongleFaults] = [DongleFaults() for _ in range(dongles)]
@@ -135,6 +140,32 @@ class LocalMedium:
     # --- dongles -----------------------------------------------------------------------------
     def dongle_count(self) -> int:
         return len(self._faults)
+
+    def dongle_model(self) -> str:
+        """The Crazyradio model plugged in (``usb_descriptors.MODELS``): "PA" or "2.0" (inline mode)."""
+        return self._dongle_model
+
+    # --- Crazyflies on a USB cable -------------------------------------------------------------------
+    def plug_usb(self, crazyflie) -> int:
+        """Put a simulated Crazyflie on a USB cable to the host; returns its number N (``usb://N``)."""
+        with self._lock:
+            self._usb.append(crazyflie)
+            return len(self._usb) - 1
+
+    def usb_count(self) -> int:
+        return len(self._usb)
+
+    def usb_send(self, index: int, data: bytes) -> bool:
+        """One CRTP packet down the cable to its STM (no nRF, no radio faults); False when it is off."""
+        cf = self._usb[index]
+        if not cf.powered:
+            return False
+        cf.handle_crtp(bytes(data))
+        return True
+
+    def usb_receive(self, index: int) -> Optional[bytes]:
+        """The next packet the Crazyflie on cable ``index`` sends up, None when it has none."""
+        return self._usb[index].pop_outgoing(packet_link=True)
 
     def set_dongle_count(self, n: int) -> None:
         with self._lock:
@@ -295,6 +326,19 @@ class RemoteMedium:
 
     def dongle_count(self) -> int:
         return int(self.control("dongle_count"))
+
+    def dongle_model(self) -> str:
+        return str(self.control("dongle_model"))
+
+    def usb_count(self) -> int:
+        return int(self.control("usb_count"))
+
+    def usb_send(self, index: int, data: bytes) -> bool:
+        return bool(self.control("usb_send", index=index, data=bytes(data).hex()))
+
+    def usb_receive(self, index: int) -> Optional[bytes]:
+        text = self.control("usb_receive", index=index)
+        return None if text is None else bytes.fromhex(text)
 
     def dongle_faults(self, dongle: int) -> DongleFaults:
         row = self.control("dongle_faults", dongle=dongle)[0]

@@ -37,7 +37,8 @@ _log = logging.getLogger(__name__)
 UDP_BASE_PORT = 19850
 CONTROL_OPS = ("time", "dongle_count", "list", "add_crazyflie", "remove_crazyflie", "state", "vehicle_state", "poses",
                "reboot", "set_rssi", "power", "set_dongle_faults", "dongle_faults", "set_battery",
-               "set_mocap_faults", "faults", "clear_faults", "set_mocap_to_estimator")
+               "set_mocap_faults", "faults", "clear_faults", "set_mocap_to_estimator",
+               "dongle_model", "usb_count", "usb_send", "usb_receive")
 
 
 @dataclass
@@ -59,9 +60,9 @@ class WorldServer:
     """Serves a world's simulated Crazyflies to RemoteMedium clients (and UDP clients)."""
 
     def __init__(self, world, dongles: int = 1, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-                 seed: Optional[int] = None, udp_base_port: Optional[int] = None) -> None:
+                 seed: Optional[int] = None, udp_base_port: Optional[int] = None, dongle_model: str = "PA") -> None:
         self.world = world
-        self.medium = LocalMedium(dongles, seed)
+        self.medium = LocalMedium(dongles, seed, dongle_model)
         self.host, self.port = parse_address("%s:%d" % (host, port))
         self.udp_base_port = udp_base_port
         self._entries: Dict[str, SimEntry] = {}
@@ -198,6 +199,42 @@ class WorldServer:
 
     def _op_dongle_count(self, a: ControlArgs) -> int:
         return self.medium.dongle_count()
+
+    def _op_dongle_model(self, a: ControlArgs) -> str:
+        return self.medium.dongle_model()
+
+    def _usb_index(self, a: ControlArgs) -> int:
+        index = int(a.number("index", low=0))
+        if index >= self.medium.usb_count():
+            raise FaultError("no simulated Crazyflie usb://%d: %d on a USB cable" % (index, self.medium.usb_count()))
+        return index
+
+    def _op_usb_count(self, a: ControlArgs) -> int:
+        return self.medium.usb_count()
+
+    def _op_usb_send(self, a: ControlArgs) -> bool:
+        try:
+            data = bytes.fromhex(a.text("data"))
+        except ValueError:
+            raise FaultError("usb_send: 'data' must be hexadecimal") from None
+        if not 1 <= len(data) <= 32:
+            raise FaultError("usb_send: a CRTP packet has 1-32 bytes, got %d" % len(data))
+        return self.medium.usb_send(self._usb_index(a), data)
+
+    def _op_usb_receive(self, a: ControlArgs) -> Optional[str]:
+        packet = self.medium.usb_receive(self._usb_index(a))
+        return None if packet is None else packet.hex()
+
+    def plug_usb(self, uri_or_name: str) -> int:
+        """Put the simulated Crazyflie ``uri_or_name`` on a USB cable too: it answers ``usb://N`` (N
+        returned, in plugging order) as well as its radio URI."""
+        with self._lock:
+            try:
+                entry = self._find(uri_or_name)
+            except KeyError:
+                raise ValueError("cannot put %r on a USB cable: no simulated Crazyflie of that name or URI (the "
+                                 "world has %s)" % (uri_or_name, ", ".join(sorted(self._entries)) or "none")) from None
+            return self.medium.plug_usb(entry.crazyflie)
 
     def _dongle(self, a: ControlArgs) -> int:
         dongle = a.integer("dongle")
@@ -519,6 +556,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--firmware", default="current", choices=sorted(PROFILES), help="firmware of --uri vehicles")
     p.add_argument("--dongles", type=int, default=None, help="number of simulated Crazyradios (default: 1, or what "
                    "the swarm file needs)")
+    p.add_argument("--dongle-model", default="PA", help="the simulated Crazyradios: PA (firmware 0.53), PA-99.55, "
+                   "2.0 (firmware 5.4, inline mode) or 2.0-5.0 (no inline mode)")
+    p.add_argument("--usb", action="append", default=[], metavar="NAME_OR_URI",
+                   help="also put this Crazyflie on a USB cable: it answers usb://N too, N in the order given")
     p.add_argument("--udp", action="store_true", help="also serve udp://127.0.0.1:%d+i per Crazyflie" % UDP_BASE_PORT)
     p.add_argument("--seed", type=int, default=None, help="seed for noise and faults")
     p.add_argument("--vrpn", nargs="?", type=int, const=-1, default=None, metavar="PORT",
@@ -581,11 +622,13 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         from crazyflie_driver.sim.world.world import World
         world = World(speed=pacing.target, seed=args.seed)
         server = WorldServer(world, dongles=args.dongles, host=host, port=port, seed=args.seed,
-                             udp_base_port=UDP_BASE_PORT if args.udp else None)
+                             udp_base_port=UDP_BASE_PORT if args.udp else None, dongle_model=args.dongle_model)
         for i, v in enumerate(vehicles):
             pos = v.get("position") or (0.5 * i, 0.0, 0.0)
             server.add_crazyflie(str(v["uri"]), v.get("name"), pos, str(v.get("firmware") or args.firmware),
                                  float(v.get("yaw") or 0.0))
+        for name in args.usb:
+            server.plug_usb(name)
         server.start()
         try:
             vrpn = start_vrpn(world, args, args.seed) if args.vrpn is not None else None

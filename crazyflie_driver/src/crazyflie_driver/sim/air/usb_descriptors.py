@@ -1,7 +1,8 @@
 """What a fake Crazyradio tells the USB host about itself: its model and its descriptors.
 
-The two models (Crazyradio PA with firmware 0.53, Crazyradio 2.0 with firmware 5.4) and their
-descriptors as libusb reports them; sources in docs/simulation.md, "The fake Crazyradio".
+The models (Crazyradio PA with firmware 0.53 or the 99.55 development image, Crazyradio 2.0 with
+firmware 5.4 or, without inline mode, 5.0) and their descriptors as libusb reports them; sources
+in docs/simulation.md, "The fake Crazyradio".
 """
 from __future__ import annotations
 
@@ -25,15 +26,24 @@ class DongleModel:
     interface_subclass: int
     endpoint_interval: int
     serial_digits: int
+    #: Highest SET_INLINE_MODE value the firmware accepts: 0 none (PA, 2.0 before 5.1), 1 inline
+    #: mode (5.1), 2 inline mode with RSSI (5.3 on).
+    inline_modes: int = 0
+
+    @property
+    def is_crazyradio_2(self) -> bool:
+        return self.product == "Crazyradio 2.0"
 
 
 PA_053 = DongleModel("PA", 0x0053, "Bitcraze", "Crazyradio PA USB Dongle", 0x1D, 0xFF, 6, 10)
 #: The PA with the development firmware "99.55" swarm setups flash: an unacked OUT of more than 32
 #: bytes goes out as two radio packets of half its length each.
 PA_9955 = DongleModel("PA-99.55", 0x9955, "Bitcraze", "Crazyradio PA USB Dongle", 0x1D, 0xFF, 6, 10)
-CRAZYRADIO_2_54 = DongleModel("2.0", 0x0504, "Bitcraze AB", "Crazyradio 2.0", 3, 0x00, 0, 16)
+CRAZYRADIO_2_54 = DongleModel("2.0", 0x0504, "Bitcraze AB", "Crazyradio 2.0", 3, 0x00, 0, 16, 2)
+#: The first Crazyradio 2.0 release with bcdDevice = app version: no inline mode (0x23 STALLs).
+CRAZYRADIO_2_50 = DongleModel("2.0-5.0", 0x0500, "Bitcraze AB", "Crazyradio 2.0", 3, 0x00, 0, 16, 0)
 MODELS = {"PA": PA_053, "pa": PA_053, "PA-99.55": PA_9955, "pa-99.55": PA_9955, "2.0": CRAZYRADIO_2_54,
-          "2": CRAZYRADIO_2_54}
+          "2": CRAZYRADIO_2_54, "2.0-5.0": CRAZYRADIO_2_50}
 PA_MODELS = (PA_053, PA_9955)
 
 

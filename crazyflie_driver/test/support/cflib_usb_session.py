@@ -1,0 +1,39 @@
+"""Run by cflib's interpreter: cflib 0.1.34, unmodified, scans and connects usb://0, a simulated
+Crazyflie on the fake USB cable (in this process), and prints what it read as JSON."""
+from __future__ import annotations
+
+import json
+import pathlib
+import sys
+import tempfile
+
+TEST = pathlib.Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TEST.parent / "src"), str(TEST)]
+
+from support.cflib_find_patch import install_find_patch  # noqa: E402
+from support.radio_rig import RadioRig  # noqa: E402
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming  # noqa: E402
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
+
+
+def main() -> int:
+    rig = RadioRig()
+    rig.medium.plug_usb(rig.firmware)
+    backend = FakeUsbBackend(rig.medium, dongles=1, timing=DongleTiming.instant(), usb_crazyflies=1)
+    install_find_patch(backend)
+    import cflib.crtp
+    from cflib.crazyflie import Crazyflie
+    from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+    cflib.crtp.init_drivers()
+    found = [uri for uri, _ in cflib.crtp.scan_interfaces() if uri.startswith("usb://")]
+    before = rig.medium.round_trips        # the scan also swept the radio's channels
+    with tempfile.TemporaryDirectory() as cache:
+        with SyncCrazyflie("usb://0", cf=Crazyflie(rw_cache=cache)) as scf:
+            effect = scf.cf.param.get_value("ring.effect")
+    print(json.dumps({"found": found, "ring.effect": effect, "radio_round_trips": rig.medium.round_trips - before,
+                      "cable_out": backend.cables[0].bulk_out}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
