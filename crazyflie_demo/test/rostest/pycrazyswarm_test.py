@@ -1,6 +1,10 @@
 #!/usr/bin/env python3
 """Crazyswarm scripts run unchanged (test/pycrazyswarm_scripts/scripts, their YAML in ../launch):
-hello world and a figure-8 from a CSV, each as a user runs it, in a subprocess from its directory.
+hello world and a figure-8 from a CSV, each as a user runs it, in a subprocess from its directory;
+against the running swarm also full-state and velocity streaming, group masks, a nice hover, one
+Crazyflie after the other, timed waypoints from a CSV and a two-group swap. Where a script waits for
+the operator's go-ahead, the test gives it (a line on the script's stdin) once the world shows what
+the script was to do before it.
 
 ~mode "sim": each script runs with --sim and starts its own simulated world and swarm server (on
 this test's master, at ~sim_address), which must be gone when the script ends. ~mode "swarm": the
@@ -38,6 +42,11 @@ ON_GROUND_Z_M = 0.02
 CLIMB_EXCLUDED_M = 0.05           # below this under 1 m: still climbing (or landing), not on the figure-8's plane
 STREAM_HEIGHT_M = 0.5             # cmd_full_state.py's take-off height and figure-8 plane
 PATH_BOUND_M = 0.10               # every flown point near the planned figure-8, every planned point flown
+WAYPOINT_BOUND_M = 0.05           # each timed waypoint reached this close
+SEPARATION_M = 0.5                # the swap's lanes keep the two this far apart
+PRESS_TIMEOUT_S = 60.0            # world s for what a script does before the operator's go-ahead
+HOLD_S = 3.0                      # world s a nice hover is held before the go-ahead (the script waits from ~2.5 s)
+LANDING_TIMEOUT_S = 10.0          # world s for a landing a script sent just before it ended
 
 
 class Recording:
@@ -64,18 +73,64 @@ class Recording:
     def positions(self, name):
         return np.array([s["position"] for _, s, _ in self.track.samples[name]]) if self.track else np.zeros((0, 3))
 
+    def times(self, name):
+        """Monotonic stamps of ``positions(name)``."""
+        return np.array([t for t, _, _ in self.track.samples[name]]) if self.track else np.zeros(0)
 
-def run_and_record(name, *args):
+
+def press_when(p, presses, pressed):
+    """The operator's go-ahead: a line on the script's stdin as soon as each condition on the world's
+    truth holds (in order); ``pressed`` gets the monotonic time of each."""
+    probe = WorldProbe(rospy.get_param("~sim_address"))
+    for condition in presses:
+        ok = probe.clock.wait_until(lambda c=condition: p.poll() is not None or c(probe), PRESS_TIMEOUT_S)[0]
+        if not ok or p.poll() is not None:
+            p.stdin.close()         # no go-ahead: end of input, the script goes on (and the test fails)
+            return
+        pressed.append(time.monotonic())
+        p.stdin.write("\n")
+        p.stdin.flush()
+
+
+def near(name, target, tolerance):
+    """A condition: the vehicle within ``tolerance`` m of ``target`` (world truth)."""
+    return lambda probe: float(np.linalg.norm(np.array(probe.position(name)) - target)) < tolerance
+
+
+def held_near(targets, tolerance, hold_s):
+    """A condition: every vehicle within ``tolerance`` m of its target, for ``hold_s`` s of world time."""
+    since = []
+
+    def condition(probe):
+        if not all(near(n, target, tolerance)(probe) for n, target in targets.items()):
+            since.clear()
+            return False
+        if not since:
+            since.append(probe.clock.now())
+        return probe.clock.now() - since[0] >= hold_s
+    return condition
+
+
+def wait_all_down(probe, names):
+    """Until every vehicle is on the ground (world truth), up to LANDING_TIMEOUT_S of world time."""
+    return probe.clock.wait_until(lambda: all(probe.state(n)["on_ground"] for n in names), LANDING_TIMEOUT_S)[0]
+
+
+def run_and_record(name, *args, presses=None, pressed=None):
     env = dict(os.environ)
     env["CRAZYFLIE_SIM_ADDRESS"] = rospy.get_param("~sim_address")
     t0 = time.monotonic()
     p = subprocess.Popen([sys.executable, name] + list(args), cwd=SCRIPTS, env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, universal_newlines=True)
+                         stderr=subprocess.STDOUT, stdin=subprocess.PIPE if presses else subprocess.DEVNULL,
+                         universal_newlines=True)
     rec = Recording(rospy.get_param("~sim_address"))
     import threading
     out = []
     reader = threading.Thread(target=lambda: out.append(p.stdout.read()), daemon=True)
     reader.start()
+    if presses:
+        threading.Thread(target=press_when, args=(p, presses, pressed if pressed is not None else []),
+                         daemon=True).start()
     rec.start_when_world_answers(lambda: p.poll() is None)
     try:
         code = p.wait(SCRIPT_TIMEOUT_S)
@@ -211,6 +266,160 @@ class PycrazyswarmScripts(unittest.TestCase):
         self.assertLess(abs(cf1[:, 0].max() - 0.5), HOVER_BOUND_M, "cf1 did not move with group 1's goTo")
         self.assertLess(np.ptp(cf2[:, 0]), HOVER_BOUND_M, "cf2 moved with group 1's goTo")
         self.assertLess(max(cf1[-1][2], cf2[-1][2]), LANDED_Z_M, "the land for all did not land both")
+
+    def hover_point(self, name, height=HEIGHT_M):
+        return np.array(INITIAL[name]) + [0, 0, height]
+
+    def check_landed_home(self, rec, names=NAMES):
+        for name in names:
+            last = rec.positions(name)[-1]
+            self.assertLess(last[2], LANDED_Z_M, "%s did not land: %s" % (name, last))
+            self.assertLess(np.abs(last[:2] - INITIAL[name][:2]).max(), HOVER_BOUND_M, "%s landed off its place" % name)
+
+    def test_7_nice_hover(self):
+        """nice_hover.py: all take off, straighten up above their starts and hold there until the
+        go-ahead, given once both have held their places for HOLD_S of world time; then all land."""
+        if self.mode != "swarm":
+            return
+        pressed = []
+        code, rec = run_and_record("nice_hover.py", pressed=pressed,
+                                   presses=[held_near({n: self.hover_point(n) for n in NAMES}, HOVER_BOUND_M, HOLD_S)])
+        self.assertEqual(code, 0, "nice_hover.py failed")
+        self.assertEqual(len(pressed), 1, "the Crazyflies never held their places above their starts together")
+        for name in NAMES:
+            xyz, t = rec.positions(name), rec.times(name)
+            held = xyz[(t > pressed[0] - HOLD_S + 0.5) & (t <= pressed[0])]
+            err = np.linalg.norm(held - self.hover_point(name), axis=1)
+            print("nice hover %s: %d samples in the %.1f s before the go-ahead, off the hover point at most %.3f m; "
+                  "landed at %s" % (name, len(held), HOLD_S - 0.5, err.max(), np.round(xyz[-1], 3)))
+            self.assertGreater(len(held), 10)
+            self.assertLess(err.max(), HOVER_BOUND_M, "%s did not hold its place until the go-ahead" % name)
+        self.check_landed_home(rec)
+
+    def test_8_individual_hover(self):
+        """individual_hover.py: one after the other, each up at 1 m while the next waits on the ground."""
+        if self.mode != "swarm":
+            return
+        pressed = []
+        code, rec = run_and_record("individual_hover.py", pressed=pressed,
+                                   presses=[near(n, self.hover_point(n), HOVER_BOUND_M) for n in NAMES])
+        self.assertEqual(code, 0, "individual_hover.py failed")
+        self.assertEqual(len(pressed), 2, "not every Crazyflie reached 1 m in its turn: %d go-aheads" % len(pressed))
+        cf2, t2 = rec.positions("cf2"), rec.times("cf2")
+        cf2_before = cf2[t2 <= pressed[0]]
+        cf2_left = t2[cf2[:, 2] > ON_GROUND_Z_M]
+        print("individual hover: cf2 highest %.3f m while cf1 was up; cf2 left the ground %.2f s after cf1's "
+              "go-ahead" % (cf2_before[:, 2].max(), cf2_left[0] - pressed[0]))
+        self.assertLess(cf2_before[:, 2].max(), ON_GROUND_Z_M, "cf2 took off before its turn")
+        self.assertGreater(cf2_left[0], pressed[0], "cf2 took off before cf1's go-ahead")
+        probe = WorldProbe(rospy.get_param("~sim_address"))        # the script ends as cf2's landing starts
+        self.assertTrue(wait_all_down(probe, NAMES), "not both landed after the script sent their lands: %s"
+                        % ([probe.position(n) for n in NAMES],))
+        for name in NAMES:
+            final = np.array(probe.position(name))
+            self.assertLess(np.abs(final[:2] - INITIAL[name][:2]).max(), HOVER_BOUND_M, "%s landed off its place"
+                            % name)
+
+    def test_9_timed_waypoints(self):
+        """waypoints.py: each Crazyflie reaches every waypoint of waypoints.csv, in order, and lands home."""
+        if self.mode != "swarm":
+            return
+        code, rec = run_and_record("waypoints.py")
+        self.assertEqual(code, 0, "waypoints.py failed")
+        rows = np.loadtxt(os.path.join(SCRIPTS, "waypoints.csv"), skiprows=1, delimiter=",", ndmin=2)
+        for cf_id in (1, 2):
+            name = "cf%d" % cf_id
+            flown = rec.positions(name)
+            points = rows[rows[:, 0] == cf_id][:, 1:4]
+            reached = []
+            start = 0
+            for wp in points:       # the first pass within the bound after the previous waypoint's
+                d = np.linalg.norm(flown[start:] - wp, axis=1)
+                hits = np.nonzero(d < WAYPOINT_BOUND_M)[0]
+                self.assertTrue(len(hits), "%s missed waypoint %s after the one before (closest %.3f m)"
+                                % (name, wp, d.min() if len(d) else np.inf))
+                reached.append(d[hits].min())
+                start += int(hits[0])
+            print("waypoints %s: %d reached in order, each within %.3f m" % (name, len(points), max(reached)))
+        self.check_landed_home(rec)
+
+    def test_10_group_swap(self):
+        """group_swap.py: groups 1 and 2 swap places by broadcast goTos and swap back, never closer than their lanes."""
+        if self.mode != "swarm":
+            return
+        code, rec = run_and_record("group_swap.py")
+        self.assertEqual(code, 0, "group_swap.py failed")
+        cf1, cf2 = rec.positions("cf1"), rec.positions("cf2")
+        n = min(len(cf1), len(cf2))
+        cf1, cf2 = cf1[:n], cf2[:n]
+        swapped = (np.linalg.norm(cf1 - self.hover_point("cf2"), axis=1) < HOVER_BOUND_M) & \
+                  (np.linalg.norm(cf2 - self.hover_point("cf1"), axis=1) < HOVER_BOUND_M)
+        flying = (cf1[:, 2] > 0.5) | (cf2[:, 2] > 0.5)
+        closest = np.linalg.norm(cf1 - cf2, axis=1)[flying].min()
+        print("group swap: %d samples with both at each other's place; closest %.3f m while flying" %
+              (swapped.sum(), closest))
+        self.assertGreater(swapped.sum(), 5, "the two never stood at each other's place")
+        self.assertGreater(closest, SEPARATION_M - HOVER_BOUND_M, "the lanes did not keep them apart")
+        self.check_landed_home(rec)
+
+    def test_11_velocity_streaming(self):
+        """velocity_circle.py: cf1 flies two circles on streamed world velocities, then the HL lands it."""
+        if self.mode != "swarm":
+            return
+        code, rec = run_and_record("velocity_circle.py")
+        self.assertEqual(code, 0, "velocity_circle.py failed")
+        flown = rec.positions("cf1")
+        centre = self.hover_point("cf1") + [-0.5, 0, 0]
+        a = np.linspace(0, 2 * np.pi, 400)
+        curve = centre + 0.5 * np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+        high = flown[flown[:, 2] > HEIGHT_M - CLIMB_EXCLUDED_M]
+        off = np.min(np.linalg.norm(high[:, None, :] - curve[None, :, :], axis=2), axis=1)
+        missed = np.min(np.linalg.norm(curve[:, None, :] - high[None, :, :], axis=2), axis=1)
+        print("velocity circle: %d samples at height; off the circle max %.3f m mean %.3f m; circle missed by at "
+              "most %.3f m; cf2 highest %.3f m" % (len(high), off.max(), off.mean(), missed.max(),
+                                                   rec.positions("cf2")[:, 2].max()))
+        self.assertGreater(len(high), 100)
+        self.assertLess(off.max(), PATH_BOUND_M, "cf1 strayed from the circle")
+        self.assertLess(missed.max(), PATH_BOUND_M, "cf1 did not fly the whole circle")
+        self.check_landed_home(rec)
+
+    def test_12_all_notify_setpoints_stop(self):
+        """/all/notify_setpoints_stop hands every Crazyflie back to its high-level commander: with both
+        streaming a position 5 cm up (motors running), one call, and the idle planners' null setpoints
+        stop every motor, no land needed (world truth)."""
+        if self.mode != "swarm":
+            return
+        from crazyflie_driver.msg import Position
+        from crazyflie_driver.srv import NotifySetpointsStop
+        probe = WorldProbe(rospy.get_param("~sim_address"))
+        pubs = {n: rospy.Publisher("/%s/cmd_position" % n, Position, queue_size=1) for n in NAMES}
+        stop_streaming = []
+
+        def stream():
+            while not stop_streaming and not rospy.is_shutdown():
+                for n, pub in pubs.items():
+                    x, y, _ = INITIAL[n]
+                    pub.publish(Position(x=x, y=y, z=0.05, yaw=0.0))
+                time.sleep(0.02)
+        import threading
+        streamer = threading.Thread(target=stream, daemon=True)
+        streamer.start()
+        try:
+            spinning = probe.clock.wait_until(lambda: all(min(probe.state(n)["motors"]) > 0 for n in NAMES), 10.0)[0]
+            self.assertTrue(spinning, "the streamed positions never ran the motors: %s"
+                            % {n: probe.state(n)["motors"] for n in NAMES})
+            stop_streaming.append(True)
+            streamer.join(1.0)
+            rospy.ServiceProxy("/all/notify_setpoints_stop", NotifySetpointsStop)(0, 100)
+            t0 = probe.clock.now()
+            stopped = probe.clock.wait_until(lambda: all(max(probe.state(n)["motors"]) == 0 for n in NAMES), 1.0)[0]
+            print("all/notify_setpoints_stop: motors %s %.2f s after the call" % (
+                "off" if stopped else "still on", probe.clock.now() - t0))
+            self.assertTrue(stopped, "a Crazyflie's motors kept running after /all/notify_setpoints_stop: %s"
+                            % {n: probe.state(n)["motors"] for n in NAMES})
+            self.assertTrue(wait_all_down(probe, NAMES))
+        finally:
+            stop_streaming.append(True)
 
 
 if __name__ == "__main__":

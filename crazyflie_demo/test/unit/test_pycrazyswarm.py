@@ -267,3 +267,41 @@ def test_position_is_an_array_and_time_helper_checks_its_arguments(swarm):
     assert th.time() == 5.0 and Clock.slept == [1.5, 0.02] and not th.isShutdown()
     with pytest.raises(CommandValueError):
         th.sleepForRate(0)
+
+
+# -- the operator's go-ahead and Crazyswarm's simulator module ------------------------------------
+class _Pipe:
+    """stdin that is not a terminal, with the given lines."""
+
+    def __init__(self, *lines):
+        self.lines, self.closed = list(lines), False
+
+    def isatty(self):
+        return False
+
+    def readline(self):
+        return self.lines.pop(0) if self.lines else ""
+
+
+def test_a_line_on_a_piped_stdin_is_the_go_ahead_even_on_a_real_swarm(monkeypatch):
+    from pycrazyswarm.input import Input
+    pipe = _Pipe("\n")
+    monkeypatch.setattr("sys.stdin", pipe)
+    Input(None, simulated=False).waitUntilButtonPressed()
+    assert pipe.lines == []
+
+
+def test_without_a_line_a_simulation_goes_on_and_a_real_swarm_refuses(monkeypatch):
+    from crazyflie_driver.errors import CrazyflieError
+    from pycrazyswarm.input import Input
+    monkeypatch.setattr("sys.stdin", _Pipe())
+    Input(None, simulated=True).waitUntilButtonPressed()
+    with pytest.raises(CrazyflieError, match="pipe it a line per go-ahead"):
+        Input(None, simulated=False).waitUntilButtonPressed()
+
+
+def test_crazyswarms_firmware_module_imports_and_refuses_any_use():
+    import pycrazyswarm.cfsim.cffirmware as firm
+    with pytest.raises(NotSupported, match="runs in the simulated world"):
+        firm.plan_init
+    assert not hasattr(firm, "__wrapped__")

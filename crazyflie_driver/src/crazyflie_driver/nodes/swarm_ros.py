@@ -3,10 +3,10 @@
 Adds every Crazyflie of the swarm file at once, writes their firmware parameters, and serves at the
 root namespace, as Crazyswarm does: ``/takeoff``, ``/land``, ``/go_to``, ``/start_trajectory``,
 ``/stop`` (broadcasts with group masks, ``server.swarm_commands``), ``/emergency`` (broadcast and
-unicast e-stop to all) and ``/update_params``. Streams motion capture (VRPN, tf or PoseStamped
-topics) to the onboard estimators in packed broadcasts (``server.mocap_stream``), lands a Crazyflie
-whose pose goes stale or whose link is lost (``server.swarm_watch``), and reports both in the log
-and on ``/diagnostics``.
+unicast e-stop to all), ``/update_params`` and Crazyswarm2's ``/all/notify_setpoints_stop``.
+Streams motion capture (VRPN, tf or PoseStamped topics) to the onboard estimators in packed
+broadcasts (``server.mocap_stream``), lands a Crazyflie whose pose goes stale or whose link is lost
+(``server.swarm_watch``), and reports both in the log and on ``/diagnostics``.
 """
 from __future__ import annotations
 
@@ -39,8 +39,9 @@ from crazyflie_driver.server.swarm_heartbeat import Heartbeat
 from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
 from crazyflie_driver.server.swarm_watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
-from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, StartTrajectory, StartTrajectoryResponse,
-                                  Stop, StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
+from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
+                                  NotifySetpointsStopResponse, StartTrajectory, StartTrajectoryResponse, Stop,
+                                  StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 
@@ -212,6 +213,8 @@ class RosSwarm:
              lambda r: c.start_trajectory(r.groupMask, r.trajectoryId, r.timescale, r.reversed)),
             ("/stop", Stop, StopResponse, lambda r: c.stop(r.groupMask)),
             ("/update_params", UpdateParams, UpdateParamsResponse, self._update_params),
+            ("/all/notify_setpoints_stop", NotifySetpointsStop, NotifySetpointsStopResponse,
+             self._notify_setpoints_stop),
         ]
         for name, kind, response, handler in services:
             self._services.append(rospy.Service(name, kind, self._service(name, handler, response)))
@@ -240,6 +243,21 @@ class RosSwarm:
         with self._watch_lock:
             for m in targets:
                 self.watch.rearm(m.name)
+
+    def _notify_setpoints_stop(self, req) -> None:
+        """Crazyswarm2's ``all/notify_setpoints_stop``: the high-level commander takes over again on
+        every Crazyflie of ``groupMask`` (0: all). Acknowledged unicast to each, not one broadcast: the
+        packet has no group mask, and each Crazyflie's own low-level stream must stop with it (the
+        per-Crazyflie ``notify_setpoints_stop`` does both)."""
+        failed = []
+        for m in self.commands.targets(req.groupMask):
+            try:
+                m.onboard.notify_setpoints_stop(req.remainValidMillisecs)
+            except CrazyflieError as e:
+                failed.append("%s: %s" % (m.name, e))
+        if failed:
+            raise CrazyflieError("notify-setpoints-stop failed for %d Crazyflie(s): %s; the others took it"
+                                 % (len(failed), "; ".join(failed[:5])))
 
     def _on_emergency(self, _req) -> EmptyResponse:
         self._emergency = True
