@@ -132,6 +132,14 @@ def fly(n: int, seconds: float, sim_address: str, work: str) -> List[str]:
     while not rospy.has_param("/use_sim_time") and time.monotonic() < deadline:
         time.sleep(0.2)
     rospy.init_node("bench_service_loop", disable_signals=True)
+    from diagnostic_msgs.msg import DiagnosticArray
+    world_status: List[Tuple[float, Dict[str, str]]] = []      # wall, the world's /diagnostics values
+
+    def on_diagnostics(msg) -> None:
+        for st in msg.status:
+            if st.hardware_id == "crazyflie_sim":
+                world_status.append((time.monotonic(), {kv.key: kv.value for kv in st.values}))
+    rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics, queue_size=50)
     rospy.wait_for_service("/takeoff", timeout=300.0)
     for p in PARAMS:
         rospy.set_param("/allcfs/" + p, 3)
@@ -212,6 +220,13 @@ def fly(n: int, seconds: float, sim_address: str, work: str) -> List[str]:
     out.append("real-time factor over the loop: %.2f; lowest 5 s window: %.2f" % (whole, worst))
     out.append("lowest Crazyflie during the loop: %.3f m (world t=%.1f s); below %.1f m at any sample: %d%s" % (
         lowest[0], lowest[1], LOW_Z_M, len(low_names), " (%s)" % ", ".join(low_names[:8]) if low_names else ""))
+    seen = [v for t, v in world_status if t0 <= t <= t1]
+
+    def span(key: str) -> str:
+        vals = [float(v[key]) for v in seen if key in v]
+        return "%.2f-%.2f" % (min(vals), max(vals)) if vals else "n/a"
+    out.append("world's /diagnostics during the loop (%d): speed %s, real-time factor %s, host run-queue wait %s ms"
+               % (len(seen), span("speed"), span("real-time factor"), span("host run-queue wait [ms]")))
     out += calls
     try:
         rospy.ServiceProxy("/land", Land)(0, 0.0, rospy.Duration(2.0))
