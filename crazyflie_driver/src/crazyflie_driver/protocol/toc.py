@@ -38,6 +38,16 @@ PIPELINE_DEPTH = 4
 #: Seconds before an unanswered request of a pipelined batch is sent again.
 PIPELINE_RESEND_S = 0.2
 
+# One download per table (cache file) at a time in this process: a swarm's Crazyflies run the same
+# build, so while one downloads a table the others with the same CRC wait and then read the cache.
+_DOWNLOADS_LOCK = threading.Lock()
+_DOWNLOADS: Dict[str, threading.Lock] = {}
+
+
+def _download_lock(key: str) -> threading.Lock:
+    with _DOWNLOADS_LOCK:
+        return _DOWNLOADS.setdefault(key, threading.Lock())
+
 
 @dataclass(frozen=True)
 class TocEntry:
@@ -309,15 +319,22 @@ class TocFetcher:
     def fetch(self) -> "tuple[Toc, TocInfo]":
         """The whole TOC: from the cache when its CRC is known, else item by item."""
         info = self.fetch_info()
-        if self.cache is not None:
-            entries = self.cache.load(self.kind, info.crc, info.count)
-            if entries is not None:
-                _LOG.debug("%s: %s TOC 0x%08X from cache", self.link.uri, self.kind, info.crc)
-                return Toc(entries, info.crc), info
-        entries = self.fetch_items(info.count)
-        if self.cache is not None:
-            self.cache.store(self.kind, info.crc, entries)
+        if self.cache is None:
+            return Toc(self.fetch_items(info.count), info.crc), info
+        entries = self._cached(info)
+        if entries is None:
+            with _download_lock(self.cache.path(self.kind, info.crc)):   # another Crazyflie may be fetching it
+                entries = self._cached(info)
+                if entries is None:
+                    entries = self.fetch_items(info.count)
+                    self.cache.store(self.kind, info.crc, entries)
         return Toc(entries, info.crc), info
+
+    def _cached(self, info: TocInfo) -> Optional[List[TocEntry]]:
+        entries = self.cache.load(self.kind, info.crc, info.count)
+        if entries is not None:
+            _LOG.debug("%s: %s TOC 0x%08X from cache", self.link.uri, self.kind, info.crc)
+        return entries
 
 
 class TocPortClient:

@@ -251,3 +251,30 @@ def test_ids_past_255_read_write_and_log_on_the_wire(air, tmp_path):
         assert got and got[0] == [pytest.approx(0.875), pytest.approx(3.9)]
     finally:
         cf.close()
+
+
+def test_crazyflies_connecting_together_download_a_shared_table_once(air, tmp_path):
+    """Same build, same CRC: while one Crazyflie downloads a table the other waits and reads the cache."""
+    import threading
+    fws = [air.add(URI1, "current")[0], air.add(URI2, "current")[0]]
+    cfs = [Crazyflie(u, radio_manager=air.manager, cache_dir=str(tmp_path / "toc")) for u in (URI1, URI2)]
+    errors = []
+
+    def connect_and_fetch(cf):
+        try:
+            cf.connect()
+            cf.params.fetch_toc()
+        except Exception as e:      # reported below
+            errors.append(e)
+    threads = [threading.Thread(target=connect_and_fetch, args=(cf,)) for cf in cfs]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30.0)
+        assert errors == [] and all(len(cf.params.toc) == len(fws[0].params.entries) for cf in cfs)
+        asked = sorted(fw.state.packets_by_port.get(2, 0) for fw in fws)
+        assert asked[1] > len(fws[0].params.entries) and asked[0] < 5, asked
+    finally:
+        for cf in cfs:
+            cf.close()
