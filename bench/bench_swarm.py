@@ -16,7 +16,7 @@ software's). The Crazyflies sit on the ground; the server streams their poses al
   transfer) / time, from the fake dongle's timing model (``DongleTiming``).
 * connect: from the world accepting connections to every Crazyflie's services and the swarm-wide
   ``/takeoff`` being registered (the server offers it once all are connected and configured),
-  with an empty TOC cache and again with the cache the first run left (``--connect``).
+  for each size, with an empty TOC cache and again with the cache the first run left (``--connect``).
 * CPU: the server process (/proc, all threads) and this world process, per second of the window.
 
 Usage (takes the ROS lock on a shared machine):
@@ -220,7 +220,7 @@ def child(out: str, n: int, seconds: float, toc_cache: str) -> None:
 
 def main() -> int:
     ap = bs.parser(__doc__, "swarm.txt", 10.0, counts="1,16,49")
-    ap.add_argument("--connect", action="store_true", help="also connect the largest swarm fresh, then warm")
+    ap.add_argument("--connect", action="store_true", help="also connect each swarm size fresh, then warm")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--n", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--toc-cache", default="", help=argparse.SUPPRESS)
@@ -239,13 +239,12 @@ def main() -> int:
         r = bs.run_child(__file__, ["--n", str(n), "--seconds", str(args.seconds)], timeout=args.seconds + 400)
         lines.append(row(n, r))
         print(lines[-1], flush=True)
-    if args.connect:
-        n = max(bs.counts_of(args.counts))
+    for n in bs.counts_of(args.counts) if args.connect else ():
         cache = tempfile.mkdtemp(prefix="cf_swarm_toc_")
         lines += ["", "connect %d Crazyflies (world accepting -> /takeoff registered: all connected, configured):"
                   % n]
         for label in ("empty TOC cache", "warm TOC cache"):
-            r = bs.run_child(__file__, ["--n", str(n), "--seconds", "1", "--toc-cache", cache], timeout=600)
+            r = bs.run_child(__file__, ["--n", str(n), "--seconds", "1", "--toc-cache", cache], timeout=900)
             lines.append("  %-16s %s" % (label, "%.1f s" % r["connect_s"] if "connect_s" in r
                                          else "failed: %s" % r.get("error")))
             print(lines[-1], flush=True)

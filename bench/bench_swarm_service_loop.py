@@ -121,7 +121,7 @@ def run(n: int, seconds: float, busy: int) -> List[str]:
     return [head] + lines
 
 
-def fly(n: int, seconds: float, sim_address: str, work: str) -> List[str]:
+def fly(n: int, seconds: float, sim_address: str, work: str) -> List[str]:  # noqa: C901  (one scripted run, read top to bottom)
     import rosgraph
     deadline = time.monotonic() + 60.0
     while not rosgraph.is_master_online() and time.monotonic() < deadline:

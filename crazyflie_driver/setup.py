@@ -7,4 +7,5 @@ setup(**generate_distutils_setup(
               'crazyflie_driver.sim', 'crazyflie_driver.sim.world', 'crazyflie_driver.sim.firmware',
               'crazyflie_driver.sim.air', 'crazyflie_driver.nodes'],
     package_dir={'': 'src'},
+    package_data={'crazyflie_driver.sim.firmware': ['data/*.tsv', 'data/README.md']},
 ))

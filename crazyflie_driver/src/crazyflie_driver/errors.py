@@ -97,3 +97,7 @@ class FlightRefused(CommandRejected):
 
 class SwarmConfigError(CrazyflieError, ValueError):
     """A swarm file that cannot be flown; the message names the file, the line or entry, and the fix."""
+
+
+class FirmwareTableError(CrazyflieError, ValueError):
+    """A simulated firmware variable table that cannot be loaded; the message names the file, the line and the fix."""

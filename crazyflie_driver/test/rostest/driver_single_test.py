@@ -95,6 +95,13 @@ class DriverSingle(unittest.TestCase):
         self.assertIn(rospy.get_param(NS + "/ring/headlightEnable"), (0, 1))
         self.assertAlmostEqual(float(rospy.get_param(NS + "/pid_rate/roll_kp")),
                                float(self.state()["params"]["pid_rate.roll_kp"]), places=3)
+        # the whole real-size table (ids past 255), e.g. the position controller's gains at id 262
+        held = self.state()["params"]
+        self.assertGreater(len(held), 380)
+        mirrored = rospy.get_param(NS)
+        missing = [n for n in held if n.partition(".")[2] not in mirrored.get(n.partition(".")[0], {})]
+        self.assertEqual(missing, [])
+        self.assertAlmostEqual(float(rospy.get_param(NS + "/posCtlPid/zKp")), float(held["posCtlPid.zKp"]), places=3)
 
     def test_d_update_params_reaches_the_crazyflie(self):
         update = rospy.ServiceProxy(NS + "/update_params", UpdateParams)
@@ -106,6 +113,9 @@ class DriverSingle(unittest.TestCase):
             update(["ring/headlightEnable", "nosuch/param"])
         self.assertIn("nosuch", str(ctx.exception))
         self.assertEqual(self.state()["params"]["ring.headlightEnable"], 0)   # the known one went through
+        rospy.set_param(NS + "/sound/freq", 4321)                              # id past 255 (16-bit on the wire)
+        update(["sound/freq"])
+        self.assertEqual(self.state()["params"]["sound.freq"], 4321)
 
     def test_e_cmd_vel_reaches_the_crazyflie_with_trims_and_pitch_sign(self):
         self.send_for(twist(x=2.0, y=3.0, z=12000.0, yaw=10.0), 0.3)
@@ -130,8 +140,9 @@ class DriverSingle(unittest.TestCase):
         self.assertEqual(statistics.median(periods), 100)
         periods = [b.onboard_timestamp - a.onboard_timestamp for a, b in zip(motors, motors[1:])]
         self.assertEqual(statistics.median(periods), 20)
-        self.assertEqual(len(log1[-1].values), 1)
+        self.assertEqual(len(log1[-1].values), 2)
         self.assertTrue(3.0 < log1[-1].values[0] < 4.3)
+        self.assertAlmostEqual(log1[-1].values[1], 1.0, delta=0.01)   # stateEstimate.qw, id past 255: live, level
         self.assertEqual(len(motors[-1].values), 4)
         stamp_age = rospy.Time.now() - log1[-1].header.stamp
         self.assertLess(abs(stamp_age.to_sec()), 1.0)

@@ -48,8 +48,9 @@ FLOAT32 = ctype("float")
 SPECIAL = (NAN, INF, -INF, -0.0, 5e-324, 1e-40, 1e39, -1e39, 1e308, -1e308, FLOAT32.high, -FLOAT32.high)
 RANDOM_PER_FIELD = 6
 #: Parameters whose values are swept (one of each C type the simulated firmware has writable), with their type.
-SWEPT_PARAMS = (("pid_rate/roll_kp", "float"), ("ring/solidRed", "uint8_t"), ("ring/glowstep", "int16_t"),
-                ("sound/freq", "uint16_t"), ("system/forceArm", "int8_t"), ("lighthouse/systemType", "int32_t"))
+#: The firmware declares no writable 16-bit signed parameter; the small table of the 2016.02 profile has one.
+SWEPT_PARAMS = (("pid_rate/roll_kp", "float"), ("ring/solidRed", "uint8_t"), ("ring/fadeColor", "uint32_t"),
+                ("sound/freq", "uint16_t"), ("radiotest/power", "int8_t"), ("colAv/vorIters", "int32_t"))
 #: Swarm-wide services at the root (/takeoff, /land, /go_to, ...) are swept once the server offers them.
 SWARM_SERVICES = ("/takeoff", "/land", "/go_to")
 

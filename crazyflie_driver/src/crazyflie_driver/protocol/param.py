@@ -10,12 +10,12 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from typing import Any, Callable, Dict, List, Union
+from typing import Any, Callable, Dict, List, Optional, Union
 
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, PORT_PARAM, CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam
 from crazyflie_driver.crtp.ctypes import ctype, type_size
-from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name
+from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name, request_all
 
 _LOG = logging.getLogger(__name__)
 
@@ -125,10 +125,22 @@ class ParamClient(TocPortClient):
         self._unsubscribe = link.subscribe(PORT_PARAM, CH_MISC, self._on_misc)
 
     def read_all(self) -> Dict[str, Value]:
-        """Read every parameter, one request at a time; ``group.name`` -> value."""
+        """Read every parameter, several requests in flight (toc.request_all); ``group.name`` -> value."""
         with self._lock:
             toc = self._ensure_toc()
-            return {entry.full_name: self._read(entry) for entry in toc}
+            v2 = self.version >= 2
+            entries = {self._id_bytes(e.ident): e for e in toc}
+
+            def key_of(p: CRTPPacket) -> Optional[bytes]:
+                if not v2 and len(p.data) == 3 and p.data[0] == 0xFF:
+                    return bytes(p.data[1:2])       # the 2016 firmware's error reply
+                key = bytes(p.data[:2 if v2 else 1])
+                return key if key in entries else None
+
+            answers = request_all(self.link, [(k, CRTPPacket(PORT_PARAM, CH_READ, k)) for k in entries],
+                                  PORT_PARAM, CH_READ, key_of, self.timeout,
+                                  lambda k: "parameter read of %s" % entries[k].full_name)
+            return {e.full_name: self._value_of(e, answers[k]) for k, e in entries.items()}
 
     def get(self, name: str) -> Value:
         """Read one parameter from the Crazyflie now."""
@@ -164,7 +176,6 @@ class ParamClient(TocPortClient):
 
     def _read(self, entry: TocEntry) -> Value:
         id_bytes = self._id_bytes(entry.ident)
-        size = type_size(entry.ctype)
         v2 = self.version >= 2
 
         def match(p: CRTPPacket) -> bool:
@@ -177,6 +188,12 @@ class ParamClient(TocPortClient):
         reply = self.link.request(CRTPPacket(PORT_PARAM, CH_READ, id_bytes), match=match,
                                   timeout=self.timeout,
                                   what="parameter read of %s" % entry.full_name)
+        return self._value_of(entry, reply)
+
+    def _value_of(self, entry: TocEntry, reply: CRTPPacket) -> Value:
+        """The value a read reply carries (stored in ``values``); ProtocolError for an error reply."""
+        size = type_size(entry.ctype)
+        v2 = self.version >= 2
         data = reply.data
         if v2:
             if len(data) == 3 + size and data[2] == 0:

@@ -11,13 +11,14 @@ from __future__ import annotations
 import logging
 import struct
 import threading
+import time
 from dataclasses import dataclass
-from typing import Dict, Iterator, List, Optional
+from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.ctypes import BY_LOG_CODE, BY_PARAM_CODE
 from crazyflie_driver.crtp.firmware_limits import TOC_NAME_MAX_BYTES
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import ProtocolError, UnknownName
+from crazyflie_driver.errors import LinkTimeout, ProtocolError, UnknownName
 from crazyflie_driver.protocol.platform import toc_version
 
 _LOG = logging.getLogger(__name__)
@@ -28,6 +29,24 @@ CMD_GET_ITEM_V2 = 2
 CMD_GET_INFO_V2 = 3
 
 PARAM_READONLY = 0x40
+
+#: Requests in flight at once when many items are read (TOC items, parameter values): the answer
+#: to one rides back in the ack of the next request instead of costing a null-packet round trip of
+#: its own, so a real-size table (~1000 items) takes about half the round trips. Kept small: the
+#: firmware queues the answers, and one lost request costs a resend interval.
+PIPELINE_DEPTH = 4
+#: Seconds before an unanswered request of a pipelined batch is sent again.
+PIPELINE_RESEND_S = 0.2
+
+# One download per table (cache file) at a time in this process: a swarm's Crazyflies run the same
+# build, so while one downloads a table the others with the same CRC wait and then read the cache.
+_DOWNLOADS_LOCK = threading.Lock()
+_DOWNLOADS: Dict[str, threading.Lock] = {}
+
+
+def _download_lock(key: str) -> threading.Lock:
+    with _DOWNLOADS_LOCK:
+        return _DOWNLOADS.setdefault(key, threading.Lock())
 
 
 @dataclass(frozen=True)
@@ -151,6 +170,70 @@ def parse_item(kind: str, version: int, data: bytes) -> TocEntry:
     return TocEntry(ident, group, name, ct.name, readonly)
 
 
+def request_all(link, requests: Sequence[Tuple[bytes, CRTPPacket]], port: int, channel: int,
+                key_of: Callable[[CRTPPacket], Optional[bytes]], timeout: float, what: Callable[[bytes], str],
+                refused: Optional[Callable[[bytes], str]] = None,
+                depth: int = PIPELINE_DEPTH) -> Dict[bytes, CRTPPacket]:
+    """Send ``requests`` (key, packet) with up to ``depth`` in flight and collect the answer to each.
+
+    ``key_of(reply)`` names the request a downlink packet on ``port``/``channel`` answers (None: not
+    an answer; b"": an error reply that names no request, raised as ProtocolError ``refused(key)`` of the
+oldest unanswered request, since the firmware answers in order). A
+    request unanswered for PIPELINE_RESEND_S is sent again (the answers are idempotent reads);
+    LinkTimeout when nothing at all arrives for ``timeout`` s. Returns the answers by key.
+    """
+    answers: Dict[bytes, CRTPPacket] = {}
+    wanted = {key for key, _ in requests} | {b""}
+    lock = threading.Lock()
+
+    def on_packet(packet: CRTPPacket) -> None:
+        key = key_of(packet)
+        if key in wanted:
+            with lock:
+                answers.setdefault(key, packet)
+
+    clock = getattr(getattr(link, "clock", None), "now", time.monotonic)
+    unsubscribe = link.subscribe(port, channel, on_packet)
+    try:
+        pending = list(requests)
+        pending.reverse()
+        in_flight: Dict[bytes, List] = {}     # key -> [packet, time sent]
+        last_progress = clock()
+        seen = len(answers), getattr(link, "downlink_packets", 0)
+        while pending or in_flight:
+            now = clock()
+            with lock:
+                for key in [k for k in in_flight if k in answers]:
+                    del in_flight[key]
+            if b"" in answers:
+                key = next(iter(in_flight), b"")
+                raise ProtocolError("%s: %s" % (link.uri, refused(key) if refused else "a request was refused"))
+            progress = len(answers), getattr(link, "downlink_packets", 0)
+            if progress != seen:
+                seen, last_progress = progress, now
+            elif now - last_progress >= timeout:
+                key = next(iter(in_flight)) if in_flight else pending[-1][0]
+                raise LinkTimeout("%s: no answer to %s within %.2f s (%d of %d answered)"
+                                  % (link.uri, what(key), now - last_progress, len(answers), len(requests)))
+            if pending and len(in_flight) < depth:
+                key, packet = pending.pop()
+                if key not in answers:
+                    in_flight[key] = [packet, now]
+                    link.send(packet)
+                continue
+            if not in_flight:
+                continue
+            oldest = min(in_flight, key=lambda k: in_flight[k][1])
+            if now - in_flight[oldest][1] >= PIPELINE_RESEND_S:
+                in_flight[oldest][1] = now
+                link.send(in_flight[oldest][0])
+            else:
+                link.poll()
+        return answers
+    finally:
+        unsubscribe()
+
+
 class TocFetcher:
     """Downloads one port's TOC over a link, using an optional cache keyed by CRC.
 
@@ -214,18 +297,44 @@ class TocFetcher:
                                 "announced it" % (self.link.uri, self._label, ident))
         return parse_item(self.kind, self.version, reply.data)
 
+    def fetch_items(self, count: int) -> List[TocEntry]:
+        """Items 0..count-1, several requests in flight (``request_all``)."""
+        v2 = self.version >= 2
+        cmd = CMD_GET_ITEM_V2 if v2 else CMD_GET_ITEM_V1
+        n = 2 if v2 else 1
+        keys = [struct.pack("<H", i) if v2 else bytes([i]) for i in range(count)]
+        requests = [(k, CRTPPacket(self.port, 0, bytes([cmd]) + k)) for k in keys]
+
+        def key_of(p: CRTPPacket) -> Optional[bytes]:
+            if p.data[:1] != bytes([cmd]):
+                return None
+            return b"" if len(p.data) == 1 else bytes(p.data[1:1 + n])
+
+        answers = request_all(self.link, requests, self.port, 0, key_of, self.timeout,
+                              lambda k: "%s TOC item %d" % (self._label, int.from_bytes(k, "little")),
+                              refused=lambda k: "%s TOC item %d is out of range although the TOC info announced "
+                              "%d items" % (self._label, int.from_bytes(k, "little"), count))
+        return [parse_item(self.kind, self.version, answers[key].data) for key in keys]
+
     def fetch(self) -> tuple[Toc, TocInfo]:
         """The whole TOC: from the cache when its CRC is known, else item by item."""
         info = self.fetch_info()
-        if self.cache is not None:
-            entries = self.cache.load(self.kind, info.crc, info.count)
-            if entries is not None:
-                _LOG.debug("%s: %s TOC 0x%08X from cache", self.link.uri, self.kind, info.crc)
-                return Toc(entries, info.crc), info
-        entries = [self.fetch_item(i) for i in range(info.count)]
-        if self.cache is not None:
-            self.cache.store(self.kind, info.crc, entries)
+        if self.cache is None:
+            return Toc(self.fetch_items(info.count), info.crc), info
+        entries = self._cached(info)
+        if entries is None:
+            with _download_lock(self.cache.path(self.kind, info.crc)):   # another Crazyflie may be fetching it
+                entries = self._cached(info)
+                if entries is None:
+                    entries = self.fetch_items(info.count)
+                    self.cache.store(self.kind, info.crc, entries)
         return Toc(entries, info.crc), info
+
+    def _cached(self, info: TocInfo) -> Optional[List[TocEntry]]:
+        entries = self.cache.load(self.kind, info.crc, info.count)
+        if entries is not None:
+            _LOG.debug("%s: %s TOC 0x%08X from cache", self.link.uri, self.kind, info.crc)
+        return entries
 
 
 class TocPortClient:

@@ -66,7 +66,11 @@ def run_session(python, server, uri, *args):
     return result
 
 
-def check_session(result, sim, param, written, period_ms):
+#: A current-firmware session also logs a variable past id 255 of the real-size table, one the world drives.
+LOG_FAR = "acc.z,pm.vbat,stateEstimate.qw"
+
+
+def check_session(result, sim, param, written, period_ms, log_vars=("acc.z", "pm.vbat")):
     """What every session must show, from cflib's side and from the simulated Crazyflie's side."""
     # Both TOCs, with the counts the simulated firmware serves.
     assert result["connected"] is True
@@ -103,30 +107,41 @@ def check_session(result, sim, param, written, period_ms):
     for values in log["values"]:
         assert abs(values["acc.z"] - 1.0) < 0.05, values
         assert 3.7 <= values["pm.vbat"] <= 4.2, values
+        if "stateEstimate.qw" in log_vars:      # the estimator's live attitude: level, not a constant 0
+            assert abs(values["stateEstimate.qw"] - 1.0) < 0.01, values
     # Setpoints reached the commander (seen through the control API from cflib's process):
     # roll as sent, pitch negated by cflib (legacy frame), yaw rate and thrust as sent.
     seen = result["sim_state"]
     assert seen["last_setpoint"] == [1.5, -2.5, -3.0, 12000]
     assert seen["setpoints"] >= result["setpoints_sent"]
     assert seen["params"][param] == int(written)
-    assert [b["variables"] for b in seen["log_blocks"].values()] == [["acc.z", "pm.vbat"]]
+    assert [b["variables"] for b in seen["log_blocks"].values()] == [list(log_vars)]
     assert sim.state.setpoints >= result["setpoints_sent"]
     # cflib's disconnect was clean.
     assert result["disconnected"] is True
 
 
+def check_real_size(s, sim, param):
+    """The current firmware's real-size TOCs, listed whole by cflib; the parameter and a log variable past id 255."""
+    assert len(sim.params.entries) > 380 and len(sim.logs.entries) > 580
+    assert s["param_toc_count"] == len(sim.params.entries) and s["log_toc_count"] == len(sim.logs.entries)
+    assert sim.params.ident(param) > 255
+    assert [e.full_name for e in sim.logs.entries].index("stateEstimate.qw") > 255
+
+
 def test_cflib_radio_session_current_firmware(python, served):
     sim = served.crazyflie(URI1)
     before = dict(sim.state.packets_by_port)
-    r = run_session(python, served, URI1, "--scan-address", "E7E7E7E701", "--param", "ring.headlightEnable=1",
-                    "--log-seconds", "1.0", "--period-ms", "50", "--sim-name", "cf1")
+    r = run_session(python, served, URI1, "--scan-address", "E7E7E7E701", "--param", "hlCommander.groupmask=3",
+                    "--log", LOG_FAR, "--log-seconds", "1.0", "--period-ms", "50", "--sim-name", "cf1")
     assert "radio://0/80/2M/E7E7E7E701" in r["scan"]
     assert not any(u.startswith("radio://") and not u.startswith("radio://0/80/2M/") for u in r["scan"])
     s = r["sessions"][URI1]
     assert s["protocol_version"] == 12
     assert s["link_needs_resending"] is False          # safelink was negotiated with the nRF side
     assert r["dongle"]["bulk_out"] > 300 and r["dongle"]["control_transfers"] > 300   # scan + session
-    check_session(s, sim, "ring.headlightEnable", "1", 50)
+    check_real_size(s, sim, "hlCommander.groupmask")
+    check_session(s, sim, "hlCommander.groupmask", "3", 50, LOG_FAR.split(","))
     assert sim.state.packets_by_port.get(3, 0) - before.get(3, 0) >= s["setpoints_sent"]
 
 
@@ -156,12 +171,13 @@ def test_cflib_two_crazyflies_on_one_dongle(python, served):
 def test_cflib_udp_session(python, served):
     entry = [e for e in served.entries() if e.uri == URI1][0]
     sim = entry.crazyflie
-    r = run_session(python, served, entry.udp.uri, "--param", "ring.solidBlue=99", "--log-seconds", "0.5",
-                    "--period-ms", "100", "--sim-name", "cf1")
+    r = run_session(python, served, entry.udp.uri, "--param", "sound.freq=4400", "--log", LOG_FAR,
+                    "--log-seconds", "0.5", "--period-ms", "100", "--sim-name", "cf1")
     s = r["sessions"][entry.udp.uri]
     assert s["protocol_version"] == 12
     assert entry.udp.datagrams_in > s["param_toc_count"] + s["log_toc_count"]
-    check_session(s, sim, "ring.solidBlue", "99", 100)
+    check_real_size(s, sim, "sound.freq")
+    check_session(s, sim, "sound.freq", "4400", 100, LOG_FAR.split(","))
 
 
 def test_cflib_safelink_over_a_lossy_radio(python, served):
@@ -172,12 +188,12 @@ def test_cflib_safelink_over_a_lossy_radio(python, served):
     setpoints_before = sim.state.setpoints
     served.medium.set_dongle_faults(0, packet_loss=20.0, ack_loss=20.0)
     try:
-        r = run_session(python, served, URI1, "--param", "ring.glowstep=-7", "--log-seconds", "0.5",
+        r = run_session(python, served, URI1, "--param", "radiotest.power=-7", "--log-seconds", "0.5",
                         "--period-ms", "20", "--sim-name", "cf1")
     finally:
         served.medium.set_dongle_faults(0, packet_loss=0.0, ack_loss=0.0)
     s = r["sessions"][URI1]
     assert s["link_needs_resending"] is False
-    check_session(s, sim, "ring.glowstep", "-7", 20)
+    check_session(s, sim, "radiotest.power", "-7", 20)
     assert s["sim_state"]["setpoints"] - setpoints_before == s["setpoints_sent"]   # each delivered once
     assert sim.link.duplicates > 0                      # lost acks made cflib repeat packets

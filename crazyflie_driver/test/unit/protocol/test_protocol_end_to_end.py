@@ -219,3 +219,62 @@ def test_console_boot_text(air, tmp_path):
         assert lines[-1] == "TEST: a line"
     finally:
         cf.close()
+
+
+def test_ids_past_255_read_write_and_log_on_the_wire(air, tmp_path):
+    """The real-size tables through the host library: 16-bit ids for a parameter and a log variable past 255."""
+    fw, vehicle = air.add(URI1, "current")
+    vehicle.readings["stateEstimate.qw"] = 0.875
+    cf = connect(air, URI1, tmp_path)
+    try:
+        params = {e.full_name: e for e in cf.params.fetch_toc()}
+        assert len(params) == len(fw.params.entries) > 380
+        far = params["posCtlPid.zKp"]
+        assert far.ident == fw.params.ident("posCtlPid.zKp") > 255
+        values = cf.params.read_all()
+        assert len(values) == len(params)
+        for n in ("posCtlPid.zKp", "cpu.id0", "pm.lowVoltage"):
+            assert values[n] == pytest.approx(fw.params.value(n)), n
+        assert cf.params.set("posCtlPid.zKp", 3.25) == 3.25
+        assert vehicle.written["posCtlPid.zKp"] == 3.25 and fw.params.value("posCtlPid.zKp") == 3.25
+        assert cf.params.get("posCtlPid.zKp") == 3.25
+        logs = {e.full_name: e for e in cf.log.fetch_toc()}
+        assert len(logs) == len(fw.logs.entries) > 580 and logs["stateEstimate.qw"].ident > 255
+        cf.log.reset()
+        got = []
+        cf.log.create_block(["stateEstimate.qw", "pm.vbat"], 100, lambda ts, v: got.append(v))
+        (block,) = fw.logs.blocks.values()     # the firmware resolved the 16-bit ids the host sent
+        assert [fw.logs.entries[i].full_name for i, _ in block.ops] == ["stateEstimate.qw", "pm.vbat"]
+        for step in range(1, 31):
+            air.advance(step * 0.01)
+            cf.send_keepalive()
+        assert got and got[0] == [pytest.approx(0.875), pytest.approx(3.9)]
+    finally:
+        cf.close()
+
+
+def test_crazyflies_connecting_together_download_a_shared_table_once(air, tmp_path):
+    """Same build, same CRC: while one Crazyflie downloads a table the other waits and reads the cache."""
+    import threading
+    fws = [air.add(URI1, "current")[0], air.add(URI2, "current")[0]]
+    cfs = [Crazyflie(u, radio_manager=air.manager, cache_dir=str(tmp_path / "toc")) for u in (URI1, URI2)]
+    errors = []
+
+    def connect_and_fetch(cf):
+        try:
+            cf.connect()
+            cf.params.fetch_toc()
+        except Exception as e:      # reported below
+            errors.append(e)
+    threads = [threading.Thread(target=connect_and_fetch, args=(cf,)) for cf in cfs]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30.0)
+        assert errors == [] and all(len(cf.params.toc) == len(fws[0].params.entries) for cf in cfs)
+        asked = sorted(fw.state.packets_by_port.get(2, 0) for fw in fws)
+        assert asked[1] > len(fws[0].params.entries) and asked[0] < 5, asked
+    finally:
+        for cf in cfs:
+            cf.close()

@@ -159,3 +159,43 @@ def test_default_cache_dir(monkeypatch, tmp_path):
     assert default_cache_dir() == os.path.join(str(tmp_path), "home", ".cache", "crazyflie_driver", "toc")
     monkeypatch.setenv("CRAZYFLIE_TOC_CACHE", str(tmp_path / "explicit"))
     assert default_cache_dir() == str(tmp_path / "explicit")
+
+
+def numbered_items_link(count, drop=lambda n: False):
+    """A V2 parameter TOC of ``count`` u8 items; the n-th uplink item request is lost when ``drop(n)``."""
+    seen = []
+
+    def respond(p):
+        d = p.data
+        if p.port != 2 or p.channel != 0:
+            return []
+        if d[:1] == b"\x03":
+            return [CRTPPacket(2, 0, b"\x03" + count.to_bytes(2, "little") + b"\x01\x02\x03\x04")]
+        seen.append(d)
+        if drop(len(seen)):
+            return []
+        i = int.from_bytes(d[1:3], "little")
+        return [CRTPPacket(2, 0, b"\x02" + d[1:3] + b"\x08" + b"g\x00v%d\x00" % i)]
+    return ScriptedLink(responder=respond), seen
+
+
+def test_items_past_255_pipelined_one_round_trip_each():
+    link, seen = numbered_items_link(300)
+    toc, info = TocFetcher(link, 2, "param", 2).fetch()
+    assert [e.ident for e in toc] == list(range(300)) and toc.find("g.v299").ident == 299
+    assert len(seen) == 300                                  # no request sent twice on a clean link
+    assert link.stats.sent <= 300 + 1 + 4 + 2                # about one round trip per item, not two
+
+
+def test_lost_item_requests_are_sent_again():
+    link, seen = numbered_items_link(40, drop=lambda n: n % 7 == 0)
+    toc, _ = TocFetcher(link, 2, "param", 2).fetch()
+    assert [e.full_name for e in toc][-1] == "g.v39" and len(toc) == 40
+    assert len(seen) > 40
+
+
+def test_a_silent_crazyflie_times_out_naming_the_item():
+    from crazyflie_driver.errors import LinkTimeout
+    link, _ = numbered_items_link(10, drop=lambda n: n >= 3)
+    with pytest.raises(LinkTimeout, match="parameter TOC item 2"):
+        TocFetcher(link, 2, "param", 2, timeout=0.3).fetch()

@@ -155,15 +155,22 @@ def test_param_read_write_errors_current():
     assert one(cf, bytes([0x2d, lo, hi])) == bytes([0x2d, lo, hi, 0, 1])
     k = param_id(cf, "pid_rate.roll_kp")
     assert one(cf, b"\x2d" + struct.pack("<H", k)) == b"\x2d" + struct.pack("<HBf", k, 0, 70.0)
-    # every type path
+    # every type path the real firmware's parameters have (it declares no 16-bit signed one)
     for name, fmt, value in [("sound.freq", "<H", 4000), ("cpu.id0", "<I", 0x00320024),
-                             ("system.selftestPassed", "<b", 1), ("ring.glowstep", "<h", 1),
-                             ("lighthouse.systemType", "<i", 2), ("ring.fullCharge", "<f", 4.2)]:
+                             ("system.selftestPassed", "<b", 1), ("colAv.vorIters", "<i", 0),
+                             ("lighthouse.systemType", "<B", 2), ("ring.fullCharge", "<f", 4.2)]:
         j = param_id(cf, name)
         assert one(cf, b"\x2d" + struct.pack("<H", j)) == b"\x2d" + struct.pack("<HB", j, 0) + struct.pack(fmt, value)
-    g = param_id(cf, "ring.glowstep")
-    assert one(cf, b"\x2e" + struct.pack("<Hh", g, -300)) == b"\x2e" + struct.pack("<Hh", g, -300)
-    assert cf.params.value("ring.glowstep") == -300
+    g = param_id(cf, "radiotest.power")
+    assert one(cf, b"\x2e" + struct.pack("<Hb", g, -30)) == b"\x2e" + struct.pack("<Hb", g, -30)
+    assert cf.params.value("radiotest.power") == -30
+    # ids past 255 (16-bit on the wire): read, write (reaches the vehicle), read back
+    far = param_id(cf, "posCtlPid.zKp")
+    assert far > 255
+    assert one(cf, b"\x2d" + struct.pack("<H", far)) == b"\x2d" + struct.pack("<HBf", far, 0, 0.0)
+    assert one(cf, b"\x2e" + struct.pack("<Hf", far, 3.5)) == b"\x2e" + struct.pack("<Hf", far, 3.5)
+    assert one(cf, b"\x2d" + struct.pack("<H", far)) == b"\x2d" + struct.pack("<HBf", far, 0, 3.5)
+    assert v.written[-1] == ("posCtlPid.zKp", 3.5)
     # unknown id, read-only write (silent, unchanged), short write dropped
     n = len(cf.params.entries)
     assert one(cf, b"\x2d" + struct.pack("<H", n)) == b"\x2d" + struct.pack("<HB", n, 2)
@@ -181,11 +188,14 @@ def test_param_read_write_errors_2016():
     assert one(cf, bytes([0x2d, i])) == bytes([0x2d, i, 0])
     assert one(cf, bytes([0x2e, i, 1])) == bytes([0x2e, i, 1])
     assert one(cf, bytes([0x2d, i])) == bytes([0x2d, i, 1])
+    g = param_id(cf, "ring.glowstep")    # the one 16-bit signed parameter, in the small table only
+    assert one(cf, bytes([0x2e, g]) + struct.pack("<h", -300)) == bytes([0x2e, g]) + struct.pack("<h", -300)
+    assert cf.params.value("ring.glowstep") == -300
     n = len(cf.params.entries)
     assert one(cf, bytes([0x2d, n])) == bytes([0x2d, 0xFF, n, 2])
     ro = param_id(cf, "cpu.flash")
     assert ask(cf, bytes([0x2e, ro, 1, 0])) == []
-    assert v.written == [("flightmode.althold", 1.0)]
+    assert v.written == [("flightmode.althold", 1.0), ("ring.glowstep", -300.0)]
 
 
 def test_param_misc_set_by_name_and_extended_type():
@@ -207,7 +217,7 @@ def test_param_misc_set_by_name_and_extended_type():
     assert one(cf, b"\x2f\x02" + h) == b"\x2f\x02" + h + b"\x02"
     assert one(cf, b"\x2f\x08" + h) == b"\x2f\x08" + h + b"\x00\x00"          # default value V2
     # the item's TOC type carries EXTENDED so cflib asks
-    assert one(cf, b"\x2c\x02" + idb)[4] == 0x18
+    assert one(cf, b"\x2c\x02" + idb)[4] == 0x38                             # u8, EXTENDED, CORE
 
 
 # --- log ----------------------------------------------------------------------------------------
@@ -231,6 +241,30 @@ def test_log_toc_info_and_items():
 def create_v2(cf, block, items, cmd=6):
     body = bytes([cmd, block]) + b"".join(struct.pack("<BH", t, log_id(cf, n)) for n, t in items)
     return one(cf, b"\x5d" + body)
+
+
+def test_log_variable_past_id_255_streams_its_live_value():
+    cf, v = make(readings={"stateEstimate.z": 0.75, "acc.z": 1.0})
+    far = log_id(cf, "stateEstimate.z")
+    assert far > 255
+    item = one(cf, b"\x50\x02" + struct.pack("<H", far))
+    assert item == b"\x50\x02" + struct.pack("<HB", far, 7) + b"stateEstimate\x00z\x00"
+    assert create_v2(cf, 3, [("stateEstimate.z", 7), ("acc.z", 7)]) == b"\x5d\x06\x03\x00"
+    assert one(cf, b"\x5d\x03\x03\x01") == b"\x5d\x03\x03\x00"
+    v.t = 0.01
+    cf.tick(v.t)
+    (p,) = drain(cf)
+    assert p[0] == 0x52 and p[1] == 3 and p[5:] == struct.pack("<ff", 0.75, 1.0)
+
+
+def test_log_crc_hashes_core_and_by_function_flags_items_carry_the_low_nibble():
+    plain = [T.LogVar("pm", "vbat", "float", (T.GEN_CURRENT,))]
+    core = [T.LogVar("pm", "vbat", "float", (T.GEN_CURRENT,), core=True)]
+    crc = lambda table: make(log_table=table)[0].logs.crc  # noqa: E731
+    assert crc(plain) == chained_crc([(0x81, "pm"), (0x07, "vbat"), (0x80, "stop_pm")])
+    assert crc(core) == chained_crc([(0x81, "pm"), (0x27, "vbat"), (0x80, "stop_pm")])
+    cf = make(log_table=core)[0]
+    assert one(cf, b"\x50\x02\x00\x00")[4] == 0x07
 
 
 def test_log_block_data_at_period_with_conversion():

@@ -56,7 +56,7 @@ class LogService:
         self.limits = LIMITS[generation]
         self.entries: List[T.LogVar] = T.select(table, generation)
         T.check_names(self.entries)
-        self.crc = T.toc_crc(self.entries, lambda e: T.CTYPES[e.ctype].log_code)
+        self.crc = T.toc_crc(self.entries, lambda e: e.crc_type_byte(generation))
         if not self.v2:
             self.crc ^= 0x20160200  # opaque in the 2016 firmware
         self._read_value = read_value

@@ -1,19 +1,21 @@
 """The simulated firmware's variable tables: log variables, parameters, their C types and TOC CRC.
 
-The tables mirror the groups users of the ROS stack touch (sensors, battery, attitude, PID gains,
-LED ring, flight modes), with the C types the real firmware declares, so that every type path of a
-host library (u8/u16/u32/i8/i16/i32/float, read-only entries, an extended/persistent parameter) gets
-exercised. Entries carry the firmware generations they exist in.
+The current generation declares the real firmware's tables for a Crazyflie 2.1 build (about 400
+parameters and 600 log variables, ids past 255; loaded by firmware_toc from the shipped data file)
+with the defaults below where the firmware's are known and 0 elsewhere. The 2016.02 generation
+keeps its small table (the groups users of the ROS stack touch, every C type a V1 host meets).
+Entries carry the firmware generations they exist in.
 """
 from __future__ import annotations
 
 import struct
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.crtp.ctypes import BY_LOG_CODE, CTYPES, CType
 from crazyflie_driver.crtp.firmware_limits import TOC_NAME_MAX_BYTES
+from crazyflie_driver.sim.firmware import firmware_toc
 
 Number = Union[int, float]
 
@@ -34,6 +36,8 @@ PARAM_GROUP_STOP = 0x80
 EXTENDED_PERSISTENT = 0x01
 LOG_GROUP_START = 0x81
 LOG_GROUP_STOP = 0x80
+LOG_CORE = 0x20           # in the TOC CRC only: TOC items carry the type's low nibble
+LOG_BY_FUNCTION = 0x40
 
 
 def convert(value: Number, ctype: CType) -> Number:
@@ -80,10 +84,21 @@ class LogVar:
     name: str
     ctype: str
     generations: Tuple[str, ...] = GENERATIONS
+    core: bool = False                # LOG_ADD_CORE (current firmware's CRC only)
+    by_function: bool = False         # computed on read (current firmware's CRC only)
 
     @property
     def full_name(self) -> str:
         return "%s.%s" % (self.group, self.name)
+
+    def crc_type_byte(self, generation: str) -> int:
+        """Type byte as the firmware's table holds it (the TOC CRC hashes it; TOC items carry the low nibble)."""
+        code = CTYPES[self.ctype].log_code
+        assert code is not None, "%s: C type %s cannot be logged" % (self.full_name, self.ctype)
+        t = code
+        if generation == GEN_CURRENT:
+            t |= (LOG_CORE if self.core else 0) | (LOG_BY_FUNCTION if self.by_function else 0)
+        return t
 
 
 @dataclass(frozen=True)
@@ -121,7 +136,8 @@ def _lv(group: str, names: str, ctype: str, gens: Tuple[str, ...] = GENERATIONS)
     return [LogVar(group, n, ctype, gens) for n in names.split()]
 
 
-LOG_TABLE: Tuple[LogVar, ...] = tuple(
+#: The small table of before the real-size one (2016.02 entries; its defaults seed the current table's).
+_SMALL_LOG_TABLE: Tuple[LogVar, ...] = tuple(
     _lv("acc", "x y z", "float")
     + _lv("gyro", "x y z", "float")
     + _lv("gyro", "xRaw yRaw zRaw", "int16_t", _CUR)
@@ -164,7 +180,7 @@ def _pid(group: str, gains: Dict[str, Tuple[float, float, float]]) -> List[Param
 
 # Defaults of the current firmware (docs/simulation.md, "The onboard attitude and rate controllers"); the world
 # overrides them per generation.
-PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
+_SMALL_PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
     [ParamVar("sound", "effect", "uint8_t", 0), ParamVar("sound", "neffect", "uint32_t", 14, readonly=True),
      ParamVar("sound", "freq", "uint16_t", 4000)]
     + [ParamVar("ring", "effect", "uint8_t", 6, persistent=True),
@@ -226,6 +242,56 @@ PARAM_TABLE: Tuple[ParamVar, ...] = tuple(
        ParamVar("firmware", "modified", "uint8_t", 0, readonly=True)]
     + [ParamVar("lighthouse", "systemType", "int32_t", 2, generations=_CUR)]
 )
+
+#: Known defaults of the current firmware's parameters the small table lacks (firmware source).
+FIRMWARE_DEFAULTS: Dict[str, Number] = {
+    "lighthouse.systemType": 2, "powerDist.idleThrust": 0, "pid_attitude.attFiltEn": 0, "pid_rate.rateFiltEn": 0,
+    "ring.fadeTime": 0.5, "kalman.robustTdoa": 0, "kalman.robustTwr": 0, "colAv.enable": 0,
+    "supervisor.tmblChckEn": 1, "pm.lowVoltage": 3.2, "pm.criticalLowVoltage": 3.0,
+}
+#: Parameters the firmware's build generates (src/utils/src/version.tmpl), absent from the source table.
+GENERATED_PARAMS: Tuple[ParamVar, ...] = (
+    ParamVar("firmware", "revision0", "uint32_t", 0x2A18FC29, readonly=True, core=True, generations=_CUR),
+    ParamVar("firmware", "revision1", "uint16_t", 0, readonly=True, core=True, generations=_CUR),
+    ParamVar("firmware", "modified", "uint8_t", 0, readonly=True, core=True, generations=_CUR),
+)
+
+
+def real_params(rows: Sequence[firmware_toc.TocRow], defaults: Dict[str, Number],
+                generations: Tuple[str, ...] = _CUR) -> List[ParamVar]:
+    """Parameter entries of the firmware's rows; ``defaults`` by full name, 0 for names it lacks."""
+    out = []
+    for r in firmware_toc.first_of_each_name(x for x in rows if x.kind == "param"):
+        full = "%s.%s" % (r.group, r.name)
+        out.append(ParamVar(r.group, r.name, r.ctype, defaults.get(full, 0),
+                            readonly="PARAM_RONLY" in r.flags, persistent="PARAM_PERSISTENT" in r.flags,
+                            core=r.macro == "core", generations=generations))
+    return out
+
+
+def real_logs(rows: Sequence[firmware_toc.TocRow], generations: Tuple[str, ...] = _CUR) -> List[LogVar]:
+    """Log entries of the firmware's rows (values come from the vehicle by name at run time)."""
+    return [LogVar(r.group, r.name, r.ctype, generations, core=r.macro == "core", by_function=r.macro == "by_function")
+            for r in firmware_toc.first_of_each_name(x for x in rows if x.kind == "log")]
+
+
+def _defaults_of(table: Sequence[ParamVar]) -> Dict[str, Number]:
+    out: Dict[str, Number] = {e.full_name: e.default for e in table}
+    out.update(FIRMWARE_DEFAULTS)
+    return out
+
+
+def _only(table: Sequence, generation: str) -> list:
+    """Entries of ``table`` restricted to ``generation`` (and marked as existing only there)."""
+    return [replace(e, generations=(generation,)) for e in table if generation in e.generations]
+
+
+_FIRMWARE_ROWS = firmware_toc.load()
+#: Log variables of both generations: the real firmware's (current) and the small table (2016.02).
+LOG_TABLE: Tuple[LogVar, ...] = tuple(real_logs(_FIRMWARE_ROWS) + _only(_SMALL_LOG_TABLE, GEN_2016))
+#: Parameters of both generations: the real firmware's plus its generated ones (current), the small table (2016.02).
+PARAM_TABLE: Tuple[ParamVar, ...] = tuple(real_params(_FIRMWARE_ROWS, _defaults_of(_SMALL_PARAM_TABLE))
+                                          + list(GENERATED_PARAMS) + _only(_SMALL_PARAM_TABLE, GEN_2016))
 
 
 def select(table: Sequence, generation: str) -> list:
