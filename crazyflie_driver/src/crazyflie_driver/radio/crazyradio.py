@@ -122,16 +122,18 @@ def list_radios(backend=None) -> List[RadioInfo]:
 
     ``backend``: the pyusb backend (None: pyusb's default, libusb).
     """
-    radios = []
-    for i, dev in enumerate(_find(backend)):
-        try:
-            serial = dev.serial_number
-        except (usb.core.USBError, ValueError):
-            serial = None
-        finally:
-            usb.util.dispose_resources(dev)
-        radios.append(RadioInfo(i, serial, _version_of(dev.bcdDevice)))
-    return radios
+    return [RadioInfo(i, serial_number_of(dev), _version_of(dev.bcdDevice)) for i, dev in enumerate(_find(backend))]
+
+
+def serial_number_of(dev) -> Optional[str]:
+    """A USB device's serial number string, None when it has none or cannot be asked; the device's
+    resources are released again (a listing must not keep a device it does not open)."""
+    try:
+        return dev.serial_number
+    except (usb.core.USBError, ValueError):
+        return None
+    finally:
+        usb.util.dispose_resources(dev)
 
 
 class Crazyradio:

@@ -17,7 +17,7 @@ import usb.util
 
 from crazyflie_driver.crtp.uri import UsbUri
 from crazyflie_driver.errors import CrazyflieError, RadioNotFound, RadioUnplugged
-from crazyflie_driver.radio.crazyradio import RadioAck
+from crazyflie_driver.radio.crazyradio import RadioAck, serial_number_of
 from crazyflie_driver.radio.link import NULL_PACKET, RadioLink
 
 CRAZYFLIE_VENDOR_ID = 0x0483
@@ -62,16 +62,7 @@ def _find(backend) -> list:
 
 def list_usb_crazyflies(backend=None) -> List[UsbCrazyflieInfo]:
     """Every Crazyflie on a USB cable, in the order ``usb://N`` numbers them."""
-    out = []
-    for i, dev in enumerate(_find(backend)):
-        try:
-            serial = dev.serial_number
-        except (usb.core.USBError, ValueError):
-            serial = None
-        finally:
-            usb.util.dispose_resources(dev)
-        out.append(UsbCrazyflieInfo(i, serial, str(UsbUri(i))))
-    return out
+    return [UsbCrazyflieInfo(i, serial_number_of(dev), str(UsbUri(i))) for i, dev in enumerate(_find(backend))]
 
 
 class UsbCrazyflie:
