@@ -282,6 +282,12 @@ class SimulatedCrazyflie:
         if do_arm and not bits & 0x03:              # neither armed nor able to arm (a locked supervisor disarms)
             return False, False
         self.state.armed = bool(do_arm)
+        hook = getattr(self.vehicle, "set_armed", None)
+        if hook is not None:
+            try:
+                hook(bool(do_arm))
+            except Exception:
+                _log.exception("vehicle.set_armed failed")
         return True, bool(self.supervisor_bits() & 0x02)
 
     def recover(self) -> Tuple[bool, bool]:
