@@ -541,6 +541,9 @@ class SimulatedCrazyflie:
                 "tx_last_wait_s": s.tx_last_wait_s,
                 "safelink": self.link.safelink,
                 "reboots": s.reboots,
+                "uptime_ms": self.timestamp_ms(),
+                "params_changed": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)
+                                   if self.params.values[i] != self.params.default_of(i)},
                 "rssi_dbm": self.rssi_dbm,
                 "log_blocks": {str(b.ident): {"running": b.running, "period_ms": int(round(b.period_s * 1000)),
                                               "variables": [self.logs.entries[v].full_name for v, _ in b.ops]}
