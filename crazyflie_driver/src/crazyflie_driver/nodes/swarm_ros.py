@@ -39,8 +39,9 @@ from crazyflie_driver.server.swarm_heartbeat import Heartbeat
 from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
 from crazyflie_driver.server.swarm_watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
-from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, StartTrajectory, StartTrajectoryResponse,
-                                  Stop, StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
+from crazyflie_driver.srv import (Arm, ArmResponse, GoTo, GoToResponse, Land, LandResponse, StartTrajectory,
+                                  StartTrajectoryResponse, Stop, StopResponse, Takeoff, TakeoffResponse, UpdateParams,
+                                  UpdateParamsResponse)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 
@@ -212,6 +213,7 @@ class RosSwarm:
              lambda r: c.start_trajectory(r.groupMask, r.trajectoryId, r.timescale, r.reversed)),
             ("/stop", Stop, StopResponse, lambda r: c.stop(r.groupMask)),
             ("/update_params", UpdateParams, UpdateParamsResponse, self._update_params),
+            ("/all/arm", Arm, ArmResponse, lambda r: self.broadcaster.arm(r.arm)),
         ]
         for name, kind, response, handler in services:
             self._services.append(rospy.Service(name, kind, self._service(name, handler, response)))
