@@ -312,8 +312,8 @@ class CrazyflieWorker:
                 LOG.error("%s: emergency stop packet failed: %s (zero-thrust setpoints follow)", self.uri, e)
         if first:
             self.safety.note_motors_off(self._clock(), "emergency stop", for_good=True)
-            LOG.warning("%s: EMERGENCY: motors stopped; this Crazyflie will not fly again until it is "
-                        "removed and added again", self.uri)
+            LOG.warning("%s: EMERGENCY: motors stopped until a reboot; to fly again %s", self.uri,
+                        power_control.REBOOT_ADVICE)
             try:
                 self.listener.on_emergency()
             except Exception:
