@@ -461,7 +461,7 @@ def test_reboot_into_the_bootloader_answers_no_crtp_until_reset_to_firmware():
     for packet in reboot_packets(bootloader=True):
         cf.handle_radio_packet(packet)
     assert cf.in_bootloader and cf.radio_on
-    drain(cf)
+    assert drain(cf) == []                                         # no firmware boot text
     cf.handle_radio_packet(b"\xfd\x00")                          # link source query: no firmware runs
     assert drain(cf) == [] and cf.state.packets_by_port == {}
     for packet in reboot_packets():

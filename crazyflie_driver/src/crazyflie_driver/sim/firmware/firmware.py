@@ -155,6 +155,7 @@ class SimulatedCrazyflie:
             self._boot()
             if bootloader:
                 self.state.powered = False
+                self._clear_tx()                 # no firmware ran: no boot text
 
     def power_off(self) -> None:
         """The power switch: everything off (the radio too)."""
