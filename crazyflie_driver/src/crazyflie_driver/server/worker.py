@@ -403,11 +403,13 @@ class CrazyflieWorker:
             self._went_down("switched off on request", WorkerState.POWERED_OFF)
 
     def power_on(self) -> None:
-        """Switch its STM32 domain on: it boots, and is set up again as after a reboot."""
+        """Switch its STM32 domain on: it boots, and is set up again as after a reboot. On one that was not
+        switched off this changes nothing (the radio chip ignores it; an emergency stays)."""
         with self._send_lock:
             self.cf.power_on_stm()
-            if self.state == WorkerState.POWERED_OFF:
-                self.state = WorkerState.LOST
+            if self.state != WorkerState.POWERED_OFF:
+                return
+            self.state = WorkerState.LOST
             self._emergency = False
         self.watchdog.restarted(False)
         self.safety.note_restarted()

@@ -101,6 +101,8 @@ def test_after_an_emergency_the_reboot_service_brings_it_back(rig):
     assert "reboot service" in worker_status(w).message
     with pytest.raises(CommandRejected, match="reboot service"):
         w.arm(True)
+    w.power_on()                                            # it was not switched off: the emergency stays
+    assert w.emergency_active and fw.state.emergency
     w.reboot()
     assert not w.emergency_active and not fw.state.emergency
     assert wait_for(lambda: w.state == WorkerState.RUNNING, 5.0)
