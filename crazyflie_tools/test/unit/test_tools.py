@@ -15,7 +15,7 @@ from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_tools import (battery, console, get_param, list_log_variables, list_params, scan,
+from crazyflie_tools import (battery, console, get_param, list_log_variables, list_params, reboot, scan,
                              set_param, version)
 
 URI1 = "radio://0/80/2M/E7E7E7E701"
@@ -339,3 +339,23 @@ def test_another_program_on_the_same_crazyflie_is_named_not_switched_on(monkeypa
         other.close()
     finally:
         s.stop()
+
+
+def test_reboot_and_power_reach_the_radio_chip(sim, capsys):
+    fw = sim.add(URI1)
+    assert reboot.main(["--uri", URI1]) == 0
+    assert capsys.readouterr().out == "%s: rebooted into its firmware\n" % URI1
+    assert fw.state.reboots == 1 and fw.powered
+    assert reboot.main(["--uri", URI1, "--power", "stm-off"]) == 0
+    assert not fw.powered and fw.radio_on
+    assert reboot.main(["--uri", URI1, "--power", "stm-on"]) == 0      # reached with the STM32 off
+    assert fw.powered
+    assert reboot.main(["--uri", URI1, "--bootloader"]) == 0
+    assert fw.in_bootloader
+    assert reboot.main(["--uri", URI1]) == 0
+    assert not fw.in_bootloader and fw.state.reboots == 4
+    capsys.readouterr()
+    assert reboot.main(["--uri", URI1, "--power", "all-off"]) == 0
+    assert not fw.radio_on
+    assert reboot.main(["--uri", URI1]) == 1                          # nothing on the air any more
+    assert "switched on" in capsys.readouterr().err

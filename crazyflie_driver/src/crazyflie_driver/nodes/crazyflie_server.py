@@ -31,7 +31,7 @@ from std_msgs.msg import Float32
 from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver.msg import GenericLogData
-from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, RemoveCrazyflie,
+from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, Arm, ArmResponse, RemoveCrazyflie,
                                   RemoveCrazyflieResponse, UpdateParams, UpdateParamsResponse)
 
 from crazyflie_driver.clock import WALL, Clock
@@ -56,6 +56,8 @@ from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shuttin
 from crazyflie_driver.server.onboard_commands import OnboardCommands, known_group_mask
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 from crazyflie_driver.server.safety import SafetyConfig
+from crazyflie_driver.server import power_control
+from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.server.safety_actions import ObservedOnboardCommands
 
 GRAVITY = 9.81
@@ -156,6 +158,12 @@ class RosCrazyflie(WorkerListener):
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
+        self._services.append(rospy.Service(name(power_control.ARM_SERVICE), Arm, self._on_arm))
+        for service, call in ((power_control.RECOVER_SERVICE, worker.recover),
+                              (power_control.REBOOT_SERVICE, worker.reboot),
+                              (power_control.POWER_OFF_SERVICE, worker.power_off),
+                              (power_control.POWER_ON_SERVICE, worker.power_on)):
+            self._services.append(rospy.Service(name(service), Empty, self._empty_service(service, call)))
         self._onboard = RosOnboardCommands(self.ns, config.uri, ObservedOnboardCommands(
             worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri, worker.safety,
             clock=worker.clock.now, on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent,
@@ -231,8 +239,26 @@ class RosCrazyflie(WorkerListener):
                 rospy.logwarn("%s: cmd_vel held to the firmware's limits: %s" % (self.config.uri, text))
         if not self._attached().set_setpoint(setpoint) and not self._said_ignored:
             self._said_ignored = True       # once: the status topic keeps saying it
-            rospy.logwarn("%s: cmd_vel ignored after emergency (the Crazyflie stays stopped until a reboot: "
-                          "switch it off and on, then remove and add it again to fly)" % self.config.uri)
+            rospy.logwarn("%s: cmd_vel ignored after emergency (the Crazyflie stays stopped until a reboot: to fly "
+                          "again %s)" % (self.config.uri, power_control.REBOOT_ADVICE))
+
+    def _on_arm(self, req) -> ArmResponse:
+        try:
+            self._attached().arm(bool(req.arm))
+        except CrazyflieError as e:
+            raise rospy.ServiceException(str(e)) from e
+        return ArmResponse()
+
+    def _empty_service(self, service: str, call: Callable[[], None]) -> Callable[[Any], EmptyResponse]:
+        """A std_srvs/Empty handler: the worker's refusal or failure becomes the service's error."""
+        def handle(_req) -> EmptyResponse:
+            try:
+                call()
+            except CrazyflieError as e:
+                raise rospy.ServiceException("%s: %s" % (service, e)) from e
+            self.publish_status()
+            return EmptyResponse()
+        return handle
 
     def _on_emergency(self, _req) -> EmptyResponse:
         self._attached().emergency()

@@ -11,7 +11,8 @@ each vehicle's pose as the motion-capture bridges of the original stack did:
 * ``both`` or ``none``.
 
 Private parameters: ``vehicles`` (list of ``{uri, name, x, y, z}``; ``position: [x, y, z]``,
-``yaw``, ``firmware`` and ``frame`` also accepted: ``frame`` is the tf frame the vicon style publishes
+``yaw``, ``firmware``, ``platform`` (``cf2`` or ``brushless``: armed before its motors spin) and ``frame``
+also accepted: ``frame`` is the tf frame the vicon style publishes
 that vehicle's pose under, as a Vicon room whose body is named that way would, e.g. the
 ``frame:=crazyflie1`` of a launch file; also as a YAML string holding that list, or the path of a
 YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri`` + ``name`` for one vehicle;
@@ -58,6 +59,7 @@ from crazyflie_driver.errors import UriError
 from crazyflie_driver.sim.air.faults import MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M
 from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST, raise_priority
 from crazyflie_driver.sim.world.pacing import Pacing, PacingError, parse_pacing
+from crazyflie_driver.sim.world.stabilizer import PLATFORM_CF2, PLATFORMS
 
 MOCAP_STYLES = ("vicon", "vrpn", "both", "none")
 CLOCK_PERIOD_S = 0.002
@@ -78,6 +80,7 @@ class VehicleSpec:
     yaw: float = 0.0
     firmware: str = "current"
     frame: str = ""          # vicon style: tf child frame of its pose; "" = vicon/<name>/<name>
+    platform: str = PLATFORM_CF2     # "brushless": must be armed before its motors spin
 
 
 @dataclass(frozen=True)
@@ -143,7 +146,7 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         where = "~vehicles[%d]" % i
         if not isinstance(item, dict) or "uri" not in item:
             raise SimConfigError("%s needs at least a 'uri' (got %r)" % (where, item))
-        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame"}
+        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform"}
         if unknown:
             raise SimConfigError("%s has unknown keys %s" % (where, ", ".join(sorted(unknown))))
         try:
@@ -166,8 +169,12 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
             raise SimConfigError("%s: URI %s is used twice" % (where, uri))
         seen_names.add(name)
         seen_uris.add(uri)
+        platform = item.get("platform", PLATFORM_CF2)
+        if platform not in PLATFORMS:
+            raise SimConfigError("%s: platform must be one of %s (brushless: armed before its motors spin), got %r"
+                                 % (where, ", ".join(PLATFORMS), platform))
         out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
-                               str(item.get("firmware", "current")), _frame(where, item.get("frame"))))
+                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform))
     return out
 
 
@@ -569,7 +576,7 @@ def main() -> None:
         server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed),
                              dongle_model=str(params.get("dongle_model", "PA")))
         for v in vehicles:
-            server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw)
+            server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw, platform=v.platform)
         for name in str(params.get("usb", "")).replace(",", " ").split():
             server.plug_usb(name)          # also on a USB cable: usb://0, usb://1, ... in this order
         server.start()

@@ -39,7 +39,7 @@ from crazyflie_driver.server.swarm_heartbeat import Heartbeat
 from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
 from crazyflie_driver.server.swarm_watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
-from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
+from crazyflie_driver.srv import (Arm, ArmResponse, GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
                                   NotifySetpointsStopResponse, StartTrajectory, StartTrajectoryResponse, Stop,
                                   StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
 
@@ -215,6 +215,7 @@ class RosSwarm:
             ("/update_params", UpdateParams, UpdateParamsResponse, self._update_params),
             ("/all/notify_setpoints_stop", NotifySetpointsStop, NotifySetpointsStopResponse,
              self._notify_setpoints_stop),
+            ("/all/arm", Arm, ArmResponse, lambda r: self.broadcaster.arm(r.arm)),
         ]
         for name, kind, response, handler in services:
             self._services.append(rospy.Service(name, kind, self._service(name, handler, response)))

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import functools
 import logging
-from typing import Optional, Union
+from typing import Optional, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
+from crazyflie_driver.crtp import nrf_system
+from crazyflie_driver.errors import LinkTimeout, NotSupported
 from crazyflie_driver.protocol.commander import Commander
 from crazyflie_driver.protocol.console import Console
 from crazyflie_driver.protocol.high_level import HighLevelCommander
@@ -115,6 +117,34 @@ class Crazyflie:
         """A null packet: keeps the link alive and fetches downlink (console, log data); ``background``:
         behind every other round trip waiting for the dongle (``RadioLink.poll``)."""
         return self.link.poll(background=True) if background else self.link.poll()
+
+    # -- reboot and power (the nRF's system commands) ----------------------------------------------
+    def _nrf(self, packets: Tuple[bytes, ...], what: str) -> None:
+        send = getattr(self.link, "send_nrf_command", None)
+        if send is None:
+            raise NotSupported("%s: %s needs a radio link (the nRF takes it from the air; this link is %s)"
+                               % (self.uri, what, type(self.link).__name__))
+        for data in packets:
+            if not send(data):
+                raise LinkTimeout("%s: %s not acknowledged (is it switched on, and on this channel, data rate "
+                                  "and address?)" % (self.uri, what), acked=0)
+
+    def reboot(self, bootloader: bool = False) -> None:
+        """Restart the whole Crazyflie into its firmware (or the bootloader): the link drops, parameters
+        go back to their defaults and log blocks are gone. LinkTimeout when the nRF does not ack."""
+        self._nrf(nrf_system.reboot_packets(bootloader), "reboot to the bootloader" if bootloader else "reboot")
+
+    def power_off_stm(self) -> None:
+        """Switch the STM32 domain (flight controller, decks) off; the nRF stays on the radio."""
+        self._nrf((nrf_system.stm_power_off_packet(),), "STM32 power off")
+
+    def power_on_stm(self) -> None:
+        """Switch the STM32 domain on: it boots with fresh state."""
+        self._nrf((nrf_system.stm_power_on_packet(),), "STM32 power on")
+
+    def power_off_all(self) -> None:
+        """Everything off, as the power button: nothing on the radio wakes it again."""
+        self._nrf((nrf_system.all_off_packet(),), "power off")
 
     def __repr__(self) -> str:
         return "<Crazyflie %s protocol %d>" % (self.uri, self.protocol_version)

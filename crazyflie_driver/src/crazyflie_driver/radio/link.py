@@ -14,6 +14,7 @@ from typing import Callable, Dict, Optional, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
+from crazyflie_driver.crtp.nrf_system import SYS_RESET, is_nrf_command
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, LinkTimeout
 from crazyflie_driver.radio.crazyradio import RadioAck
@@ -194,6 +195,20 @@ class RadioLink:
                     # else: a repeat of the last downlink packet (our ack of it was lost): drop it
                     return True
             self._resync = True
+            return False
+
+    def send_nrf_command(self, data: bytes, attempts: int = 10) -> bool:
+        """One nRF system command (``crtp.nrf_system``) until acked, at most ``attempts`` times; True when
+        acked. It bypasses safelink (the nRF takes it before the sequence check); after a reset the
+        nRF has forgotten safelink, so the next packet negotiates it again."""
+        if not is_nrf_command(data):
+            raise CommandValueError("%s: not an nRF system command: %s" % (self.uri, bytes(data).hex(" ")))
+        with self._send_lock:
+            for _ in range(max(1, attempts)):
+                if self._round_trip(bytes(data)).ack:
+                    if data[2] == SYS_RESET and self.safelink:
+                        self._resync = True
+                    return True
             return False
 
     def _resync_safelink(self) -> bool:

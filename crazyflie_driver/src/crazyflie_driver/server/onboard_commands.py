@@ -29,6 +29,7 @@ from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.commander import stop_packet
 from crazyflie_driver.protocol.localization import external_pose_packet, external_position_packet
 from crazyflie_driver.protocol.trajectory import make_piece
+from crazyflie_driver.server import power_control
 from crazyflie_driver.server.safety import checked_landing
 
 Quaternion = Sequence[float]
@@ -123,8 +124,8 @@ class OnboardCommands:
         """Raise, before anything is sent, when ``what`` must not go out: after emergency, or when
         ``group_mask`` does not address this Crazyflie."""
         if self._emergency_active():
-            raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
-                                 "is restarted, removed and added again)" % (self.label, what))
+            raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until a "
+                                 "reboot: %s)" % (self.label, what, power_control.REBOOT_ADVICE))
         if not in_groups(self.group_mask, group_mask):
             raise nobody_addressed(group_mask, "%s is in group mask %d" % (self.label, self.group_mask),
                                    "%s: %s" % (self.label, what))

@@ -397,6 +397,11 @@ class SafetyMonitor:
             self._motors_off_by = why
             self._stopped_for_good = self._stopped_for_good or for_good
 
+    def note_restarted(self) -> None:
+        """It rebooted on request: an emergency stop is over, the user's commands count again."""
+        with self._lock:
+            self._stopped_for_good = False
+
     def current_height(self, now: float) -> Optional[float]:
         """The height (m) of the last pose sent to the onboard estimator if it is fresh, else None."""
         with self._lock:

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Tuple
 
+from crazyflie_driver.server import power_control
 from crazyflie_driver.server.diagnostics import ERROR, OK, STALE, WARN, worst
 from crazyflie_driver.server.worker import WorkerState
 
@@ -29,12 +30,14 @@ def worker_status(worker: Any) -> CrazyflieStatus:
     if state == WorkerState.FAILED:
         level, message = ERROR, "worker gave up: %s" % (worker.last_unexpected_error or "connect failed")
     elif worker.emergency_active:
-        level, message = ERROR, ("emergency: motors stopped until a reboot: switch it off and on, then remove and "
-                                 "add it again to fly")
+        level, message = ERROR, "emergency: motors stopped until a reboot: to fly again " + power_control.REBOOT_ADVICE
     elif state == WorkerState.RESTARTING:
         level, message = ERROR, "worker restarting after: %s" % worker.last_unexpected_error
     elif state == WorkerState.LOST:
         level, message = ERROR, "link lost: retrying"
+    elif state == WorkerState.POWERED_OFF:
+        level, message = WARN, "switched off on request (its %s service switches it on)" % (
+            power_control.POWER_ON_SERVICE)
     elif state in (WorkerState.CONNECTING, WorkerState.STOPPED):
         level, message = STALE, state
     elif getattr(worker, "watchdog", None) is not None and worker.watchdog.message:

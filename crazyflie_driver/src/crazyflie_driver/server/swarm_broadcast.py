@@ -24,7 +24,7 @@ from crazyflie_driver.protocol import high_level, param
 from crazyflie_driver.protocol.commander import emergency_stop_packet
 from crazyflie_driver.protocol.localization import address_id, packed_pose_packets, packed_position_packets
 from crazyflie_driver.protocol.setpoints import notify_setpoints_stop_packet
-from crazyflie_driver.protocol.supervisor import watchdog_packet
+from crazyflie_driver.protocol.supervisor import arm_packet, watchdog_packet
 from crazyflie_driver.radio.broadcast import DEFAULT_REPEAT_INTERVAL_S, DEFAULT_REPEATS, BroadcastLink
 from crazyflie_driver.radio.shared_radio import RadioManager
 
@@ -146,6 +146,11 @@ class SwarmBroadcaster:
 
     def notify_setpoints_stop(self) -> int:
         return self._everywhere(notify_setpoints_stop_packet(0))
+
+    def arm(self, do_arm: bool = True) -> int:
+        """Every Crazyflie armed (or disarmed): the supervisor port from protocol 12, the platform port
+        before (NotSupported below 6: such firmware arms itself). Unacknowledged, repeated."""
+        return self._everywhere(arm_packet(do_arm, self.protocol_version))
 
     def emergency(self) -> int:
         """Motors off for every Crazyflie until restarted."""

@@ -17,9 +17,9 @@ from crazyflie_driver.crtp.firmware_limits import MIN_THRUST, SETPOINT_WATCHDOG_
 from crazyflie_driver.crtp.packet import PORT_GENERIC_SETPOINT, CRTPPacket
 from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
 from crazyflie_driver.protocol.setpoints import TYPE_STOP
+from crazyflie_driver.server import power_control
 
-RESTART_ADVICE = ("restart it (switch it off and on: the lock holds until a reboot), then remove and add it "
-                  "again")
+RESTART_ADVICE = "restart it (the lock holds until a reboot): " + power_control.REBOOT_ADVICE
 ZERO_THRUST_ADVICE = ("send one setpoint with thrust 0 (cmd_vel all zero; the teleop's thrust stick down) to "
                       "release its thrust lock, then fly again")
 

@@ -33,8 +33,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import (ConnectCancelled, CrazyflieError, LogConfigError, RadioMediumGone, RadioNotFound,
-                                     RadioUnplugged, UnknownName)
+from crazyflie_driver.errors import (CommandRejected, ConnectCancelled, CrazyflieError, LogConfigError,
+                                     RadioMediumGone, RadioNotFound, RadioUnplugged, UnknownName)
 from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
 from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
@@ -43,11 +43,12 @@ from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPI
 from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
 from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
 from crazyflie_driver.protocol.param import param_value
+from crazyflie_driver.protocol.supervisor import decode_state
 from crazyflie_driver.server.log_timing import LATE_DATA_WARNING_S, OnboardClock, TopicTiming
 from crazyflie_driver.server.poll_pacer import PollPacer
 from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
 from crazyflie_driver.protocol.toc import toc_types
-from crazyflie_driver.server import watchdog_notice
+from crazyflie_driver.server import power_control, watchdog_notice
 from crazyflie_driver.server import safety_actions
 from crazyflie_driver.server.safety import SafetyConfig, SafetyMonitor
 
@@ -130,6 +131,7 @@ class WorkerState:
     RESTARTING = "restarting"   # after an unexpected error, before the loop runs again
     FAILED = "failed"
     STOPPED = "stopped"
+    POWERED_OFF = "powered off"  # its STM32 domain switched off by request: the nRF acks, nothing more
 
 
 class CrazyflieWorker:
@@ -198,6 +200,8 @@ class CrazyflieWorker:
                                     lambda: getattr(self.cf, "protocol_version", -1), lambda: self.param_values)
         self._safety_events = 0
         self._watchdog_due = 0.0
+        self.user_params: Dict[str, Any] = {}    # written through update_params: set again after a reboot
+        self._rebooted = False                   # a reboot was asked for: set up again once it answers
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -311,8 +315,8 @@ class CrazyflieWorker:
                 LOG.error("%s: emergency stop packet failed: %s (zero-thrust setpoints follow)", self.uri, e)
         if first:
             self.safety.note_motors_off(self._clock(), "emergency stop", for_good=True)
-            LOG.warning("%s: EMERGENCY: motors stopped; this Crazyflie will not fly again until it is "
-                        "removed and added again", self.uri)
+            LOG.warning("%s: EMERGENCY: motors stopped until a reboot; to fly again %s", self.uri,
+                        power_control.REBOOT_ADVICE)
             try:
                 self.listener.on_emergency()
             except Exception:
@@ -334,12 +338,93 @@ class CrazyflieWorker:
                 v = param_value(name, ctype, value) if ctype else value
                 self.cf.params.set(name, v)
                 self.param_values[name] = v
+                self.user_params[name] = v
                 written.append(name)
             except UnknownName:
                 errors.append("%s: no such parameter on %s" % (name, self.uri))
             except (ValueError, CrazyflieError) as e:
                 errors.append("%s: %s" % (name, e))
         return written, errors
+
+    # ------------------------------------------------------------------ supervisor and power (any thread)
+
+    def _offline(self) -> str:
+        """'' while the link runs, else why nothing can be asked of the Crazyflie."""
+        if self.state == WorkerState.POWERED_OFF:
+            return "its STM32 is switched off (call its %s service)" % power_control.POWER_ON_SERVICE
+        if self.state != WorkerState.RUNNING:
+            return "its link is %s" % self.state
+        return ""
+
+    def arm(self, do_arm: bool = True) -> None:
+        """Arm (or disarm) through its supervisor (platform port before protocol 12). CommandRejected
+        when refused here or by the Crazyflie; NotSupported on firmware that arms itself."""
+        refusal = power_control.arm_refusal(do_arm, self._emergency, self._offline())
+        if refusal is not None:
+            raise CommandRejected("%s: %s" % (self.uri, refusal))
+        if not self.cf.supervisor.arm(do_arm):
+            raise CommandRejected("%s: the Crazyflie refused to %s (its supervisor is locked or crashed: see its "
+                                  "status)" % (self.uri, "arm" if do_arm else "disarm"))
+
+    def recover(self) -> None:
+        """Leave the crashed state (after a tumble); CommandRejected when refused or still upside down."""
+        refusal = power_control.recover_refusal(self._emergency, self._offline())
+        if refusal is not None:
+            raise CommandRejected("%s: %s" % (self.uri, refusal))
+        if not self.cf.supervisor.recover():
+            raise CommandRejected("%s: not recovered: the Crazyflie is still tumbled (put it upright) or not "
+                                  "crashed" % self.uri)
+
+    def _airborne(self) -> Tuple[Optional[float], bool]:
+        now = self._clock()
+        bits, at = self.health.supervisor_bits, self.health.supervisor_at
+        sup_flying = bits is not None and at is not None and now - at < 1.0 and bool(decode_state(bits).flags["flying"])
+        return self.watchdog.flying_for(now), sup_flying
+
+    def reboot(self) -> None:
+        """Restart it into its firmware; the worker then waits for it and sets up again what the server
+        set up (log blocks, the parameters written through ``update_params``), and an emergency is over."""
+        flying_for, sup_flying = self._airborne()
+        refusal = power_control.power_change_refusal("reboot", flying_for, sup_flying, self._emergency)
+        if refusal is not None:
+            raise CommandRejected("%s: %s" % (self.uri, refusal))
+        with self._send_lock:
+            self.cf.reboot()
+            self._went_down("rebooted on request")
+            self._emergency = False
+        self.watchdog.restarted(False)
+        self.safety.note_restarted()
+
+    def power_off(self) -> None:
+        """Switch its STM32 domain off (the nRF stays on the radio, so ``power_on`` can reach it)."""
+        flying_for, sup_flying = self._airborne()
+        refusal = power_control.power_change_refusal("power-off", flying_for, sup_flying, self._emergency)
+        if refusal is not None:
+            raise CommandRejected("%s: %s" % (self.uri, refusal))
+        with self._send_lock:
+            self.cf.power_off_stm()
+            self._went_down("switched off on request", WorkerState.POWERED_OFF)
+
+    def power_on(self) -> None:
+        """Switch its STM32 domain on: it boots, and is set up again as after a reboot. On one that was not
+        switched off this changes nothing (the radio chip ignores it; an emergency stays)."""
+        with self._send_lock:
+            self.cf.power_on_stm()
+            if self.state != WorkerState.POWERED_OFF:
+                return
+            self.state = WorkerState.LOST
+            self._emergency = False
+        self.watchdog.restarted(False)
+        self.safety.note_restarted()
+
+    def _went_down(self, reason: str, state: str = WorkerState.LOST) -> None:
+        with self._cond:
+            self._pending = None
+            self._rebooted = True
+            self.state = state
+            self._lost_at = self._clock()
+            self._cond.notify_all()
+        LOG.warning("%s: %s; it is set up again when it answers", self.uri, reason)
 
     # ------------------------------------------------------------------ thread
 
@@ -607,7 +692,7 @@ class CrazyflieWorker:
             with self._cond:
                 while not self._stopping:
                     now = self._clock()
-                    lost = self.state == WorkerState.LOST
+                    lost = self.state in (WorkerState.LOST, WorkerState.POWERED_OFF)
                     if self._pending is not None and not lost:
                         break
                     wait = next_due - now
@@ -623,7 +708,7 @@ class CrazyflieWorker:
             fetched_before = self._fetched_packets()
             acked = self._round_trip(setpoint)
             now = self._clock()
-            if self.state == WorkerState.LOST:
+            if self.state in (WorkerState.LOST, WorkerState.POWERED_OFF):
                 next_due = now + self.lost_retry_period
             else:
                 logged = self._downlink_packets - downlink_before
@@ -781,6 +866,20 @@ class CrazyflieWorker:
             self.safety.note_motors_off(now, "locked by its supervisor after the setpoint watchdog's cut")
 
     def _restore(self) -> None:
+        if self._rebooted:
+            # It booted afresh: no log blocks, parameters at their defaults, thrust locked. Until its firmware
+            # answers (the nRF acks first) this fails and is tried again at the next ack.
+            try:
+                self._set_up_again()
+            except CrazyflieError as e:
+                LOG.info("%s: not up yet after the reboot (%s); trying again", self.uri, e)
+                return
+            self._rebooted = False
+            LOG.warning("%s: back after the reboot (%.1f s): %d log block(s) and %d parameter(s) set again",
+                        self.uri, self._clock() - self._lost_at, len(self._blocks), len(self.user_params))
+            self.state = WorkerState.RUNNING
+            self.listener.on_link_restored()
+            return
         LOG.warning("%s: link restored after %.1f s", self.uri, self._clock() - self._lost_at)
         if self._clock() - self._lost_at >= SETPOINT_WATCHDOG_CUT_S:
             self.safety.note_stream_released(self._clock())     # the firmware's watchdog ended that stream
@@ -796,8 +895,30 @@ class CrazyflieWorker:
                 self._start_log_blocks()
             except Exception as e:
                 LOG.error("%s: could not restart logging after the link came back: %s", self.uri, e)
+        self._apply_user_params()
         self.state = WorkerState.RUNNING     # only now: log data queued during the outage is not "late"
         self.listener.on_link_restored()
+
+    def _set_up_again(self) -> None:
+        """After a reboot: the firmware answers, then log blocks, the user's parameters, thrust unlock."""
+        self.cf.platform.detect_protocol_version()
+        self.safety.note_stream_released(self._clock())
+        if self._log_plan:
+            self.cf.log.reset()
+            self._start_log_blocks()
+        for name, value in self.user_params.items():
+            self.cf.params.set(name, value)
+            self.param_values[name] = value
+        self._release_thrust_lock()
+
+    def _apply_user_params(self) -> None:
+        """The parameters written through the server, set again (a Crazyflie restarted by hand meanwhile
+        lost them; on one that kept them this writes the same values)."""
+        for name, value in self.user_params.items():
+            try:
+                self.cf.params.set(name, value)
+            except CrazyflieError as e:
+                LOG.error("%s: could not set %s again after the link came back: %s", self.uri, name, e)
 
     def link_quality(self) -> Tuple[float, int]:
         """(acked / sent, samples) over the recent window, per radio packet, from the link's

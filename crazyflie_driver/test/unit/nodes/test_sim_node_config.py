@@ -15,6 +15,9 @@ def test_vehicle_list_and_single_vehicle():
     assert dongles_needed(v, None) == 2
     with pytest.raises(SimConfigError, match="radio index 1"):
         dongles_needed(v, 1)
+    assert [x.platform for x in v] == ["cf2", "cf2"]
+    assert vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M", "platform": "brushless"}]})[0].platform \
+        == "brushless"
     single = vehicles_from_params({"uri": "radio://0/80/2M", "name": "crazyflie"})
     assert single[0].uri == "radio://0/80/2M/E7E7E7E7E7" and single[0].name == "crazyflie"
 
@@ -26,6 +29,7 @@ def test_vehicle_list_and_single_vehicle():
     ({"vehicles": [{"uri": "radio://0/80/2M", "name": "cf-1"}]}, "not a valid ROS name"),
     ({"vehicles": [{"uri": "radio://0/80/2M", "name": "a"}, {"uri": "radio://0/80/2M", "name": "b"}]}, "twice"),
     ({"vehicles": [{"uri": "radio://0/80/2M", "colour": "red"}]}, "unknown keys colour"),
+    ({"vehicles": [{"uri": "radio://0/80/2M", "platform": "quad"}]}, "platform must be one of cf2, brushless"),
 ])
 def test_vehicle_errors(params, message):
     with pytest.raises(SimConfigError, match=message):

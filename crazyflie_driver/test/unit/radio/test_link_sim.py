@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from crazyflie_driver.crtp.nrf_system import reboot_packets
 from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.errors import CommandValueError, LinkTimeout
+from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.radio.link import open_link
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
@@ -83,3 +86,51 @@ def test_every_echo_exactly_once_through_ack_loss():
     assert [p.data for p in got] == sent           # in order, none lost, none twice
     assert 0.4 < link.stats.ack_ratio < 0.8         # about (1 - 0.1) * (1 - 0.3) = 0.63
     link.close()
+
+
+def test_reboot_over_the_air_and_safelink_again_after_it():
+    """The nRF takes the reset itself (RESET_INIT, RESET to firmware); safelink is negotiated again."""
+    medium, backend, manager, fw = make_air()
+    link = open_link(URI, manager)
+    try:
+        assert link.safelink
+        for packet in reboot_packets():
+            assert link.send_nrf_command(packet)
+        assert fw.state.reboots == 1 and not fw.link.safelink
+        payload = b"\x01\x02"
+        assert link.request(CRTPPacket(15, 0, payload), is_echo(payload), what="echo").data == payload
+        assert fw.link.safelink
+    finally:
+        link.close()
+
+
+def test_stm_power_off_and_on_over_the_air():
+    medium, backend, manager, fw = make_air()
+    cf = Crazyflie(URI, manager)
+    cf.connect()
+    try:
+        cf.power_off_stm()
+        assert not fw.powered and fw.radio_on
+        assert cf.send_keepalive()                      # the nRF still acks
+        with pytest.raises(LinkTimeout):
+            cf.platform.detect_protocol_version()       # the STM answers nothing
+        cf.power_on_stm()
+        assert fw.powered and cf.platform.detect_protocol_version() == fw.profile.protocol_version
+        cf.reboot()
+        assert fw.state.reboots == 2
+        cf.power_off_all()
+        assert not fw.radio_on
+        with pytest.raises(LinkTimeout):
+            cf.power_on_stm()                           # nothing on the air wakes it
+    finally:
+        cf.close()
+
+
+def test_nrf_commands_only_take_nrf_packets():
+    medium, backend, manager, fw = make_air()
+    link = open_link(URI, manager)
+    try:
+        with pytest.raises(CommandValueError):
+            link.send_nrf_command(b"\x3c\x00\x00")
+    finally:
+        link.close()

@@ -76,6 +76,14 @@ def test_emergency_on_every_radio_by_protocol_version():
     bc.close()
 
 
+@pytest.mark.parametrize("version,packet", [(12, bytes([0x9D, 1, 1])), (8, bytes([0xDC, 1, 1]))])
+def test_arming_every_crazyflie_by_protocol_version(version, packet):
+    bc, medium, _ = swarm(version=version, repeats=2)
+    assert bc.arm(True) == 4
+    assert {t.data for t in broadcasts(medium)} == {packet}        # 9:1 [arm, 1]; 13:0 before protocol 12
+    bc.close()
+
+
 def test_mocap_frame_each_radio_carries_only_its_crazyflies():
     bc, medium, _ = swarm()
     q = (0.0, 0.0, 0.3826834, 0.9238795)

@@ -7,6 +7,7 @@ import zlib
 
 import pytest
 
+from crazyflie_driver.crtp.nrf_system import reboot_packets, stm_power_off_packet, stm_power_on_packet
 from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.firmware.ports import boot_text
@@ -465,7 +466,63 @@ def test_side_channel_reboot_and_radio_commands():
     assert b"".join(p[1:] for p in drain(cf)).startswith(b"SYS: ---")
     assert cf.handle_radio_packet(b"\xff\x85\x00") == b""
     cf.handle_radio_packet(b"\xff\xfe\x01")
-    assert not cf.powered and cf.handle_radio_packet(b"\xff") == b""
+    assert not cf.powered and not cf.radio_on and cf.handle_radio_packet(b"\xff") == b""
+    assert cf.handle_radio_packet(b"\xff\xfe\x03") == b"" and not cf.powered     # all off: no radio wakes it
+
+
+def test_reset_needs_reset_init_first():
+    cf, v = make()
+    assert cf.handle_radio_packet(b"\xf3\xfe\xf0\x01") in (b"\xf3", b"\xf7")
+    assert cf.state.reboots == 0
+    cf.handle_radio_packet(b"\xf3\xfe\xff")
+    cf.handle_radio_packet(b"\xf3\xfe\xf0\x01")
+    assert cf.state.reboots == 1
+
+
+def test_reboot_brings_back_fresh_state_and_restarts_uptime():
+    cf, v = make()
+    ask(cf, b"\x2e" + struct.pack("<HB", param_id(cf, "ring.headlightEnable"), 1))
+    v.t += 5.0
+    assert cf.timestamp_ms() >= 5000
+    for packet in reboot_packets():
+        cf.handle_radio_packet(packet)
+    assert cf.state.reboots == 1 and cf.params.value("ring.headlightEnable") == 0
+    assert cf.logs.blocks == {} and cf.timestamp_ms() == 0 and not cf.link.safelink
+
+
+def test_reboot_into_the_bootloader_answers_no_crtp_until_reset_to_firmware():
+    cf, v = make()
+    for packet in reboot_packets(bootloader=True):
+        cf.handle_radio_packet(packet)
+    assert cf.in_bootloader and cf.radio_on
+    assert drain(cf) == []                                         # no firmware boot text
+    cf.handle_radio_packet(b"\xfd\x00")                          # link source query: no firmware runs
+    assert drain(cf) == [] and cf.state.packets_by_port == {}
+    for packet in reboot_packets():
+        cf.handle_radio_packet(packet)
+    assert not cf.in_bootloader and cf.powered
+
+
+def test_stm_off_keeps_the_nrf_on_the_air_until_stm_on():
+    cf, v = make()
+    cf.handle_radio_packet(b"\xff\x05\x01")                     # safelink on
+    assert cf.handle_radio_packet(stm_power_off_packet()) in (b"\xf3", b"\xf7")
+    assert not cf.powered and cf.radio_on
+    assert cf.handle_radio_packet(b"\xfd\x00") != b""            # acked by the nRF ...
+    assert cf.state.packets_by_port == {}                          # ... the STM sees nothing
+    cf.handle_radio_packet(stm_power_on_packet())
+    assert cf.powered and cf.state.reboots == 1
+    assert cf.link.safelink                                       # the nRF was not reset
+
+
+def test_brushless_profile_does_not_arm_itself():
+    cf, _ = make()
+    assert cf.supervisor_bits() & 0x06 == 0x06                    # armed, auto-arm
+    cf, _ = make(auto_arm=False)
+    assert cf.supervisor_bits() & 0x07 == 0x01                    # can arm, not armed, no auto-arm
+    assert cf.arm(True) == (True, True)
+    cf.reboot()
+    assert not cf.state.armed                                     # a reboot disarms it
 
 
 @pytest.mark.parametrize("fw,size", [("current", 200), ("2016.02", 60)])

@@ -22,10 +22,10 @@ MOCAP_NOISE = 0.0005
 class Rig:
     """One world vehicle behind its simulated firmware; mocap streamed as external position packets."""
 
-    def __init__(self, position=(0.0, 0.0, 0.0), seed=3, estimator=2, mocap="position"):
+    def __init__(self, position=(0.0, 0.0, 0.0), seed=3, estimator=2, mocap="position", platform="cf2"):
         self.world = World(speed=0, seed=seed)
-        self.vehicle = self.world.add_vehicle("cf5", position=position)
-        self.cf = SimulatedCrazyflie(ADDR, self.vehicle)
+        self.vehicle = self.world.add_vehicle("cf5", position=position, platform=platform)
+        self.cf = SimulatedCrazyflie(ADDR, self.vehicle, auto_arm=self.vehicle.auto_arm)
         self.rng = np.random.default_rng(seed)
         self.mocap = mocap
         self.setpoint = None

@@ -168,6 +168,11 @@ def test_vehicle_config(tmp_path):
     bad.write_text("- uri: radio://0/80/2M\n  colour: red\n")
     with pytest.raises(ValueError, match="unknown keys"):
         load_vehicle_config(str(bad))
+    bad.write_text("- uri: radio://0/80/2M\n  platform: quad\n")
+    with pytest.raises(ValueError, match="platform must be one of cf2, brushless"):
+        load_vehicle_config(str(bad))
+    good.write_text("- uri: radio://0/80/2M/E7E7E7E701\n  platform: brushless\n")
+    assert load_vehicle_config(str(good))[0]["platform"] == "brushless"
 
 
 def test_cli_refuses_bad_arguments(capsys):

@@ -7,6 +7,8 @@ import struct
 
 import pytest
 
+from crazyflie_driver.sim.world.stabilizer import BRUSHLESS_IDLE_MOTOR
+
 from test_sim_high_level import ask, hl, takeoff
 from test_sim_onboard_flight import Rig
 
@@ -100,3 +102,23 @@ def test_emergency_stop_during_a_crash_locks():
     assert bits(rig) & (CRASHED | LOCKED) == LOCKED
     rig.vehicle.place((0.0, 0.0, 0.0))
     assert ask(rig, 9, 1, b"\x02")[2:] == b"\x01\x01" and bits(rig) & LOCKED     # no crash, still locked
+
+
+def test_a_brushless_crazyflie_spins_nothing_until_armed_then_idles_and_flies():
+    rig = Rig(platform="brushless")
+    assert bits(rig) & (CAN_ARM | ARMED | AUTO_ARM | CAN_FLY) == CAN_ARM
+    hl(rig, takeoff(0.5, 1.0))
+    rig.fly(1.5)
+    assert max(rig.vehicle.motors()) == 0.0 and rig.vehicle.pose()[0][2] < 0.01     # refused: not armed
+    rig.cf.reboot()                                   # forget that plan; a reboot leaves it disarmed
+    assert not bits(rig) & ARMED
+    assert ask(rig, 9, 1, b"\x01\x01")[1:] == b"\x81\x01\x01"       # arm: success, armed
+    rig.fly(0.2)
+    assert list(rig.vehicle.motors()) == [BRUSHLESS_IDLE_MOTOR] * 4      # armed on the floor: idling
+    assert rig.vehicle.pose()[0][2] < 0.01
+    hl(rig, takeoff(0.5, 1.5))
+    rig.fly(2.5)
+    assert rig.vehicle.pose()[0][2] == pytest.approx(0.5, abs=0.05)
+    assert ask(rig, 9, 1, b"\x01\x00")[1:] == b"\x81\x01\x00"       # disarmed in the air: motors off
+    rig.fly(0.1)
+    assert max(rig.vehicle.motors()) == 0.0

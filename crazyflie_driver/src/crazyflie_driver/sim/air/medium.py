@@ -228,7 +228,7 @@ class LocalMedium:
             for c in heard:
                 c.handle_broadcast(data)
             return miss
-        if cf is None or lost or not cf.powered:
+        if cf is None or lost or not cf.radio_on:
             return miss
         cf.rssi_dbm = rssi_dbm
         payload = cf.handle_radio_packet(data, ack_enabled)

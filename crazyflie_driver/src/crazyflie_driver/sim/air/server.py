@@ -31,6 +31,7 @@ from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMed
 from crazyflie_driver.sim.world import battery as battery_model
 from crazyflie_driver.sim.world.mocap_feed import MocapEstimatorFeed
 from crazyflie_driver.sim.world.pacing import parse_pacing, start_pacing
+from crazyflie_driver.sim.world.stabilizer import PLATFORM_CF2, PLATFORMS
 from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)
@@ -82,8 +83,8 @@ class WorldServer:
 
     # --- Crazyflies --------------------------------------------------------------------------
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position: Sequence[float] = (0.0, 0.0, 0.0),
-                      firmware: str = "current", yaw: float = 0.0, mocap_to_estimator: bool = False
-                      ) -> SimulatedCrazyflie:
+                      firmware: str = "current", yaw: float = 0.0, mocap_to_estimator: bool = False,
+                      platform: str = PLATFORM_CF2) -> SimulatedCrazyflie:
         """A simulated Crazyflie on ``uri``; ``mocap_to_estimator`` switches on the simulator extension
         that feeds the world's motion capture straight into its estimator (``set_mocap_to_estimator``)."""
         if firmware not in PROFILES:
@@ -98,8 +99,9 @@ class WorldServer:
             name = name or "cf%d" % (len(self._entries) + 1)
             if name in self._entries:
                 raise ValueError("a simulated Crazyflie is already called %r" % name)
-            vehicle = self.world.add_vehicle(name, position=pos, yaw=float(yaw), firmware=firmware)
-            cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware)
+            extra = {"platform": platform} if platform != PLATFORM_CF2 else {}
+            vehicle = self.world.add_vehicle(name, position=pos, yaw=float(yaw), firmware=firmware, **extra)
+            cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware, auto_arm=getattr(vehicle, "auto_arm", True))
             self.medium.add_crazyflie(cf, key[0], key[1])
             entry = SimEntry(uri, name, key, cf)
             if self.udp_base_port is not None:
@@ -271,7 +273,8 @@ class WorldServer:
     def _op_add_crazyflie(self, a: ControlArgs) -> Dict[str, Any]:
         uri = a.text("uri")
         self.add_crazyflie(uri, a.text("name", None), a.args.get("position") or (0.0, 0.0, 0.0),
-                           a.text("firmware", "current"), mocap_to_estimator=a.flag("mocap_to_estimator", False))
+                           a.text("firmware", "current"), mocap_to_estimator=a.flag("mocap_to_estimator", False),
+                           platform=a.text("platform", PLATFORM_CF2))
         return self._find(uri).describe()
 
     def _op_remove_crazyflie(self, a: ControlArgs) -> None:
@@ -529,13 +532,16 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
     for i, item in enumerate(items):
         if not isinstance(item, dict) or "uri" not in item:
             raise ValueError("vehicle config %s: entry %d needs at least a 'uri'" % (path, i + 1))
-        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator"}
+        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator", "platform"}
         if unknown:
             raise ValueError("vehicle config %s: entry %d has unknown keys %s" % (path, i + 1, sorted(unknown)))
         if not isinstance(item.get("mocap_to_estimator", False), bool):
             raise ValueError("vehicle config %s: entry %d: mocap_to_estimator must be true or false (a simulator "
                              "extension feeding the world's motion capture into the estimator), got %r"
                              % (path, i + 1, item["mocap_to_estimator"]))
+        if item.get("platform", PLATFORM_CF2) not in PLATFORMS:
+            raise ValueError("vehicle config %s: entry %d: platform must be one of %s (brushless: must be armed "
+                             "before its motors spin), got %r" % (path, i + 1, ", ".join(PLATFORMS), item["platform"]))
         out.append(dict(item))
     return out
 
@@ -626,7 +632,7 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         for i, v in enumerate(vehicles):
             pos = v.get("position") or (0.5 * i, 0.0, 0.0)
             server.add_crazyflie(str(v["uri"]), v.get("name"), pos, str(v.get("firmware") or args.firmware),
-                                 float(v.get("yaw") or 0.0))
+                                 float(v.get("yaw") or 0.0), platform=str(v.get("platform") or PLATFORM_CF2))
         for name in args.usb:
             server.plug_usb(name)
         server.start()

@@ -22,7 +22,9 @@ from crazyflie_driver.sim.firmware import ports
 from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.decoded_values import DecodedValues, trajectory_values
 from crazyflie_driver.sim.firmware.high_level_port import ENOEXEC, high_level_port
-from crazyflie_driver.sim.firmware.link import NrfLink, SYS_ALL_OFF, SYS_RESET, SYS_STM_OFF
+from crazyflie_driver.crtp.nrf_system import (RESET_TO_FIRMWARE, SYS_ALL_OFF, SYS_RESET, SYS_RESET_INIT, SYS_STM_OFF,
+                                             SYS_STM_ON)
+from crazyflie_driver.sim.firmware.link import NrfLink
 from crazyflie_driver.sim.firmware.log import LogService
 from crazyflie_driver.sim.firmware.param import ParamService
 from crazyflie_driver.sim.firmware.state import SimState
@@ -68,12 +70,14 @@ class SimulatedCrazyflie:
 
     def __init__(self, address: bytes, vehicle: Any, firmware: str = T.GEN_CURRENT,
                  rssi_dbm: float = -40.0, param_table: Optional[Sequence[T.ParamVar]] = None,
-                 log_table: Optional[Sequence[T.LogVar]] = None) -> None:
+                 log_table: Optional[Sequence[T.LogVar]] = None, auto_arm: bool = True) -> None:
+        """``auto_arm`` False: a platform that must be armed before its motors spin (a Brushless one)."""
         self.address = bytes(address)
+        self.auto_arm = bool(auto_arm)
         self.vehicle = vehicle
         self.profile = profile_for(firmware)
         self.rssi_dbm = float(rssi_dbm)          # RSSI of the last uplink packet (set by the medium)
-        self.state = SimState()
+        self.state = SimState(armed=self.auto_arm)
         self.lock = threading.RLock()
         self._param_table = tuple(param_table if param_table is not None else T.PARAM_TABLE)
         self._log_table = tuple(log_table if log_table is not None else T.LOG_TABLE)
@@ -81,6 +85,9 @@ class SimulatedCrazyflie:
         self._tx_queued_at: Deque[float] = deque()   # world time [s] each packet in _tx was queued
         self._tx_listener: Optional[Callable[[], None]] = None
         self._last_radio: Optional[float] = None
+        self.radio_on = True                     # the nRF's power: off only after "all off" or the switch
+        self.in_bootloader = False               # rebooted into the bootloader: no firmware answers CRTP
+        self._reset_armed = False                # an nRF RESET_INIT came: the next RESET is taken
         self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
                             self.profile.rssi_in_empty_ack, self._system_command)
         self._ports: Dict[int, Callable[[int, int, bytes], None]] = {}
@@ -94,7 +101,6 @@ class SimulatedCrazyflie:
         self._clear_tx()
         self._last_radio = None
         self.packet_link_active = False      # True while a packet link (UDP) is the active link
-        self.link.reset()
         self.params = ParamService(self.profile.generation, self.profile.protocol_version, self._param_table,
                                    self._vehicle_param_defaults(), self._write_param, self.send)
         self.logs = LogService(self.profile.generation, self._log_table, self.read_value, self.send, self.now)
@@ -128,8 +134,10 @@ class SimulatedCrazyflie:
         self.console.write(ports.boot_text(self.profile.device_type, self.profile.firmware_version, cpu_id,
                                            self.profile.production))
 
-    def reboot(self) -> None:
-        """Power cycle: protocol state back to boot (params, log blocks, safelink, console text)."""
+    def reboot(self, bootloader: bool = False, reset_nrf: bool = True) -> None:
+        """Power cycle: protocol state back to boot (params, log blocks, console text, uptime); with
+        ``reset_nrf`` the radio's safelink state too. Into the bootloader the firmware does not run:
+        the nRF acks, nothing answers CRTP until a reset into the firmware."""
         with self.lock:
             hook = getattr(self.vehicle, "reboot", None)
             if hook is not None:
@@ -138,16 +146,27 @@ class SimulatedCrazyflie:
                 except Exception:
                     _log.exception("vehicle.reboot failed")
             reboots = self.state.reboots + 1
-            self.state = SimState(reboots=reboots)
+            self.state = SimState(reboots=reboots, armed=self.auto_arm)
+            self.radio_on = True
+            self.in_bootloader = bool(bootloader)
+            self._reset_armed = False
+            if reset_nrf:
+                self.link.reset()
             self._boot()
+            if bootloader:
+                self.state.powered = False
+                self._clear_tx()                 # no firmware ran: no boot text
 
     def power_off(self) -> None:
+        """The power switch: everything off (the radio too)."""
         with self.lock:
             self._cut_power()
+            self.radio_on = False
 
     def _cut_power(self) -> None:
         """STM off: the motors stop with it (the vehicle would otherwise fly on its last setpoint)."""
         self.state.powered = False
+        self._clear_tx()
         stop = getattr(self.vehicle, "stop_motors", None)
         try:
             stop() if stop is not None else self.vehicle.set_rpyt(0.0, 0.0, 0.0, 0)
@@ -155,8 +174,9 @@ class SimulatedCrazyflie:
             _log.exception("stopping the vehicle's motors at power-off failed")
 
     def power_on(self) -> None:
+        """The power switch on: a cold boot when anything was off."""
         with self.lock:
-            if not self.state.powered:
+            if not self.state.powered or not self.radio_on:
                 self.reboot()
 
     @property
@@ -245,7 +265,7 @@ class SimulatedCrazyflie:
         armed = self.state.armed and not blocked
         bits = int(not self.state.armed and not blocked)        # 0: can arm
         bits |= int(armed) << 1
-        bits |= 1 << 2                                          # auto arm
+        bits |= int(self.auto_arm) << 2                         # auto arm
         bits |= int(armed) << 3                                 # can fly: motors allowed
         bits |= int(bool(f.get("flying"))) << 4
         bits |= int(bool(f.get("tumbled"))) << 5
@@ -263,6 +283,12 @@ class SimulatedCrazyflie:
         if do_arm and not bits & 0x03:              # neither armed nor able to arm (a locked supervisor disarms)
             return False, False
         self.state.armed = bool(do_arm)
+        hook = getattr(self.vehicle, "set_armed", None)
+        if hook is not None:
+            try:
+                hook(bool(do_arm))
+            except Exception:
+                _log.exception("vehicle.set_armed failed")
         return True, bool(self.supervisor_bits() & 0x02)
 
     def recover(self) -> Tuple[bool, bool]:
@@ -279,7 +305,7 @@ class SimulatedCrazyflie:
     def handle_radio_packet(self, data: bytes, ack_requested: bool = True) -> bytes:
         """One radio packet from a dongle; returns the ack payload the nRF sends back."""
         with self.lock:
-            if not self.state.powered:
+            if not self.radio_on:
                 return b""
             self._last_radio = self.now()
             self.packet_link_active = False
@@ -333,7 +359,7 @@ class SimulatedCrazyflie:
         self._dispatch(raw)
 
     def _dispatch(self, raw: bytes) -> None:
-        if not raw or len(raw) > MAX_PAYLOAD + 1 or self.state.halted:
+        if not raw or len(raw) > MAX_PAYLOAD + 1 or self.state.halted or not self.state.powered:
             return
         header = raw[0]
         port, channel = header >> 4, header & 0x03
@@ -347,11 +373,21 @@ class SimulatedCrazyflie:
         except Exception:
             _log.exception("CRTP packet %s broke port %d of the simulated firmware", raw.hex(), port)
 
-    def _system_command(self, cmd: int) -> None:
-        if cmd == SYS_RESET:
-            self.reboot()
-        elif cmd in (SYS_ALL_OFF, SYS_STM_OFF):
+    def _system_command(self, command: bytes) -> None:
+        """An nRF system command (the bytes after its 0xFE target), as the nRF firmware takes it: a
+        reset only right after a RESET_INIT; the STM32 domain on boots the STM (the nRF keeps its
+        safelink state); "all off" leaves nothing on the air."""
+        cmd, arg = command[0], command[1:2]
+        armed, self._reset_armed = self._reset_armed, cmd == SYS_RESET_INIT
+        if cmd == SYS_RESET and armed and arg:
+            self.reboot(bootloader=arg[0] != RESET_TO_FIRMWARE)
+        elif cmd == SYS_STM_OFF:
             self._cut_power()
+        elif cmd == SYS_STM_ON and not self.state.powered:
+            self.reboot(reset_nrf=False)
+        elif cmd == SYS_ALL_OFF:
+            self._cut_power()
+            self.radio_on = False
 
     # --- packets out -------------------------------------------------------------------------
     def send(self, header: int, payload: bytes) -> bool:
@@ -488,6 +524,8 @@ class SimulatedCrazyflie:
                 "address": self.address.hex().upper(),
                 "firmware": self.profile.generation,
                 "powered": s.powered,
+                "radio_on": self.radio_on,
+                "in_bootloader": self.in_bootloader,
                 "emergency": s.emergency,
                 "emergency_reason": s.emergency_reason,
                 "halted": s.halted,
@@ -504,6 +542,9 @@ class SimulatedCrazyflie:
                 "tx_last_wait_s": s.tx_last_wait_s,
                 "safelink": self.link.safelink,
                 "reboots": s.reboots,
+                "uptime_ms": self.timestamp_ms(),
+                "params_changed": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)
+                                   if self.params.values[i] != self.params.default_of(i)},
                 "rssi_dbm": self.rssi_dbm,
                 "log_blocks": {str(b.ident): {"running": b.running, "period_ms": int(round(b.period_s * 1000)),
                                               "variables": [self.logs.entries[v].full_name for v, _ in b.ops]}

@@ -11,17 +11,12 @@ from __future__ import annotations
 
 from typing import Callable, Optional
 
+from crazyflie_driver.crtp.nrf_system import TARGET_NRF
+
 NULL_MASK = 0xF3
 SAFELINK_CMD = 0x05
 RADIO_CTRL_CMD = 0x03
-SYSTEM_CMD = 0xFE
 
-# 0xFF 0xFE <cmd>: power and bootloader commands of the nRF (docs/protocol.md, "Safelink, empty acks and RSSI")
-SYS_RESET_INIT = 0xFF
-SYS_RESET = 0xF0
-SYS_ALL_OFF = 0x01
-SYS_STM_OFF = 0x02
-SYS_STM_ON = 0x03
 
 
 class NrfLink:
@@ -29,12 +24,12 @@ class NrfLink:
 
     ``deliver(bytes)`` hands a CRTP packet to the STM; ``next_downlink()`` pops the next queued
     downlink packet (or None); ``rssi()`` is the uplink RSSI in -dBm (positive, as the nRF reports it);
-    ``system(cmd)`` performs a 0xFE power command.
+    ``system(command)`` performs an nRF system command (its bytes after the 0xFE target).
     """
 
     def __init__(self, deliver: Callable[[bytes], None], next_downlink: Callable[[], Optional[bytes]],
                  rssi: Callable[[], int], rssi_in_empty_ack: bool,
-                 system: Callable[[int], None] = lambda cmd: None) -> None:
+                 system: Callable[[bytes], None] = lambda cmd: None) -> None:
         self._deliver = deliver
         self._next_downlink = next_downlink
         self._rssi = rssi
@@ -111,8 +106,8 @@ class NrfLink:
             # channel / datarate / power changes are acknowledged; the simulated air does not move
             # the Crazyflie (the world server re-registers it if asked to)
             return self.empty_ack()
-        if cmd == SYSTEM_CMD and len(data) > 2:
-            self._system(data[2])
+        if cmd == TARGET_NRF and len(data) > 2:
+            self._system(bytes(data[2:]))
             return self.empty_ack()
         if 0x80 <= cmd <= 0x8F:  # peer-to-peer
             return b""

@@ -43,6 +43,15 @@ TUMBLE_UPSIDE_DOWN_S = 0.1
 
 # lock reasons (why the motors are held off until a reboot)
 LOCK_NONE, LOCK_EMERGENCY, LOCK_WATCHDOG, LOCK_TUMBLE, LOCK_BATTERY, LOCK_ASSERT = 0, 1, 2, 3, 4, 5
+
+# platforms (a vehicles entry's ``platform``): a brushed Crazyflie 2.x arms itself at boot; a Brushless one
+# keeps its motors off until armed, then idles them (the firmware's arming documentation)
+PLATFORM_CF2 = "cf2"
+PLATFORM_BRUSHLESS = "brushless"
+PLATFORMS = (PLATFORM_CF2, PLATFORM_BRUSHLESS)
+#: Motor command (0..65535) a Brushless platform's motors idle at once armed: a simulation choice, low
+#: enough to lift nothing (about 5 % of full scale)
+BRUSHLESS_IDLE_MOTOR = 3000.0
 LOCK_NAMES = {LOCK_NONE: "", LOCK_EMERGENCY: "emergency stop", LOCK_WATCHDOG: "setpoint watchdog",
               LOCK_TUMBLE: "tumbled", LOCK_BATTERY: "battery empty", LOCK_ASSERT: "firmware assert"}
 
@@ -124,6 +133,8 @@ class OnboardStates(Rows):
         "tilt_time": ((), float),
         "upside_time": ((), float),
         "motor_power_enable": ((), bool),
+        "disarmed": ((), bool),             # not armed: motors off whatever the setpoint (Brushless at boot)
+        "idle_motor": ((), float),          # motor command while armed with no thrust asked (Brushless)
         "motor_power": ((4,), float),
         # the Mellinger controller's attitude law (rows flown by controller 2 with generic setpoints)
         "moment_law": ((), bool),           # the roll, pitch, yaw commands come from the law, not the PIDs
@@ -160,6 +171,8 @@ class OnboardStates(Rows):
     tilt_time: np.ndarray
     upside_time: np.ndarray
     motor_power_enable: np.ndarray
+    disarmed: np.ndarray
+    idle_motor: np.ndarray
     motor_power: np.ndarray
     moment_law: np.ndarray
     mel_axes: np.ndarray
@@ -178,15 +191,20 @@ class OnboardStates(Rows):
         self.rate_integ[rows] = 0.0
         self.rate_prev[rows] = 0.0
 
-    def add(self, firmware: str, now: float, yaw_deg: float = 0.0) -> int:
+    def add(self, firmware: str, now: float, yaw_deg: float = 0.0, platform: str = PLATFORM_CF2) -> int:
         i = self.append_row()
-        self.boot(i, firmware, now, yaw_deg)
+        self.boot(i, firmware, now, yaw_deg, platform)
         return i
 
-    def boot(self, i: int, firmware: str, now: float, yaw_deg: float = 0.0) -> None:
-        """Row ``i`` as after power-on: default gains, thrust locked, controller reset."""
+    def boot(self, i: int, firmware: str, now: float, yaw_deg: float = 0.0, platform: str = PLATFORM_CF2) -> None:
+        """Row ``i`` as after power-on: default gains, thrust locked, controller reset; a Brushless
+        platform disarmed."""
+        if platform not in PLATFORMS:
+            raise ValueError("unknown platform %r (choose one of: %s)" % (platform, ", ".join(PLATFORMS)))
         for name in self.FIELDS:
             getattr(self, name)[i] = 0
+        self.disarmed[i] = platform == PLATFORM_BRUSHLESS
+        self.idle_motor[i] = BRUSHLESS_IDLE_MOTOR if platform == PLATFORM_BRUSHLESS else 0.0
         self.gen2016[i] = check_generation(firmware) == GEN_2016
         g = GAINS[firmware]
         self.att_gains[i] = g["pid_attitude"]
@@ -307,7 +325,7 @@ class OnboardController:
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
         if np.count_nonzero(s.generic):     # the position controller's thrust goes to the mixer as it is
             thrust = np.where(s.generic, raw, thrust)
-        off = s.thrust_locked | (s.lock != LOCK_NONE)
+        off = s.thrust_locked | (s.lock != LOCK_NONE) | s.disarmed
         if np.count_nonzero(off):
             thrust[off] = 0.0
 
@@ -335,10 +353,18 @@ class OnboardController:
         np.minimum(m, 65535.0, out=m)
         m *= (thrust > 0.0)[:, None]
         if np.count_nonzero(s.motor_power_enable):
-            m = np.where((s.motor_power_enable & (s.lock == LOCK_NONE))[:, None], s.motor_power, m)
+            m = np.where((s.motor_power_enable & (s.lock == LOCK_NONE) & ~s.disarmed)[:, None], s.motor_power, m)
+        if np.count_nonzero(s.idle_motor):      # armed Brushless rows idle their motors
+            idling = (s.idle_motor > 0.0) & ~s.disarmed & (s.lock == LOCK_NONE)
+            m = np.where(idling[:, None], np.maximum(m, s.idle_motor[:, None]), m)
         s.thrust = thrust
         s.motors = m
         return m
+
+    def set_armed(self, i: int, armed: bool) -> None:
+        """The supervisor armed (or disarmed) row ``i``."""
+        self.s.disarmed[i] = not armed
+        self.dirty = True
 
     def recover(self, i: int, tilt_cos: float) -> bool:
         """Crash recovery: a crash (tumble) lock is cleared unless the body is still tilted over 60°.

@@ -21,7 +21,7 @@ from crazyflie_driver.sim.world import sensors as _sensors
 from crazyflie_driver.sim.world import flight as _flight
 from crazyflie_driver.sim.world.stabilizer import (GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE,
                                                    LOCK_TUMBLE, TUMBLE_TILT_COS, OnboardController, check_generation,
-                                                   default_params)
+                                                   PLATFORM_BRUSHLESS, PLATFORM_CF2, PLATFORMS, default_params)
 from crazyflie_driver.sim.world.physics import BodyStates, Drive, RigidBodyBackend, VehicleParams, quat_to_matrix
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
@@ -41,9 +41,11 @@ _ONES4 = np.ones(4)
 class Vehicle:
     """One simulated Crazyflie as the firmware side sees it. Thread safe."""
 
-    def __init__(self, world: World, name: str, firmware: str, params: VehicleParams) -> None:
+    def __init__(self, world: World, name: str, firmware: str, params: VehicleParams,
+                 platform: str = PLATFORM_CF2) -> None:
         self.name = name
         self.firmware = firmware
+        self.platform = platform
         self.params = params
         self._world = world
         self._row = -1
@@ -114,9 +116,21 @@ class Vehicle:
         with w._lock:
             if self._row >= 0:
                 yaw = w.onboard.s.attitude[self._row, 2]
-                w.onboard.s.boot(self._row, self.firmware, w.time, float(yaw))
+                w.onboard.s.boot(self._row, self.firmware, w.time, float(yaw), self.platform)
                 w.onboard.dirty = True
                 w.flight.boot(self._row, w.bodies.position[self._row].copy(), w.time)
+
+    @property
+    def auto_arm(self) -> bool:
+        """Whether its firmware arms itself at boot (not a Brushless platform)."""
+        return self.platform != PLATFORM_BRUSHLESS
+
+    def set_armed(self, armed: bool) -> None:
+        """The supervisor armed or disarmed it: a Brushless platform's motors run only armed."""
+        w = self._world
+        with w._lock:
+            if self._row >= 0:
+                w.onboard.set_armed(self._row, armed)
 
     def stop_motors(self) -> None:
         """Generic setpoint type 0 (stop): the same as a zero RPYT setpoint."""
@@ -302,8 +316,12 @@ class World:
     # --- vehicles ----------------------------------------------------------------------------
     def add_vehicle(self, name: str, position=(0.0, 0.0, 0.0), yaw: float = 0.0, firmware: str = GEN_CURRENT,
                     mass: Optional[float] = None, params: Optional[VehicleParams] = None,
-                    battery_charge: float = 1.0) -> Vehicle:
-        """A Crazyflie at ``position`` (m) with ``yaw`` (rad), at rest on the floor when z <= 0."""
+                    battery_charge: float = 1.0, platform: str = PLATFORM_CF2) -> Vehicle:
+        """A Crazyflie at ``position`` (m) with ``yaw`` (rad), at rest on the floor when z <= 0; ``platform``
+        'brushless' must be armed before its motors spin."""
+        if platform not in PLATFORMS:
+            raise ValueError("unknown platform %r for vehicle %r (choose one of: %s)"
+                             % (platform, name, ", ".join(PLATFORMS)))
         name = str(name)
         check_generation(firmware)
         pos = np.asarray(position, dtype=float).reshape(-1)
@@ -317,9 +335,9 @@ class World:
         with self._lock:
             if name in self._vehicles:
                 raise ValueError("a vehicle called %r is already in the world" % name)
-            v = Vehicle(self, name, firmware, params)
+            v = Vehicle(self, name, firmware, params, platform)
             v._row = self.bodies.add(params, pos, float(yaw))
-            self.onboard.s.add(firmware, self.time, math.degrees(float(yaw)))
+            self.onboard.s.add(firmware, self.time, math.degrees(float(yaw)), platform)
             self.sensors.add(self.rng)
             self.battery.add(battery_charge)
             self.flight.add(self.rng, pos, self.time)
