@@ -181,9 +181,9 @@ def main() -> int:
     else:
         level.append("  cflib: not measured (see above)")
     table = bs.Table(
-        level + ["", "Link level: RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink -> Crazyradio -> pyusb ->",
-         "FakeUsbBackend -> LocalMedium -> simulated nRF + commander), %.1f s per case after %.1f s warm-up"
-         % (args.seconds, WARMUP_S),
+        level + ["", "Link level: RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink ->",
+         "Crazyradio -> pyusb -> FakeUsbBackend -> LocalMedium -> simulated nRF + commander),",
+         "%.1f s per case after %.1f s warm-up" % (args.seconds, WARMUP_S),
          "timing model: bulk round trip %.2f ms, control transfer %.2f ms; 'off' = DongleTiming.instant()"
          % (1000 * model.bulk_round_trip_s, 1000 * model.control_transfer_s),
          bs.machine_line(),
