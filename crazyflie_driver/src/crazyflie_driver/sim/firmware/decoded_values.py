@@ -43,7 +43,18 @@ class DecodedValues:
             self._walk(name, value)
 
     def _walk(self, name: str, value: Any) -> None:
-        if isinstance(value, float) or (isinstance(value, numbers.Real) and not isinstance(value, bool)):
+        kind = type(value)
+        if kind is float or kind is int:         # exact types first: a setpoint is a tuple of these
+            self._add(name, float(value))
+        elif kind is tuple or kind is list:
+            add, walk = self._add, self._walk
+            for i, v in enumerate(value):
+                kind = type(v)
+                if kind is float or kind is int:
+                    add(_child(name, i), float(v))
+                else:
+                    walk(_child(name, i), v)
+        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
             self._add(name, float(value))
         elif isinstance(value, (tuple, list)):
             for i, v in enumerate(value):
