@@ -47,9 +47,15 @@ def _rate(value: float) -> float:
 
 def rpyt_packet(roll: float, pitch: float, yawrate: float, thrust: float) -> CRTPPacket:
     """The 14-byte RPYT setpoint; ValueError for a value that is not a finite number."""
-    roll, pitch, yawrate = _finite("roll", roll), _finite("pitch", pitch), _finite("yaw rate", yawrate)
-    thrust = _finite("thrust", thrust)
-    thrust_u16 = int(0.0 if thrust < 0.0 else (MAX_THRUST if thrust > MAX_THRUST else thrust))
+    kind = type(thrust)
+    if not (type(roll) is float and type(pitch) is float and type(yawrate) is float
+            and roll - roll == 0.0 and pitch - pitch == 0.0 and yawrate - yawrate == 0.0
+            and ((kind is float and thrust - thrust == 0.0) or (kind is int and 0 <= thrust <= MAX_THRUST))):
+        # anything but finite floats and a finite float or in-range int thrust: the general checks,
+        # which name the value
+        roll, pitch, yawrate = _finite("roll", roll), _finite("pitch", pitch), _finite("yaw rate", yawrate)
+        thrust = _finite("thrust", thrust)
+    thrust_u16 = int(0 if thrust < 0 else (MAX_THRUST if thrust > MAX_THRUST else thrust))
     return CRTPPacket(PORT_COMMANDER, 0, _RPYT.pack(_rate(roll), _rate(pitch), _rate(yawrate), thrust_u16))
 
 

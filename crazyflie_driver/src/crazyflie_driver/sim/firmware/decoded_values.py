@@ -19,6 +19,16 @@ import numpy as np
 
 _FIELD_NAMES: Dict[type, Tuple[str, ...]] = {}
 _CHILD: Dict[Tuple[str, Any], str] = {}
+_CHILDREN: Dict[Tuple[str, int], Tuple[str, ...]] = {}
+
+
+def _children(name: str, count: int) -> Tuple[str, ...]:
+    """``name.0`` .. ``name.<count-1>``, built once per pair."""
+    try:
+        return _CHILDREN[(name, count)]
+    except KeyError:
+        names = _CHILDREN[(name, count)] = tuple(_child(name, i) for i in range(count))
+        return names
 
 
 def _child(name: str, key: Any) -> str:
@@ -48,12 +58,12 @@ class DecodedValues:
             self._add(name, float(value))
         elif kind is tuple or kind is list:
             add, walk = self._add, self._walk
-            for i, v in enumerate(value):
+            for child, v in zip(_children(name, len(value)), value):
                 kind = type(v)
                 if kind is float or kind is int:
-                    add(_child(name, i), float(v))
+                    add(child, float(v))
                 else:
-                    walk(_child(name, i), v)
+                    walk(child, v)
         elif isinstance(value, numbers.Real) and not isinstance(value, bool):
             self._add(name, float(value))
         elif isinstance(value, (tuple, list)):
