@@ -27,7 +27,7 @@ The path measured is the real one from ``RadioLink.send_bytes`` down: safelink b
 ``Crazyradio`` (pyusb ``write``/``read``, vendor requests), the fake pyusb backend, ``LocalMedium`` and the
 simulated nRF + commander port of ``SimulatedCrazyflie`` (a vehicle that does nothing, so physics does
 not enter the figures), all in this process. Usage:
-    PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--out FILE]
+    /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--modes none] [--out FILE]
 """
 from __future__ import annotations
 

@@ -8,8 +8,8 @@ moment cmd_vel is handed to the worker until the setpoint's radio round trip is 
 p99). Also the IMU messages per second each Crazyflie delivers with logging on.
 
 Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.World stepping
-in real time, sim.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
-    PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_server.py [--seconds 3] [--out FILE]
+in real time, sim.air.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
+    /usr/bin/python3 bench/bench_server.py [--seconds 3] [--out FILE]
 """
 from __future__ import annotations
 
