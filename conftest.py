@@ -10,7 +10,11 @@ _SKIP_DIRS = {".ws", "build", "devel", "bench"}
 
 def pytest_ignore_collect(path, config):  # `path` exists on pytest 4.6 (Noetic) and 7 (Debian 12)
     p = pathlib.Path(str(path))
-    if _SKIP_DIRS.intersection(p.parts):
+    try:                            # only the parts inside the checkout: it may itself sit in a "bench" or "build"
+        inside = p.resolve().relative_to(pathlib.Path(str(config.rootdir)).resolve()).parts
+    except ValueError:
+        inside = p.parts
+    if _SKIP_DIRS.intersection(inside):
         return True
     if p.suffix == ".py" and p.is_file():
         try:

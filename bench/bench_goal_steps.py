@@ -34,16 +34,12 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "test"))   # controller_support.world_flight
 
 import bench_support as bs  # noqa: E402
 
-from chapter_gains import chapter_gains  # noqa: E402
 from crazyflie_controller.position_controller import ControllerConfig, PositionController, State  # noqa: E402
 
-X, Y, Z, YAW = chapter_gains()   # config/crazyflie2.yaml, as the node loads it
+X, Y, Z, YAW = bs.chapter_gains()   # config/crazyflie2.yaml, as the node loads it
 BEFORE = dict(goal_change="step", tilt_compensation=False, z_integration="always", hover_refine_time=0.0)
 VARIANTS = {
     "original": None,

@@ -27,10 +27,8 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "test"))      # support.radio_rig
 
+import bench_support as bs  # noqa: E402  (the sources and the tests' support on the path)
 from support.radio_rig import RadioRig  # noqa: E402
 
 GOAL = np.array([0.0, 0.0, 0.5])
@@ -41,10 +39,9 @@ def controller():
     """The chapter's controller with crazyflie2.yaml's gains, or None when the package is missing."""
     try:
         from crazyflie_controller.position_controller import ControllerConfig, PositionController
-        from chapter_gains import chapter_gains
     except ImportError:
         return None
-    x, y, z, yaw = chapter_gains()
+    x, y, z, yaw = bs.chapter_gains()
     return PositionController(ControllerConfig(x, y, z, yaw))
 
 

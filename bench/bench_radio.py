@@ -17,31 +17,85 @@ the ``SharedRadio`` FIFO lock interleaves them, as the driver's per-Crazyflie wo
 model (PA: 0.8 ms per bulk round trip, 1.5 ms per control transfer, real sleeps) and with the model
 off (no sleeps: pure host overhead).
 
+First, the Crazyflie level, one Crazyflie, timing model off: host CPU per RPYT setpoint of
+``Crazyflie.send_setpoint`` (value checks, packet building, ``RadioLink``, the dongle, the simulated
+firmware) beside Bitcraze's cflib doing the same in the same run (``bench_radio_cflib.py``, run with
+cflib's interpreter: ``.ws/cflib-venv``, or $CFLIB_PYTHON). Both count the setpoints the simulated
+commander received and the CPU time of the whole process.
+
 The path measured is the real one from ``RadioLink.send_bytes`` down: safelink bits, ``SharedRadio``,
 ``Crazyradio`` (pyusb ``write``/``read``, vendor requests), the fake pyusb backend, ``LocalMedium`` and the
 simulated nRF + commander port of ``SimulatedCrazyflie`` (a vehicle that does nothing, so physics does
 not enter the figures), all in this process. Usage:
-    PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--out FILE]
+    /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--modes none] [--out FILE]
 """
 from __future__ import annotations
 
+import json
+import os
 import struct
+import subprocess
 import sys
 import threading
 import time
-from typing import List
+from typing import List, Optional
 
 import bench_support as bs
 from bench_support import IdleVehicle
-from crazyflie_driver.radio.link import RadioLink                            # noqa: E402
-from crazyflie_driver.radio.shared_radio import RadioManager                # noqa: E402
-from crazyflie_driver.sim.air.dongle_timing import DongleTiming  # noqa: E402
-from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie            # noqa: E402
-from crazyflie_driver.sim.air.medium import LocalMedium                     # noqa: E402
+from crazyflie_driver.protocol.crazyflie import Crazyflie
+from crazyflie_driver.radio.link import RadioLink
+from crazyflie_driver.radio.shared_radio import RadioManager
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+from crazyflie_driver.sim.air.medium import LocalMedium
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 
 SETPOINT = bytes([0x30]) + struct.pack("<fffH", 0.0, 0.0, 0.0, 0)   # port 3 ch 0 RPYT, thrust 0
 WARMUP_S = 0.2
+
+
+CFLIB_PYTHON = os.environ.get("CFLIB_PYTHON") or os.path.join(bs.REPO, ".ws", "cflib-venv", "bin", "python3")
+
+
+def crazyflie_level(seconds: float) -> dict:
+    """``Crazyflie.send_setpoint`` in a loop on one fake dongle, timing model off: CPU per setpoint."""
+    medium = LocalMedium(dongles=1, seed=1)
+    sim = SimulatedCrazyflie(bytes([0xE7] * 5), IdleVehicle())
+    medium.add_crazyflie(sim, 80, 2)
+    backend = FakeUsbBackend(medium, dongles=1, timing=DongleTiming.instant())
+    cf = Crazyflie("radio://0/80/2M/E7E7E7E7E7", RadioManager(backend=backend))
+    cf.connect()
+    send = cf.send_setpoint
+    try:
+        end = time.monotonic() + WARMUP_S
+        while time.monotonic() < end:
+            send(0.0, 0.0, 0.0, 0)
+        s0, cpu0, t0 = sim.state.setpoints, time.process_time(), time.monotonic()
+        end = t0 + seconds
+        while time.monotonic() < end:
+            for _ in range(100):
+                send(0.0, 0.0, 0.0, 0)
+        s1, cpu1, t1 = sim.state.setpoints, time.process_time(), time.monotonic()
+    finally:
+        cf.close()
+    setpoints = s1 - s0
+    return {"setpoints": setpoints, "seconds": t1 - t0, "cpu_us": 1e6 * (cpu1 - cpu0) / setpoints}
+
+
+def cflib_level(seconds: float) -> Optional[dict]:
+    """cflib's figure from ``bench_radio_cflib.py`` in its own interpreter; None (with the reason
+    printed) when cflib is not installed or its run failed."""
+    if not os.path.exists(CFLIB_PYTHON):
+        print("cflib not measured: no %s (tools/bootstrap.sh --with-cflib, or set CFLIB_PYTHON)" % CFLIB_PYTHON)
+        return None
+    script = os.path.join(bs.HERE, "bench_radio_cflib.py")
+    run = subprocess.run([CFLIB_PYTHON, script, "--seconds", str(seconds), "--warmup", str(WARMUP_S)],
+                         capture_output=True, text=True,
+                         timeout=60 + 2 * seconds)
+    if run.returncode != 0:
+        print("cflib not measured: %s exited with %d:\n%s" % (script, run.returncode, run.stderr[-2000:]))
+        return None
+    return json.loads(run.stdout.strip().splitlines()[-1])
 
 
 def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
@@ -112,13 +166,24 @@ def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
 
 def main() -> int:
     ap = bs.parser(__doc__, "radio.txt", 2.0, counts="1,2,4,8")
-    ap.add_argument("--modes", default="threads,round-robin")
+    ap.add_argument("--modes", default="threads,round-robin", help="link-level modes; none: only the Crazyflie level")
     args = ap.parse_args()
     model = DongleTiming()
+    ours, theirs = crazyflie_level(args.seconds), cflib_level(args.seconds)
+    level = ["Crazyflie level, one Crazyflie, timing model off, %.1f s after %.1f s warm-up (host CPU per setpoint the"
+             % (args.seconds, WARMUP_S), "simulated commander received, whole process):",
+             "  ours  Crazyflie.send_setpoint             %6.1f us/setpoint  (%d setpoints/s)"
+             % (ours["cpu_us"], ours["setpoints"] / ours["seconds"])]
+    if theirs is not None and theirs.get("cpu_us"):
+        level += ["  cflib %-6s commander.send_setpoint      %6.1f us/setpoint  (%d setpoints/s, Python %s)"
+                  % (theirs["cflib"], theirs["cpu_us"], theirs["setpoints"] / theirs["seconds"], theirs["python"]),
+                  "  ours / cflib = %.2f" % (ours["cpu_us"] / theirs["cpu_us"])]
+    else:
+        level.append("  cflib: not measured (see above)")
     table = bs.Table(
-        ["RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink -> Crazyradio -> pyusb ->",
-         "FakeUsbBackend -> LocalMedium -> simulated nRF + commander), %.1f s per case after %.1f s warm-up"
-         % (args.seconds, WARMUP_S),
+        level + ["", "Link level: RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink ->",
+         "Crazyradio -> pyusb -> FakeUsbBackend -> LocalMedium -> simulated nRF + commander),",
+         "%.1f s per case after %.1f s warm-up" % (args.seconds, WARMUP_S),
          "timing model: bulk round trip %.2f ms, control transfer %.2f ms; 'off' = DongleTiming.instant()"
          % (1000 * model.bulk_round_trip_s, 1000 * model.control_transfer_s),
          bs.machine_line(),
@@ -129,6 +194,8 @@ def main() -> int:
     for label, timing in (("model", model), ("off", DongleTiming.instant())):
         for mode in args.modes.split(","):
             for n in bs.counts_of(args.counts):
+                if mode == "none":
+                    continue
                 r = run_case(n, timing, mode, args.seconds)
                 if r["failures"] or abs(r["delivered_ratio"] - 1.0) > 0.01:
                     print("warning: %d unacked, delivered/acked = %.3f" % (r["failures"], r["delivered_ratio"]))

@@ -21,13 +21,12 @@ import os
 import platform
 import signal
 import subprocess
-import sys
 import threading
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
 ROOT = os.path.join(HERE, "..")
-sys.path.insert(0, os.path.join(ROOT, "crazyflie_driver", "src"))
 
 MASTER_PORT = 11611
 WORLD_ADDRESS = "127.0.0.1:19881"

@@ -4,12 +4,11 @@ with the simulated world (the unmodified ``crazyflie_sim`` node) running inside 
 can tap the simulated air.
 
 Import it first thing in a bench (``import bench_support``: it puts the packages' sources on the
-path). Tests that need a world server the way a user runs one use ``served_world`` too.
+path and the tests' ``support`` package, whose ``served_world`` and ``free_port`` it passes on).
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib.util
 import json
 import os
@@ -20,20 +19,37 @@ import sys
 import tempfile
 import threading
 import time
-from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 RESULTS = os.path.join(HERE, "results")
-PACKAGES = ("crazyflie_driver", "crazyflie_demo", "crazyflie_tools")
+PACKAGES = ("crazyflie_driver", "crazyflie_controller", "crazyflie_demo", "crazyflie_tools")
 for _package in PACKAGES:          # the catkin devel space (messages, services) when sourced, else the sources
     if importlib.util.find_spec(_package) is None:
         sys.path.insert(0, os.path.join(REPO, _package, "src"))
-TEST_SUPPORT = os.path.join(REPO, "crazyflie_driver", "test")      # the ``support`` package the tests share
-if TEST_SUPPORT not in sys.path:
-    sys.path.append(TEST_SUPPORT)
+# the tests' helper packages: ``support`` (driver) and ``controller_support`` (world flights)
+TEST_SUPPORT = os.path.join(REPO, "crazyflie_driver", "test")
+for _support in (TEST_SUPPORT, os.path.join(REPO, "crazyflie_controller", "test")):
+    if _support not in sys.path:
+        sys.path.append(_support)
 
 from support.ports import free_port  # noqa: E402,F401  (one home for tests and benches; benches take it from here)
+from support.served_world import served_world  # noqa: E402,F401  (likewise)
+
+
+# --- the chapter's controller gains ---------------------------------------------------------------
+CONTROLLER_CONFIG = os.path.join(REPO, "crazyflie_controller", "config", "crazyflie2.yaml")
+
+
+def chapter_gains() -> tuple:
+    """(X, Y, Z, Yaw) ``PidGains`` of crazyflie_controller/config/crazyflie2.yaml: read from the file the
+    controller node loads, so a figure is never measured with gains that drifted from the ones users fly."""
+    import yaml
+    from crazyflie_controller.pid import PidGains
+    with open(CONTROLLER_CONFIG) as f:
+        pids = yaml.safe_load(f)["PIDs"]
+    return tuple(PidGains.from_params(pids[axis], axis) for axis in ("X", "Y", "Z", "Yaw"))
 
 
 # --- arguments and reports ---------------------------------------------------------------------
@@ -152,31 +168,6 @@ class IdleWorld:
 
     def add_tick_listener(self, fn, period) -> None:
         pass
-
-
-@contextlib.contextmanager
-def served_world(vehicles: Sequence[Tuple], world=None, dongles: int = 1) -> Iterator[Tuple[object, str]]:
-    """A ``WorldServer`` on an ephemeral loopback port with ``vehicles`` as (uri, name[, position[,
-    firmware]]) tuples, its world started when it can be; yields (server, "host:port"), stops both."""
-    from crazyflie_driver.sim.air.server import WorldServer
-    if world is None:
-        from crazyflie_driver.sim.world.world import World
-        world = World(speed=1.0, seed=3)
-    server = WorldServer(world, dongles=dongles, port=0)
-    for v in vehicles:
-        uri, name = v[0], v[1]
-        position = v[2] if len(v) > 2 else (0.0, 0.0, 0.0)
-        firmware = v[3] if len(v) > 3 else "current"
-        server.add_crazyflie(uri, name, position, firmware, 0.0)
-    host, port = server.start()
-    if hasattr(world, "start"):
-        world.start()
-    try:
-        yield server, "%s:%d" % (host, port)
-    finally:
-        server.stop()
-        if hasattr(world, "stop"):
-            world.stop()
 
 
 # --- one ROS graph per case, the simulated world inside the bench's child process ---------------

@@ -22,15 +22,11 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "src"))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_controller", "test"))   # controller_support.world_flight
 
 import bench_support as bs  # noqa: E402
-from chapter_gains import chapter_gains  # noqa: E402
 from crazyflie_controller.position_controller import ControllerConfig, PositionController  # noqa: E402
 
-X, Y, Z, YAW = chapter_gains()   # config/crazyflie2.yaml, as the node loads it
+X, Y, Z, YAW = bs.chapter_gains()   # config/crazyflie2.yaml, as the node loads it
 ORIGINAL_GOALS = dict(goal_change="step", z_integration="always", tilt_compensation=False)
 VARIANTS = {
     "original": dict(ORIGINAL_GOALS, takeoff_handover="original", derivative="error"),

@@ -5,13 +5,12 @@ trip) and the simulated firmware: first connect (download item by item) vs. seco
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
+import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
 from crazyflie_driver.protocol.crazyflie import Crazyflie  # noqa: E402
 from crazyflie_driver.radio.shared_radio import RadioManager  # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402

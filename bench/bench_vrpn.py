@@ -23,8 +23,8 @@ import threading
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
+import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
 from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, config_from_params  # noqa: E402
 from crazyflie_driver.mocap.vrpn_client import VrpnClient, VrpnSession  # noqa: E402
 from crazyflie_driver.mocap.vrpn_server import VrpnTestServer, circle_pose  # noqa: E402

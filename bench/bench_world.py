@@ -17,12 +17,11 @@ import argparse
 import os
 import platform
 import struct
-import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "crazyflie_driver", "src"))
 
+import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
 from crazyflie_driver.sim.firmware.setpoint_decode import decode_setpoint  # noqa: E402
 from crazyflie_driver.sim.world.physics import VehicleParams  # noqa: E402
 from crazyflie_driver.sim.world.world import World  # noqa: E402

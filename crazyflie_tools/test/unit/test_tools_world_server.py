@@ -1,5 +1,5 @@
 """The installed-style scripts as separate processes with CRAZYFLIE_BACKEND=sim, against a world
-server in this process (``bench/bench_support.served_world``, as the benchmarks start one): the path
+server in this process (``support.served_world``, as the benchmarks start one): the path
 a user takes with a running ``crazyflie_world_server``.
 """
 from __future__ import annotations
@@ -9,11 +9,11 @@ import subprocess
 import sys
 
 import pytest
+from support.ports import free_port
+from support.served_world import served_world
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
-sys.path.insert(0, os.path.join(REPO, "bench"))
-from bench_support import free_port, served_world  # noqa: E402
 SCRIPTS = os.path.join(REPO, "crazyflie_tools", "scripts")
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"

@@ -25,20 +25,38 @@ ESTOP_COMMAND = 3
 GENERIC_STOP = 0
 
 
+_RPYT = struct.Struct("<fffH")
+
+
+def _finite(name: str, value: float) -> float:
+    """``value`` as a float; ValueError for anything that is not a finite real number."""
+    kind = type(value)
+    try:
+        number = float(value) if kind is float or kind is int or isinstance(value, numbers.Real) else math.nan
+    except OverflowError:
+        number = math.nan
+    if number - number != 0.0:          # NaN or infinite
+        raise ValueError("setpoint %s must be a finite number, got %r" % (name, value))
+    return number
+
+
+def _rate(value: float) -> float:
+    """Held to the widest range the firmware acts on."""
+    return -MAX_RATE_DEG_S if value < -MAX_RATE_DEG_S else (MAX_RATE_DEG_S if value > MAX_RATE_DEG_S else value)
+
+
 def rpyt_packet(roll: float, pitch: float, yawrate: float, thrust: float) -> CRTPPacket:
     """The 14-byte RPYT setpoint; ValueError for a value that is not a finite number."""
-    values = []
-    for name, value in (("roll", roll), ("pitch", pitch), ("yaw rate", yawrate), ("thrust", thrust)):
-        try:
-            number = float(value) if isinstance(value, numbers.Real) else math.nan
-        except OverflowError:
-            number = math.nan
-        if not math.isfinite(number):
-            raise ValueError("setpoint %s must be a finite number, got %r" % (name, value))
-        values.append(number)
-    roll, pitch, yawrate = (min(max(v, -MAX_RATE_DEG_S), MAX_RATE_DEG_S) for v in values[:3])
-    thrust_u16 = int(min(max(values[3], 0.0), MAX_THRUST))
-    return CRTPPacket(PORT_COMMANDER, 0, struct.pack("<fffH", roll, pitch, yawrate, thrust_u16))
+    kind = type(thrust)
+    if not (type(roll) is float and type(pitch) is float and type(yawrate) is float
+            and roll - roll == 0.0 and pitch - pitch == 0.0 and yawrate - yawrate == 0.0
+            and ((kind is float and thrust - thrust == 0.0) or (kind is int and 0 <= thrust <= MAX_THRUST))):
+        # anything but finite floats and a finite float or in-range int thrust: the general checks,
+        # which name the value
+        roll, pitch, yawrate = _finite("roll", roll), _finite("pitch", pitch), _finite("yaw rate", yawrate)
+        thrust = _finite("thrust", thrust)
+    thrust_u16 = int(0 if thrust < 0 else (MAX_THRUST if thrust > MAX_THRUST else thrust))
+    return CRTPPacket(PORT_COMMANDER, 0, _RPYT.pack(_rate(roll), _rate(pitch), _rate(yawrate), thrust_u16))
 
 
 def stop_packet(protocol_version: int) -> CRTPPacket:

@@ -93,7 +93,8 @@ class FairLock:
     def _grant(self, capped: bool) -> None:
         self._held = True
         self._holder_capped = capped
-        self._granted_at = self._clock()
+        if capped:                      # only a capped turn's length counts towards its share
+            self._granted_at = self._clock()
 
     def capped_share_now(self) -> float:
         """The capped turns' recent share of the dongle's time (0..1, decaying average)."""
@@ -107,6 +108,9 @@ class FairLock:
         with self._mutex:
             if not self._held:
                 raise RuntimeError("release of an unlocked FairLock")
+            if not (self._holder_capped or self._urgent or self._background or self._waiters):
+                self._held = False      # nobody waits and no share to account: no clock reading
+                return
             now = self._clock()
             if self._holder_capped:
                 held = max(0.0, now - self._granted_at)

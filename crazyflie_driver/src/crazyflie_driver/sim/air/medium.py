@@ -223,19 +223,22 @@ class LocalMedium:
                 rssi_dbm = round(model.mean_dbm + (self._rng.gauss(0.0, model.noise_db) if model.noise_db else 0.0))
                 rssi_dbm = min(0.0, max(-127.0, rssi_dbm))
             latency = f.latency_s
-        miss = AirReply(acked=False, retries=arc & 0x0F, power_detector=False, latency_s=latency)
         if broadcast:            # every Crazyflie on this channel and data rate takes it; none acks
             for c in heard:
                 c.handle_broadcast(data)
-            return miss
+            return _miss(arc, latency)
         if cf is None or lost or not cf.radio_on:
-            return miss
+            return _miss(arc, latency)
         cf.rssi_dbm = rssi_dbm
         payload = cf.handle_radio_packet(data, ack_enabled)
         if not ack_enabled or ack_lost:
-            return miss
-        return AirReply(acked=True, payload=payload, retries=0,
-                        power_detector=rssi_dbm > POWER_DETECTOR_DBM, latency_s=latency)
+            return _miss(arc, latency)
+        return AirReply(True, payload, 0, rssi_dbm > POWER_DETECTOR_DBM, False, latency)
+
+
+def _miss(arc: int, latency_s: float) -> AirReply:
+    """No ack: the dongle gave up after its ``arc`` retransmissions."""
+    return AirReply(acked=False, retries=arc & 0x0F, power_detector=False, latency_s=latency_s)
 
 
 def _percent(name: str, value: float) -> float:

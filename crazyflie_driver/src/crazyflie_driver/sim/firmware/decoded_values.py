@@ -19,6 +19,16 @@ import numpy as np
 
 _FIELD_NAMES: Dict[type, Tuple[str, ...]] = {}
 _CHILD: Dict[Tuple[str, Any], str] = {}
+_CHILDREN: Dict[Tuple[str, int], Tuple[str, ...]] = {}
+
+
+def _children(name: str, count: int) -> Tuple[str, ...]:
+    """``name.0`` .. ``name.<count-1>``, built once per pair."""
+    try:
+        return _CHILDREN[(name, count)]
+    except KeyError:
+        names = _CHILDREN[(name, count)] = tuple(_child(name, i) for i in range(count))
+        return names
 
 
 def _child(name: str, key: Any) -> str:
@@ -43,7 +53,18 @@ class DecodedValues:
             self._walk(name, value)
 
     def _walk(self, name: str, value: Any) -> None:
-        if isinstance(value, float) or (isinstance(value, numbers.Real) and not isinstance(value, bool)):
+        kind = type(value)
+        if kind is float or kind is int:         # exact types first: a setpoint is a tuple of these
+            self._add(name, float(value))
+        elif kind is tuple or kind is list:
+            add, walk = self._add, self._walk
+            for child, v in zip(_children(name, len(value)), value):
+                kind = type(v)
+                if kind is float or kind is int:
+                    add(child, float(v))
+                else:
+                    walk(child, v)
+        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
             self._add(name, float(value))
         elif isinstance(value, (tuple, list)):
             for i, v in enumerate(value):

@@ -3,7 +3,7 @@
 
 Runs a WorldServer in this process on an ephemeral loopback port (the client talks to it over TCP
 exactly as another process would) and times N null-packet round trips. Prints median and p99.
-Usage: /usr/bin/python3 bench/sim_remote_medium_rtt.py [N]
+Usage: /usr/bin/python3 bench/bench_remote_medium.py [N]
 """
 from __future__ import annotations
 

@@ -5,13 +5,15 @@ Run it next to tools/run_demo.sh (it waits up to 60 s for the launch's master on
 ROS_PORT, default 11411, records /tf and both Crazyflies' goal topics until the launch ends,
 then prints per vehicle and goal change, over the 3 s after the goal changed (before landing):
 the peak after a climb, the low after a descent, the height range during a horizontal move):
-  /usr/bin/python3 bench/main_job_heights.py & tools/run_demo.sh
+  /usr/bin/python3 bench/bench_main_job_heights.py & tools/run_demo.sh
 """
 from __future__ import annotations
 
 import os
 import sys
 import time
+
+import bench_support  # noqa: F401  (the sources on the path, as for every bench)
 
 VEHICLES = (1, 2)
 WINDOW = 3.0   # s after a goal change
@@ -31,7 +33,7 @@ def main() -> int:
     from geometry_msgs.msg import PoseStamped
     from tf2_msgs.msg import TFMessage
 
-    rospy.init_node("main_job_heights", anonymous=True, disable_signals=True)
+    rospy.init_node("bench_main_job_heights", anonymous=True, disable_signals=True)
     rows = {k: [] for k in VEHICLES}
     goals = {k: None for k in VEHICLES}
     frames = {"vicon/crazyflie%d/crazyflie%d" % (k, k): k for k in VEHICLES}
