@@ -58,7 +58,7 @@ README_TABLE = "README table:"
 def previous_table(path: str) -> Tuple[List[str], Dict[str, Tuple[List[str], str]]]:
     """An earlier table file's head lines and its rows by key: (detail lines, README line); empty if none.
 
-    Rows are found by their title and path, as :func:``table`` and :func:``markdown`` write them."""
+    Rows are found by their title and path, as :func:`table` and :func:`markdown` write them."""
     try:
         with open(path) as f:
             text = f.read()
