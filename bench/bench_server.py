@@ -7,7 +7,7 @@ receives when cmd_vel arrives at 100 Hz per Crazyflie, and the cmd_vel-to-radio 
 moment cmd_vel is handed to the worker until the setpoint's radio round trip is acked; median and
 p99). Also the IMU messages per second each Crazyflie delivers with logging on.
 
-Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.World stepping
+Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.world.World stepping
 in real time, sim.air.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
     /usr/bin/python3 bench/bench_server.py [--seconds 3] [--out FILE]
 """
