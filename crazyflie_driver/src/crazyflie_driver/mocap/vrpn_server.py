@@ -55,6 +55,8 @@ MAX_CLIENT_BACKLOG_BYTES = 1 << 20
 #: Kernel send buffer of each client socket (bytes; ~15 frames of 49 trackers): what a client has not
 #: taken waits in its backlog, where its age is known, rather than unseen in an ever-growing kernel buffer.
 CLIENT_SEND_BUFFER_BYTES = 64 * 1024
+#: Stamps of streamed frames a server keeps (``streamed``; 100 s at 100 Hz).
+STREAMED_KEPT = 10000
 #: How often a client's reader thread looks up when nothing happens (s).
 _PEER_POLL_S = 0.2
 
@@ -134,6 +136,9 @@ class VrpnTestServer:
         self._threads: List[threading.Thread] = []
         self._seq = 0
         self.poses_sent = 0             # Pos_Quat messages written (all clients)
+        self.streamed: Deque[Tuple[int, int]] = deque(maxlen=STREAMED_KEPT)
+        """(sec, usec) stamp of each frame the stream sent to its clients, newest last (what a test
+        compares a client's frames with)."""
         self.accepted = 0               # connections that completed the handshake
         self.rejected_cookies = 0
         self.slow_clients = 0           # disconnected for not reading (MAX_CLIENT_LAG_S)
@@ -451,10 +456,12 @@ class VrpnTestServer:
             next_t += period
             if next_t < now - 1.0:             # fell far behind: do not burst to catch up
                 next_t = now + period
-            data, n = self.frame(time.time())
+            t = time.time()
+            data, n = self.frame(t)
             if data and self.client_count():
                 self._broadcast(data)
                 self.poses_sent += n * self.client_count()
+                self.streamed.append(vp.split_time(t))
 
 
 # -- standalone fake mocap ----------------------------------------------------------------------

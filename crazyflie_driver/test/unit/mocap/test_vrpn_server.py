@@ -69,7 +69,7 @@ def test_a_client_slow_for_a_moment_gets_its_whole_stream_intact():
             assert wait_until(lambda: server.client_count() == 1, 3.0)
             time.sleep(MAX_CLIENT_LAG_S / 2)        # the pause under test, not a wait for a condition
             stamps = []
-            session = VrpnSession(on_pose=lambda r: stamps.append(r.server_sec + 1e-6 * r.server_usec)
+            session = VrpnSession(on_pose=lambda r: stamps.append((r.server_sec, r.server_usec))
                                   if r.tracker == "cf0" else None)
             s.settimeout(1.0)
             data = b""
@@ -82,4 +82,9 @@ def test_a_client_slow_for_a_moment_gets_its_whole_stream_intact():
             s.close()
     assert server.slow_clients == 0
     assert session.stats.malformed == 0 and session.stats.undescribed == 0
-    assert len(stamps) >= 100 and max(b - a for a, b in zip(stamps, stamps[1:])) < 0.05
+    # every frame the server streamed from the first one the client got on, none missing, in order
+    # (the server's stream thread may itself be late on a busy machine: its own stamps are the measure)
+    streamed = list(server.streamed)
+    assert len(stamps) >= 100 and stamps[0] in streamed
+    first = streamed.index(stamps[0])
+    assert stamps == streamed[first:first + len(stamps)]
