@@ -2,10 +2,10 @@
 
 Adds every Crazyflie of the swarm file at once, writes their firmware parameters, and serves at the
 root namespace, as Crazyswarm does: ``/takeoff``, ``/land``, ``/go_to``, ``/start_trajectory``,
-``/stop`` (broadcasts with group masks, ``server.swarm_commands``), ``/emergency`` (broadcast and
+``/stop`` (broadcasts with group masks, ``server.swarm.commands``), ``/emergency`` (broadcast and
 unicast e-stop to all) and ``/update_params``. Streams motion capture (VRPN, tf or PoseStamped
-topics) to the onboard estimators in packed broadcasts (``server.mocap_stream``), lands a Crazyflie
-whose pose goes stale or whose link is lost (``server.swarm_watch``), and reports both in the log
+topics) to the onboard estimators in packed broadcasts (``server.swarm.mocap_stream``), lands a Crazyflie
+whose pose goes stale or whose link is lost (``server.swarm.watch``), and reports both in the log
 and on ``/diagnostics``.
 """
 from __future__ import annotations
@@ -29,15 +29,16 @@ from crazyflie_driver.errors import CommandValueError, CrazyflieError
 from crazyflie_driver.nodes import swarm_mocap_sources
 from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
 from crazyflie_driver.radio.crazyradio import list_radios
-from crazyflie_driver.server.mocap_stream import MocapStream
-from crazyflie_driver.server import estimator_placement, radio_budget
+from crazyflie_driver.server.swarm.mocap_stream import MocapStream
+from crazyflie_driver.server import radio_budget
+from crazyflie_driver.server.swarm import estimator_placement
 from crazyflie_driver.server.onboard_pose import pose_block
-from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, update_params
-from crazyflie_driver.server.swarm_config import SwarmConfig, SwarmCrazyflie, load_swarm_file
-from crazyflie_driver.server.swarm_heartbeat import Heartbeat
-from crazyflie_driver.server.swarm_options import SwarmOptions, options_from_params
-from crazyflie_driver.server.swarm_watch import SwarmWatch
+from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.commands import SwarmCommands, SwarmMember, update_params
+from crazyflie_driver.server.swarm.config import SwarmConfig, SwarmCrazyflie, load_swarm_file
+from crazyflie_driver.server.swarm.heartbeat import Heartbeat
+from crazyflie_driver.server.swarm.options import SwarmOptions, options_from_params
+from crazyflie_driver.server.swarm.watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
 from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, StartTrajectory, StartTrajectoryResponse,
                                   Stop, StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
@@ -255,7 +256,7 @@ class RosSwarm:
     def _update_params(self, req) -> None:
         """Each name from /allcfs/<group>/<name> (for every Crazyflie) or else /<tf_prefix>/<group>/<name>, each
         ROS parameter read once: an /allcfs value by one broadcast on every radio, the others by acknowledged
-        unicast, the radios in parallel (``swarm_commands.update_params``); the first-fix writes keep their own
+        unicast, the radios in parallel (``swarm.commands.update_params``); the first-fix writes keep their own
         pool. While first fixes are still to come, it waits for them first (up to the takeoff's
         ``PLACEMENT_WAIT_S``): every Crazyflie answers each write, and a placement's request would wait behind
         those answers in its transmit queue (bench/results/swarm_params.txt: placement 2.6 s -> 5.0 s)."""

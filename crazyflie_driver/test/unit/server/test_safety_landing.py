@@ -17,8 +17,8 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.onboard_commands import OnboardCommands, known_group_mask
 from crazyflie_driver.server.safety import Action, Reaction, SafetyConfig, SafetyMonitor, checked_landing
 from crazyflie_driver.server.safety_actions import ObservedOnboardCommands
-from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember
+from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.commands import SwarmCommands, SwarmMember
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
