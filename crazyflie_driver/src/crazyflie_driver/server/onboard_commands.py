@@ -23,7 +23,7 @@ import threading
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CrazyflieError, EmergencyActive
 from crazyflie_driver.protocol import high_level, setpoints
 from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.commander import stop_packet
@@ -123,8 +123,8 @@ class OnboardCommands:
         """Raise, before anything is sent, when ``what`` must not go out: after emergency, or when
         ``group_mask`` does not address this Crazyflie."""
         if self._emergency_active():
-            raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
-                                 "is restarted, removed and added again)" % (self.label, what))
+            raise EmergencyActive("%s: %s refused: emergency is active (the Crazyflie stays stopped until it "
+                                  "is restarted, removed and added again)" % (self.label, what))
         if not in_groups(self.group_mask, group_mask):
             raise nobody_addressed(group_mask, "%s is in group mask %d" % (self.label, self.group_mask),
                                    "%s: %s" % (self.label, what))
@@ -188,7 +188,7 @@ class OnboardCommands:
         checked = [make_piece(d, x, y, z, yaw, index=i) for i, (d, x, y, z, yaw) in enumerate(pieces)]
         with self._lock:
             if self._emergency_active():
-                raise CrazyflieError("%s: upload_trajectory refused: emergency is active" % self.label)
+                raise EmergencyActive("%s: upload_trajectory refused: emergency is active" % self.label)
             self.cf.high_level.upload_trajectory(trajectory_id, checked, piece_offset)
 
 
