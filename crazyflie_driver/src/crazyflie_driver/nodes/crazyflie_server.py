@@ -53,10 +53,10 @@ from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
-from crazyflie_driver.server.onboard_commands import OnboardCommands, known_group_mask
+from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 from crazyflie_driver.server.safety import SafetyConfig
-from crazyflie_driver.server.safety_actions import ObservedOnboardCommands
+from crazyflie_driver.server.safety_actions import worker_onboard_commands
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -156,10 +156,7 @@ class RosCrazyflie(WorkerListener):
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
-        self._onboard = RosOnboardCommands(self.ns, config.uri, ObservedOnboardCommands(
-            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri, worker.safety,
-            clock=worker.clock.now, on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent,
-            group_mask=known_group_mask(worker.param_values)))
+        self._onboard = RosOnboardCommands(self.ns, config.uri, worker_onboard_commands(worker, config.uri))
         self.publish_status()
 
     @property

@@ -20,7 +20,7 @@ Where this differs from crazyflie_ros HEAD (see the package README):
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Mapping, MutableMapping, Optional, Sequence
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, EmergencyActive
@@ -53,13 +53,19 @@ class OnboardCommands:
     ``on_pose()``, if given, is called for each external position/pose the Crazyflie acknowledged (for
     ``/diagnostics``);
     ``low_level_sent()``, if given, counts the low-level setpoints the worker has sent (any source):
-    one sent since the last notify-setpoints-stop holds the firmware's priority again; ``group_mask``:
-    the Crazyflie's groups as last read (``hlCommander.groupmask``; 0 after a restart)."""
+    one sent since the last notify-setpoints-stop holds the firmware's priority again; ``params()``, if
+    given, the worker's parameter values as read and written since (a mapping this also writes to): the
+    group mask is their ``hlCommander.groupmask``, so a write by ``update_params`` counts as
+    ``set_group_mask`` does; ``group_mask``: the groups to start with where ``params`` has none (0 after
+    a restart)."""
 
     def __init__(self, cf, stream: Callable[[CRTPPacket], bool], emergency_active: Callable[[], bool],
                  label: str = "", on_pose: Optional[Callable[[], None]] = None,
-                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0) -> None:
+                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0,
+                 params: Optional[Callable[[], MutableMapping[str, Any]]] = None) -> None:
         self.cf = cf
+        own: MutableMapping[str, Any] = {}
+        self._params: Callable[[], MutableMapping[str, Any]] = params if params is not None else (lambda: own)
         self._on_pose = on_pose
         self._low_level_sent = low_level_sent
         self._sent_at_notify: Optional[int] = None
@@ -68,7 +74,18 @@ class OnboardCommands:
         self.label = label or str(getattr(cf, "uri", ""))
         self._lock = threading.Lock()
         self._low_level_active = True    # connect sends zero setpoints: assume low level owns it
-        self.group_mask = group_mask     # as last set by set_group_mask (the firmware starts with 0)
+        if GROUP_MASK_PARAM not in self._params():
+            self.group_mask = group_mask
+
+    @property
+    def group_mask(self) -> int:
+        """The Crazyflie's groups as last set: by ``set_group_mask`` or by a write of ``hlCommander.groupmask``
+        (the firmware's variable behind both), whichever came last."""
+        return known_group_mask(self._params())
+
+    @group_mask.setter
+    def group_mask(self, mask: int) -> None:
+        self._params()[GROUP_MASK_PARAM] = int(mask) & 0xFF
 
     @property
     def low_level_active(self) -> bool:
