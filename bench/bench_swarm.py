@@ -203,7 +203,7 @@ def measure(taps: Taps, names: List[str], ids: Dict[str, int], seconds: float, r
 
 def child(out: str, n: int, seconds: float, toc_cache: str) -> None:
     from crazyflie_demo.swarm_grid import swarm_file_text
-    from crazyflie_driver.server.swarm_config import load_swarm_file
+    from crazyflie_driver.server.swarm.config import load_swarm_file
     work = tempfile.mkdtemp(prefix="cf_swarm_")
     swarm_file = os.path.join(work, "swarm.yaml")
     with open(swarm_file, "w") as f:

@@ -155,7 +155,7 @@ def measure(taps: Taps, names: List[str], result: dict, load: bool) -> None:
 def child(out: str, n: int, load: bool) -> None:
     import os
     from crazyflie_demo.swarm_grid import swarm_file_text
-    from crazyflie_driver.server.swarm_config import load_swarm_file
+    from crazyflie_driver.server.swarm.config import load_swarm_file
     work = tempfile.mkdtemp(prefix="cf_swarm_params_")
     swarm_file = os.path.join(work, "swarm.yaml")
     with open(swarm_file, "w") as f:

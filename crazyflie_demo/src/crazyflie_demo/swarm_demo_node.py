@@ -25,7 +25,7 @@ from crazyflie_demo.swarm_flight import (FORMATION_S, LAND_S, SETTLE_S, TAKEOFF_
 from crazyflie_driver.clock import Clock
 from crazyflie_driver.nodes.ros_clock import ros_clock, topic_clock
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
-from crazyflie_driver.server.swarm_config import load_swarm_file
+from crazyflie_driver.server.swarm.config import load_swarm_file
 
 
 PARALLEL_CALLS = 16

@@ -27,7 +27,7 @@ from crazyflie_demo.swarm_flight import Flight, Phase, plot_flight
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
-from crazyflie_driver.server.swarm_config import load_swarm_file
+from crazyflie_driver.server.swarm.config import load_swarm_file
 
 LANDED_Z_M = 0.05
 START_READ_DELAY_S = 1.0        # world time after an announcement when every Crazyflie has the command

@@ -23,7 +23,7 @@ from typing import Any, Dict, Optional
 import yaml
 
 from crazyflie_driver.errors import CrazyflieError, SwarmConfigError
-from crazyflie_driver.server.swarm_config import parse_swarm
+from crazyflie_driver.server.swarm.config import parse_swarm
 from pycrazyswarm.config import Source
 
 DEFAULT_SIM_ADDRESS = "127.0.0.1:19840"

@@ -12,7 +12,7 @@ import rostest
 from crazyflie_demo.swarm_flight import TAKEOFF_HEIGHT_M
 from crazyflie_demo.swarm_monitor_node import SwarmRecorder
 from crazyflie_driver.nodes.ros_signals import init_node
-from crazyflie_driver.server.swarm_config import load_swarm_file
+from crazyflie_driver.server.swarm.config import load_swarm_file
 
 FLIGHT_TIMEOUT_S = 100.0
 FIGURE8_MEAN_BOUND_M = 0.03      # per Crazyflie, over the figure-8 and its settling second

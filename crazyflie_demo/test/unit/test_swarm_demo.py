@@ -11,7 +11,7 @@ from crazyflie_demo.figure8 import curve, figure8_pieces, position_at, trajector
 from crazyflie_demo.swarm_flight import Flight, Phase, Plan, pyramid_goals
 from crazyflie_demo.swarm_grid import SHIPPED, channel_blocks, grid_positions, swarm_file_text
 from crazyflie_driver.protocol.trajectory import PIECE_BYTES, evaluate, pack_poly4d
-from crazyflie_driver.server.swarm_config import load_swarm_file
+from crazyflie_driver.server.swarm.config import load_swarm_file
 
 CONFIG = pathlib.Path(__file__).resolve().parents[2] / "config"
 TRAJECTORY_MEMORY_BYTES = 4096

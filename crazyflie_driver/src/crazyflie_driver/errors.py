@@ -95,6 +95,11 @@ class FlightRefused(CommandRejected):
     still taken, and the command is once the landing has ended."""
 
 
+class EmergencyActive(CommandRejected):
+    """A command refused by the server, nothing sent, because the Crazyflie is in emergency: its motors
+    are stopped until it is restarted (and removed and added again)."""
+
+
 class SwarmConfigError(CrazyflieError, ValueError):
     """A swarm file that cannot be flown; the message names the file, the line or entry, and the fix."""
 

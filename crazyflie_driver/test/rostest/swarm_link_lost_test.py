@@ -109,11 +109,16 @@ class SwarmLinkLost(unittest.TestCase):
                     return msg.header.stamp.to_sec(), int(values["poses sent"])
         return None
 
+    def latest_poses_sent(self, name):
+        """(stamp s, "poses sent" of ``name``) from the newest /diagnostics message that has it (the topic
+        also carries the server's and the world's own messages), or None."""
+        msg = self.diagnostics.latest_where(lambda m: self.poses_sent(m, name))
+        return self.poses_sent(msg, name) if msg is not None else None
+
     def pose_rate(self, name, seconds):
         """Poses per s the server sent ``name`` over ``seconds`` of /diagnostics stamps (the server's own
         count, over ROS time: world time in simulation, whatever pace the world runs at)."""
-        first = wait_until(lambda: self.diagnostics.latest() is not None
-                           and self.poses_sent(self.diagnostics.latest(), name), 5.0)
+        first = wait_until(lambda: self.latest_poses_sent(name), 5.0)
         self.assertTrue(first, self.diagnostics.latest())
         last = first
         spanned = wait_until(lambda: self._span(name, first, seconds), 30.0, 0.1)
@@ -123,7 +128,7 @@ class SwarmLinkLost(unittest.TestCase):
 
     def _span(self, name, first, seconds):
         """The latest (stamp, count) of ``name`` once it lies ``seconds`` after ``first``, else None."""
-        last = self.poses_sent(self.diagnostics.latest(), name)
+        last = self.latest_poses_sent(name)
         return last if last is not None and last[0] - first[0] >= seconds else None
 
     def test_with_one_ghost_on_radio_0_its_neighbour_keeps_its_poses_and_the_ghost_lands(self):
@@ -137,11 +142,11 @@ class SwarmLinkLost(unittest.TestCase):
         self.world.control(op, **args)
         try:
             worst, t_end = 0.0, rospy.get_time() + GHOST_S          # ROS time: world time in simulation
-            first = self.poses_sent(self.diagnostics.latest(), "cf1")
+            first = self.latest_poses_sent("cf1")
             while rospy.get_time() < t_end:
                 worst = max(worst, self.hover_error("cf1"))
                 time.sleep(0.02)
-            last = self.poses_sent(self.diagnostics.latest(), "cf1")
+            last = self.latest_poses_sent("cf1")
             during = (last[1] - first[1]) / (last[0] - first[0])
             rospy.loginfo("ghost on cf2: cf1 got %.1f poses/s (%.1f before), worst hover error %.3f m", during,
                           before, worst)

@@ -5,6 +5,8 @@ crtp < radio < protocol < server < nodes: a module imports only from its own lay
 server or the nodes; ``radio``, ``protocol``, ``server`` and ``mocap`` never import ``sim``. The
 backend choice (``usb_choice``) is the one bridge from the radio to the simulated air, and only
 entry points (nodes, tools, tests, benchmarks) use it. Only ``nodes`` imports rospy or ROS messages.
+Inside ``server``, swarm mode (``server.swarm``) builds on the per-Crazyflie path (worker, registry,
+safety, onboard commands), which never imports the swarm; every swarm module lives in that package.
 """
 from __future__ import annotations
 
@@ -97,6 +99,25 @@ def test_only_the_backend_choice_and_the_simulators_node_import_sim():
 def test_only_entry_points_choose_the_backend():
     wrong = [(m, n) for m, lm, n, ln in _edges() if ln == "usb_choice" and lm not in {"nodes", "usb_choice"}]
     assert wrong == []
+
+
+def _sublayer(module: str) -> str:
+    """``crazyflie_driver.server.swarm.watch`` -> ``server.swarm``; other modules: their layer."""
+    parts = module.split(".")
+    return "server.swarm" if parts[1:3] == ["server", "swarm"] else _layer(module)
+
+
+def test_the_per_crazyflie_server_never_imports_the_swarm():
+    wrong = [(m, n) for m, lm, n, _ in _edges() if lm == "server" and _sublayer(m) == "server"
+             and _sublayer(n) == "server.swarm"]
+    assert wrong == []
+
+
+def test_every_swarm_module_lives_in_the_swarm_package():
+    flat = sorted(m for m in MODULES if _sublayer(m) == "server" and m.split(".")[-1].startswith(
+        ("swarm_", "mocap_stream", "estimator_placement")))
+    assert flat == []
+    assert (PACKAGE / "server" / "swarm" / "__init__.py").is_file()
 
 
 def test_no_ros_below_the_nodes():

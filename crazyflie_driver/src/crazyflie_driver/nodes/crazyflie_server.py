@@ -53,12 +53,12 @@ from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
-from crazyflie_driver.server.onboard_commands import OnboardCommands, known_group_mask
+from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 from crazyflie_driver.server.safety import SafetyConfig
 from crazyflie_driver.server import power_control
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.server.safety_actions import ObservedOnboardCommands
+from crazyflie_driver.server.safety_actions import worker_onboard_commands
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -164,10 +164,7 @@ class RosCrazyflie(WorkerListener):
                               (power_control.POWER_OFF_SERVICE, worker.power_off),
                               (power_control.POWER_ON_SERVICE, worker.power_on)):
             self._services.append(rospy.Service(name(service), Empty, self._empty_service(service, call)))
-        self._onboard = RosOnboardCommands(self.ns, config.uri, ObservedOnboardCommands(
-            worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, config.uri, worker.safety,
-            clock=worker.clock.now, on_pose=worker.health.pose_sent, low_level_sent=lambda: worker.setpoints_sent,
-            group_mask=known_group_mask(worker.param_values)))
+        self._onboard = RosOnboardCommands(self.ns, config.uri, worker_onboard_commands(worker, config.uri))
         self.publish_status()
 
     @property

@@ -16,7 +16,7 @@ also accepted: ``frame`` is the tf frame the vicon style publishes
 that vehicle's pose under, as a Vicon room whose body is named that way would, e.g. the
 ``frame:=crazyflie1`` of a launch file; also as a YAML string holding that list, or the path of a
 YAML file, which is what ``sim.launch``'s ``vehicles`` argument passes) or ``uri`` + ``name`` for one vehicle;
-or ``swarm_file``, the path of the swarm file crazyflie_server reads (``server.swarm_config``): every
+or ``swarm_file``, the path of the swarm file crazyflie_server reads (``server.swarm.config``): every
 Crazyflie at its ``initialPosition`` on the URI the server derives from its id and channel (one
 dongle per channel), named after its tf_prefix, as the server's motion capture looks for it;
 ``dongles``
@@ -180,7 +180,7 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
 
 def vehicles_from_swarm_file(path: str) -> Tuple[List[VehicleSpec], int]:
     """The vehicles of a swarm file and the dongles they need (``SwarmConfigError`` names the fault)."""
-    from crazyflie_driver.server.swarm_config import load_swarm_file
+    from crazyflie_driver.server.swarm.config import load_swarm_file
 
     config = load_swarm_file(path)
     out = []

@@ -19,7 +19,7 @@ from geometry_msgs.msg import PoseStamped
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.mocap.vrpn_client import PoseReport, VrpnClient, parse_server
-from crazyflie_driver.server.swarm_options import SwarmOptions
+from crazyflie_driver.server.swarm.options import SwarmOptions
 
 OnPose = Callable[..., bool]
 

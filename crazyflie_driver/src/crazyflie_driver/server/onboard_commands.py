@@ -20,10 +20,10 @@ Where this differs from crazyflie_ros HEAD (see the package README):
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Mapping, MutableMapping, Optional, Sequence
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CrazyflieError, EmergencyActive
 from crazyflie_driver.protocol import high_level, setpoints
 from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.commander import stop_packet
@@ -54,13 +54,19 @@ class OnboardCommands:
     ``on_pose()``, if given, is called for each external position/pose the Crazyflie acknowledged (for
     ``/diagnostics``);
     ``low_level_sent()``, if given, counts the low-level setpoints the worker has sent (any source):
-    one sent since the last notify-setpoints-stop holds the firmware's priority again; ``group_mask``:
-    the Crazyflie's groups as last read (``hlCommander.groupmask``; 0 after a restart)."""
+    one sent since the last notify-setpoints-stop holds the firmware's priority again; ``params()``, if
+    given, the worker's parameter values as read and written since (a mapping this also writes to): the
+    group mask is their ``hlCommander.groupmask``, so a write by ``update_params`` counts as
+    ``set_group_mask`` does; ``group_mask``: the groups to start with where ``params`` has none (0 after
+    a restart)."""
 
     def __init__(self, cf, stream: Callable[[Optional[CRTPPacket]], bool], emergency_active: Callable[[], bool],
                  label: str = "", on_pose: Optional[Callable[[], None]] = None,
-                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0) -> None:
+                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0,
+                 params: Optional[Callable[[], MutableMapping[str, Any]]] = None) -> None:
         self.cf = cf
+        own: MutableMapping[str, Any] = {}
+        self._params: Callable[[], MutableMapping[str, Any]] = params if params is not None else (lambda: own)
         self._on_pose = on_pose
         self._low_level_sent = low_level_sent
         self._sent_at_notify: Optional[int] = None
@@ -69,7 +75,18 @@ class OnboardCommands:
         self.label = label or str(getattr(cf, "uri", ""))
         self._lock = threading.Lock()
         self._low_level_active = True    # connect sends zero setpoints: assume low level owns it
-        self.group_mask = group_mask     # as last set by set_group_mask (the firmware starts with 0)
+        if GROUP_MASK_PARAM not in self._params():
+            self.group_mask = group_mask
+
+    @property
+    def group_mask(self) -> int:
+        """The Crazyflie's groups as last set: by ``set_group_mask`` or by a write of ``hlCommander.groupmask``
+        (the firmware's variable behind both), whichever came last."""
+        return known_group_mask(self._params())
+
+    @group_mask.setter
+    def group_mask(self, mask: int) -> None:
+        self._params()[GROUP_MASK_PARAM] = int(mask) & 0xFF
 
     @property
     def low_level_active(self) -> bool:
@@ -124,8 +141,8 @@ class OnboardCommands:
         """Raise, before anything is sent, when ``what`` must not go out: after emergency, or when
         ``group_mask`` does not address this Crazyflie."""
         if self._emergency_active():
-            raise CrazyflieError("%s: %s refused: emergency is active (the Crazyflie stays stopped until a "
-                                 "reboot: %s)" % (self.label, what, power_control.REBOOT_ADVICE))
+            raise EmergencyActive("%s: %s refused: emergency is active (the Crazyflie stays stopped until a "
+                                  "reboot: %s)" % (self.label, what, power_control.REBOOT_ADVICE))
         if not in_groups(self.group_mask, group_mask):
             raise nobody_addressed(group_mask, "%s is in group mask %d" % (self.label, self.group_mask),
                                    "%s: %s" % (self.label, what))
@@ -189,7 +206,7 @@ class OnboardCommands:
         checked = [make_piece(d, x, y, z, yaw, index=i) for i, (d, x, y, z, yaw) in enumerate(pieces)]
         with self._lock:
             if self._emergency_active():
-                raise CrazyflieError("%s: upload_trajectory refused: emergency is active" % self.label)
+                raise EmergencyActive("%s: upload_trajectory refused: emergency is active" % self.label)
             self.cf.high_level.upload_trajectory(trajectory_id, checked, piece_offset)
 
 

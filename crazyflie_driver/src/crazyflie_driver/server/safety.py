@@ -412,7 +412,8 @@ class SafetyMonitor:
     def refusal(self, now: float, what: str) -> Optional[str]:
         """Why the high-level command ``what`` must not go out now, or None. A command that flies
         (``FLYING_COMMANDS``) never cancels a landing under way, nor starts a flight while the server
-        lets the Crazyflie go; land and stop always may (stop is motors off, as emergency)."""
+        lets the Crazyflie go or on a critical battery; land and stop always may (stop is motors off, as
+        emergency)."""
         if what not in FLYING_COMMANDS:
             return None
         with self._lock:
@@ -422,6 +423,10 @@ class SafetyMonitor:
             if self._shutdown:
                 return ("the server is shutting down or letting this Crazyflie go: nothing may send it up again "
                         "without supervision")
+            if self.config.battery and self.battery.level == ERROR:
+                # as for thrust setpoints: no new flight on a battery that made the Crazyflie land
+                return ("battery critical (%.2f V): no %s on this battery; charge or change it, then remove "
+                        "and add the Crazyflie again" % (self.battery.volts, what))
             if self._hl_flying and now < self._land_until:
                 return ("a landing is under way (%.1f s to go) and a %s would cancel it in the air; wait for its "
                         "end, or land again or stop" % (self._land_until - now, what))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Callable, Optional, Tuple
+from typing import Any, Callable, MutableMapping, Optional, Tuple
 
 from crazyflie_driver.crtp.packet import PORT_GENERIC_SETPOINT, CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, FlightRefused
@@ -75,9 +75,10 @@ class ObservedOnboardCommands(OnboardCommands):
 
     def __init__(self, cf, stream, emergency_active, label: str, monitor: SafetyMonitor,
                  clock: Callable[[], float] = time.monotonic, on_pose: Optional[Callable[[], None]] = None,
-                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0) -> None:
+                 low_level_sent: Optional[Callable[[], int]] = None, group_mask: int = 0,
+                 params: Optional[Callable[[], MutableMapping[str, Any]]] = None) -> None:
         super().__init__(cf, stream, emergency_active, label, on_pose=on_pose, low_level_sent=low_level_sent,
-                         group_mask=group_mask)
+                         group_mask=group_mask, params=params)
         self._monitor = monitor
         self._clock = clock
 
@@ -110,3 +111,12 @@ class ObservedOnboardCommands(OnboardCommands):
         asked_at = self._clock()    # the firmware starts the plan later: the monitor never outlasts its landing
         super().land(group_mask, height, duration_s)
         self._monitor.note_high_level(asked_at, "land", duration_s)
+
+
+def worker_onboard_commands(worker: Any, label: str) -> ObservedOnboardCommands:
+    """The HEAD API of a served Crazyflie, wired on its worker: its setpoint stream, emergency state,
+    safety monitor, clock, pose and low-level counts, and its parameter values (so a group mask written
+    by ``update_params`` is the one every group-mask check follows)."""
+    return ObservedOnboardCommands(worker.cf, worker.set_packet_setpoint, lambda: worker.emergency_active, label,
+                                   worker.safety, clock=worker.clock.now, on_pose=worker.health.pose_sent,
+                                   low_level_sent=lambda: worker.setpoints_sent, params=lambda: worker.param_values)

@@ -7,7 +7,7 @@ import pytest
 
 from crazyflie_driver.errors import UnknownName
 from crazyflie_driver.server.param_names import param_values, ros_param_name
-from crazyflie_driver.server.swarm_commands import update_param_values
+from crazyflie_driver.server.swarm.commands import update_param_values
 
 BAD_NAMES = ["ring/eff\x01ect", "ring/effect\x00", "ring/eff ect", "ring/eff.ect", "ring/", "nogroup", "a/b/c", "", 7]
 

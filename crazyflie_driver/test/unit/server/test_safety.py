@@ -125,6 +125,30 @@ def test_battery_warning_then_critical_descends_once_flying(caplog):
     assert m.note_setpoint(t2 + 21.0, 0)
 
 
+def test_no_high_level_flight_after_a_battery_critical_landing():
+    """The high-level path keeps the setpoint path's rule: a critical battery brings the Crazyflie down and
+    no takeoff, go_to or start_trajectory sends it up again (land and stop stay taken)."""
+    m = monitor(protocol=CURRENT_FW)
+    m.note_high_level(0.0, "takeoff", 2.0)
+    assert m.refusal(1.0, "go_to") is None
+    for i in range(25):
+        m.note_battery(3.0 + i * 0.1, 3.25)
+    acts = run(m, 5.5, 25.0)
+    assert acts[0][1].kind == "land" and "battery critical" in m.reason
+    assert m.reaction == Reaction.DOWN and not m.flying
+    for what in ("takeoff", "go_to", "start_trajectory"):
+        why = m.refusal(26.0, what)
+        assert why is not None and "battery critical (3.25 V)" in why, what
+    assert m.refusal(26.0, "land") is None and m.refusal(26.0, "stop") is None
+
+
+def test_a_critical_battery_without_the_battery_reaction_refuses_nothing():
+    m = monitor(SafetyConfig(battery=False), protocol=CURRENT_FW)
+    for i in range(25):
+        m.note_battery(i * 0.1, 3.25)
+    assert m.refusal(3.0, "takeoff") is None
+
+
 # ---------------------------------------------------------------- setpoint silence
 
 def test_silence_on_the_chapter_path_holds_then_descends_then_stops(caplog):

@@ -14,11 +14,12 @@ from crazyflie_driver.protocol.high_level import (CMD_GO_TO_2, CMD_LAND_2, CMD_S
 from crazyflie_driver.protocol.memory import MemoryClient
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.server.onboard_commands import OnboardCommands, known_group_mask
+from crazyflie_driver.server.onboard_commands import GROUP_MASK_PARAM, OnboardCommands, known_group_mask
 from crazyflie_driver.server.safety import Action, Reaction, SafetyConfig, SafetyMonitor, checked_landing
-from crazyflie_driver.server.safety_actions import ObservedOnboardCommands
-from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember
+from crazyflie_driver.server.safety_actions import ObservedOnboardCommands, worker_onboard_commands
+from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.commands import SwarmCommands, SwarmMember
+from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
@@ -234,6 +235,44 @@ def test_per_crazyflie_group_mask_that_does_not_address_it_is_refused_for_every_
     commands, cf, _, _ = observed(group_mask=4)
     commands.takeoff(4, 0.5, 2.0)
     assert cf.link.sent[-1].data[:2] == bytes([7, 4])
+
+
+def served(n: int = 1):
+    """A served Crazyflie's worker (not started) and its HEAD API wired as the server wires them."""
+    fake = FakeCrazyflie("radio://0/80/2M/E7E7E7E70%d" % n)
+    fake.params.values[GROUP_MASK_PARAM] = 0
+    wire = Crazyflie()
+    fake.link, fake.high_level, fake.protocol_version = wire.link, wire.high_level, wire.protocol_version
+    worker = CrazyflieWorker(WorkerConfig(fake.uri, "cf%d" % n, enable_logging=False, enable_parameters=False),
+                             fake, safety=SafetyConfig())
+    return worker, worker_onboard_commands(worker, fake.uri), wire
+
+
+def test_a_group_mask_written_by_update_params_is_the_one_the_per_crazyflie_checks_follow():
+    worker, commands, wire = served()
+    assert worker.update_params({GROUP_MASK_PARAM: 2}) == ([GROUP_MASK_PARAM], [])   # /cf1/update_params
+    assert commands.group_mask == 2
+    with pytest.raises(CommandValueError, match="no Crazyflie is in group mask 1 .*group mask 2"):
+        commands.takeoff(1, 0.5, 2.0)
+    assert wire.link.sent == []
+    commands.takeoff(2, 0.5, 2.0)
+    assert wire.link.sent[-1].data[:2] == bytes([7, 2])
+    # whichever came last counts: set_group_mask, then a write again
+    commands.set_group_mask(4)
+    assert commands.group_mask == 4 and worker.param_values[GROUP_MASK_PARAM] == 4
+    worker.update_params({GROUP_MASK_PARAM: 2})
+    assert commands.group_mask == 2
+
+
+def test_a_group_mask_written_by_update_params_is_the_one_the_swarm_follows():
+    served_ = [served(n) for n in (1, 2, 3)]
+    members = [SwarmMember("cf%d" % n, w.uri, w, c) for n, (w, c, _) in zip((1, 2, 3), served_)]
+    commands = SwarmCommands(lambda: members, broadcaster=None)
+    with pytest.raises(CommandValueError, match="no Crazyflie is in group mask 8"):
+        commands.targets(8)
+    served_[1][0].update_params({GROUP_MASK_PARAM: 8})        # /cf2/update_params after the add
+    assert [m.name for m in commands.targets(8)] == ["cf2"]
+    assert [m.name for m in commands.targets(0)] == ["cf1", "cf2", "cf3"]
 
 
 def test_worker_emergency_clears_what_the_shutdown_reaction_trusts():

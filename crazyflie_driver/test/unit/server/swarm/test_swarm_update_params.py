@@ -12,8 +12,8 @@ from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.radio_lanes import RadioLanes
-from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmMember, update_params
+from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.commands import SwarmMember, update_params
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend

@@ -7,9 +7,9 @@ import textwrap
 import pytest
 
 from crazyflie_driver.errors import SwarmConfigError
-from crazyflie_driver.server.swarm_config import load_swarm_file, parse_swarm
+from crazyflie_driver.server.swarm.config import load_swarm_file, parse_swarm
 
-EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "config", "swarm_example.yaml")
+EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "config", "swarm_example.yaml")
 
 TYPES = """
 crazyflieTypes:

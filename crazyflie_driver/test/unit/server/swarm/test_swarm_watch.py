@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.server.swarm_watch import LANDING, NO_POSE_YET, OK, STALE, SwarmWatch
+from crazyflie_driver.server.swarm.watch import LANDING, NO_POSE_YET, OK, STALE, SwarmWatch
 
 
 def kinds(events):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.errors import SwarmConfigError
-from crazyflie_driver.server.swarm_options import options_from_params
+from crazyflie_driver.server.swarm.options import options_from_params
 
 
 def test_defaults_and_patterns_by_source():

@@ -11,7 +11,7 @@ from typing import Any, Mapping, Optional
 
 from crazyflie_driver.errors import SwarmConfigError
 from crazyflie_driver.radio.broadcast import DEFAULT_REPEAT_INTERVAL_S, DEFAULT_REPEATS
-from crazyflie_driver.server.swarm_watch import DEFAULT_HOLD_S, DEFAULT_STALE_AFTER_S
+from crazyflie_driver.server.swarm.watch import DEFAULT_HOLD_S, DEFAULT_STALE_AFTER_S
 
 MOCAP_SOURCES = ("vrpn", "tf", "topic", "none")
 #: Where each source finds Crazyflie ``{name}`` (its tf_prefix): a VRPN tracker, a tf child frame of
@@ -37,7 +37,7 @@ class SwarmOptions:
     pose_period_ms: Optional[int] = None     # None ("auto"): the radio budget chooses (radio_budget.pose_log_period_ms)
     dongle_wait: float = 30.0
     mocap_rate: float = 100.0       # Hz, the motion capture's frame rate: the most the stream sends
-    emergency_watchdog: bool = True     # broadcast the emergency-stop watchdog keep-alive (swarm_heartbeat)
+    emergency_watchdog: bool = True     # broadcast the emergency-stop watchdog keep-alive (swarm.heartbeat)
 
 
 def _bool(name: str, v: Any) -> bool:

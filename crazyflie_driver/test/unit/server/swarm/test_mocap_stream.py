@@ -8,8 +8,8 @@ import threading
 
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.server.mocap_stream import MocapStream, usable_quaternion
-from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.mocap_stream import MocapStream, usable_quaternion
+from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 
@@ -150,7 +150,7 @@ def test_one_out_of_range_pose_never_costs_its_radio_neighbours_their_poses(capl
     """cf1 reports a ghost 100 m away every frame (beyond the packed format's +-32.767 m): cf2 and cf3 on
     the same radio still get a pose in every burst, cf1's ghost never goes out, the swarm watch sees only
     the poses that went out (cf1 goes stale and is landed), and the log names cf1 and the value once."""
-    from crazyflie_driver.server.swarm_watch import SwarmWatch
+    from crazyflie_driver.server.swarm.watch import SwarmWatch
 
     bc, medium = rig()
     now = [0.0]
@@ -206,7 +206,7 @@ def test_a_ghost_within_the_packed_range_is_refused_as_a_jump_and_a_real_move_is
     """Noise of 100 m puts some ghosts inside +-32.767 m: each is refused by the speed a jump from the
     Crazyflie's last accepted pose would need, so its estimator never sees one; a move at flying speed,
     or a body carried elsewhere while hidden for long enough, is taken."""
-    from crazyflie_driver.server.mocap_stream import MAX_POSE_SPEED_M_S, POSE_JUMP_MARGIN_M
+    from crazyflie_driver.server.swarm.mocap_stream import MAX_POSE_SPEED_M_S, POSE_JUMP_MARGIN_M
 
     bc, medium = rig()
     now = [0.0]

@@ -10,8 +10,8 @@ import pytest
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.server.swarm_broadcast import SwarmBroadcaster
-from crazyflie_driver.server.swarm_commands import SwarmCommands, SwarmMember, in_groups, update_param_values
+from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.commands import SwarmCommands, SwarmMember, in_groups, update_param_values
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 

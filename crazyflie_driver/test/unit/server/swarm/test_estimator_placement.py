@@ -4,7 +4,7 @@ from __future__ import annotations
 import threading
 import time
 
-from crazyflie_driver.server.estimator_placement import EstimatorPlacement, refusal
+from crazyflie_driver.server.swarm.estimator_placement import EstimatorPlacement, refusal
 
 
 def test_missing_names_those_not_placed_in_their_order():
