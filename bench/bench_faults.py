@@ -44,10 +44,11 @@ try:
 except ImportError:
     sys.exit("bench_faults: the catkin workspace is not on the path: source tools/env.sh first")
 
-import bench_support as bs  # noqa: E402  (after the workspace check: it names the fix)
 from fault_table.harness import Bench, Row  # noqa: E402
 from fault_table.report import RUN_FIRST, table, write  # noqa: E402
 from fault_table.rows import rows  # noqa: E402
+
+import bench_support as bs  # noqa: E402  (after the workspace check: it names the fix)
 
 
 def main() -> int:

@@ -36,7 +36,6 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 import bench_support as bs  # noqa: E402
-
 from crazyflie_controller.position_controller import ControllerConfig, PositionController, State  # noqa: E402
 
 X, Y, Z, YAW = bs.chapter_gains()   # config/crazyflie2.yaml, as the node loads it

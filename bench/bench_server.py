@@ -20,13 +20,13 @@ import time
 
 import bench_support as bs
 from bench_support import percentile
-from crazyflie_driver.protocol.crazyflie import Crazyflie                     # noqa: E402
-from crazyflie_driver.radio.shared_radio import RadioManager                       # noqa: E402
-from crazyflie_driver.server.registry import CrazyflieRegistry              # noqa: E402
-from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend             # noqa: E402
-from crazyflie_driver.sim.air.server import WorldServer                  # noqa: E402
-from crazyflie_driver.sim.world.world import World                         # noqa: E402
-from crazyflie_driver.server.worker import WorkerConfig, WorkerListener     # noqa: E402
+from crazyflie_driver.protocol.crazyflie import Crazyflie  # noqa: E402
+from crazyflie_driver.radio.shared_radio import RadioManager  # noqa: E402
+from crazyflie_driver.server.registry import CrazyflieRegistry  # noqa: E402
+from crazyflie_driver.server.worker import WorkerConfig, WorkerListener  # noqa: E402
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
+from crazyflie_driver.sim.air.server import WorldServer  # noqa: E402
+from crazyflie_driver.sim.world.world import World  # noqa: E402
 
 CMD_RATE_HZ = 100.0
 

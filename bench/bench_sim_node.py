@@ -26,6 +26,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
+
 ROOT = os.path.join(HERE, "..")
 
 MASTER_PORT = 11611

@@ -37,7 +37,6 @@ for _support in (TEST_SUPPORT, os.path.join(REPO, "crazyflie_controller", "test"
 from support.ports import free_port  # noqa: E402,F401  (one home for tests and benches; benches take it from here)
 from support.served_world import served_world  # noqa: E402,F401  (likewise)
 
-
 # --- the chapter's controller gains ---------------------------------------------------------------
 CONTROLLER_CONFIG = os.path.join(REPO, "crazyflie_controller", "config", "crazyflie2.yaml")
 
@@ -46,6 +45,7 @@ def chapter_gains() -> tuple:
     """(X, Y, Z, Yaw) ``PidGains`` of crazyflie_controller/config/crazyflie2.yaml: read from the file the
     controller node loads, so a figure is never measured with gains that drifted from the ones users fly."""
     import yaml
+
     from crazyflie_controller.pid import PidGains
     with open(CONTROLLER_CONFIG) as f:
         pids = yaml.safe_load(f)["PIDs"]

@@ -165,8 +165,9 @@ def radio_load(air, t0: float, t1: float) -> Dict[int, Dict[str, float]]:
 
 
 def server_pid() -> int:
-    import rosgraph
     import xmlrpc.client
+
+    import rosgraph
     master = rosgraph.Master("/bench_swarm")
     uri = master.lookupNode("/crazyflie_server")
     return int(xmlrpc.client.ServerProxy(uri).getPid("/bench_swarm")[2])

@@ -35,8 +35,9 @@ import threading
 import time
 from typing import Dict, List, Tuple
 
-import bench_support as bs
 from bench_swarm import launch_text
+
+import bench_support as bs
 
 PORT_PARAM = 2
 CHANNEL_WRITE = 2
@@ -81,6 +82,7 @@ def service_load(stop: threading.Event, counts: Dict[str, int]) -> None:
     """go_to back and forth and a refused start_trajectory, until ``stop``."""
     import rospy
     from geometry_msgs.msg import Point
+
     from crazyflie_driver.srv import GoTo, StartTrajectory
     go_to = rospy.ServiceProxy("/go_to", GoTo)
     start = rospy.ServiceProxy("/start_trajectory", StartTrajectory)
@@ -100,6 +102,7 @@ def measure(taps: Taps, names: List[str], result: dict, load: bool) -> None:
     import rosgraph
     import rospy
     from rosgraph_msgs.msg import Log
+
     from crazyflie_driver.srv import UpdateParams
     bs.wait_for_ros()
     placed: Dict[str, float] = {}
@@ -154,6 +157,7 @@ def measure(taps: Taps, names: List[str], result: dict, load: bool) -> None:
 
 def child(out: str, n: int, load: bool) -> None:
     import os
+
     from crazyflie_demo.swarm_grid import swarm_file_text
     from crazyflie_driver.server.swarm.config import load_swarm_file
     work = tempfile.mkdtemp(prefix="cf_swarm_params_")

@@ -128,6 +128,7 @@ def fly(n: int, seconds: float, sim_address: str, work: str) -> List[str]:  # no
         time.sleep(0.2)
     import rospy
     from geometry_msgs.msg import Point
+
     from crazyflie_driver.srv import GoTo, Land, StartTrajectory, Takeoff, UpdateParams
     while not rospy.has_param("/use_sim_time") and time.monotonic() < deadline:
         time.sleep(0.2)

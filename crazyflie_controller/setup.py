@@ -1,4 +1,4 @@
-from setuptools import setup
 from catkin_pkg.python_setup import generate_distutils_setup
+from setuptools import setup
 
 setup(**generate_distutils_setup(packages=['crazyflie_controller'], package_dir={'': 'src'}))

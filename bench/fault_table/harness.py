@@ -148,8 +148,9 @@ def fault(words: str) -> Any:
 
 def node_pid(node: str) -> int:
     """The process id of a ROS node, asked through its own XML-RPC API."""
-    import rosgraph
     import xmlrpc.client
+
+    import rosgraph
     uri = rosgraph.Master("/bench_faults").lookupNode(node)
     code, message, pid = xmlrpc.client.ServerProxy(uri).getPid("/bench_faults")
     if code != 1:

@@ -50,6 +50,7 @@ GO_TO_PERIOD_S = 0.1     # another client's go_to while the server lands the Cra
 
 def go_to_request(goal: Tuple[float, float, float], group_mask: int = 0):
     import rospy
+
     from crazyflie_driver.srv import GoTo
     req = GoTo._request_class(groupMask=group_mask, relative=False, yaw=0.0, duration=rospy.Duration(1.0))
     req.goal.x, req.goal.y, req.goal.z = goal

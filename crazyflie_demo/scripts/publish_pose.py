@@ -1,3 +1,4 @@
 #!/usr/bin/env python3
 from crazyflie_demo.publish_pose_node import main
+
 main()

@@ -34,8 +34,8 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from std_msgs.msg import String
-from tf2_msgs.msg import TFMessage
 from std_srvs.srv import Empty, EmptyResponse
+from tf2_msgs.msg import TFMessage
 
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 

@@ -12,9 +12,8 @@ import math
 import random
 from collections import deque
 
+from crazyflie_controller.position_controller import Command, PoseSample, PositionController
 from crazyflie_driver.server.setpoint import setpoint_from_twist
-
-from crazyflie_controller.position_controller import Command, PositionController, PoseSample
 
 G = 9.81
 

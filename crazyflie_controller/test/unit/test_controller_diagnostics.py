@@ -1,8 +1,15 @@
 """The controller's /diagnostics entry: state and safety levels, pose age, thrust saturation on a flight."""
 from test_position_controller import DT, airborne, fly_takeoff, make, pose
 
-from crazyflie_controller.diagnostics import (ERROR, OK, SATURATION_WARN, WARN, SaturationWindow, controller_entry,
-                                              thrust_saturated)
+from crazyflie_controller.diagnostics import (
+    ERROR,
+    OK,
+    SATURATION_WARN,
+    WARN,
+    SaturationWindow,
+    controller_entry,
+    thrust_saturated,
+)
 from crazyflie_controller.position_controller import Safety, State
 
 

@@ -1,7 +1,7 @@
 """After the server's emergency stop the controller idles, says so, and refuses to take off until re-added."""
 from test_position_controller import DT, airborne, make, pose
 
-from crazyflie_controller.position_controller import Safety, State, ZERO
+from crazyflie_controller.position_controller import ZERO, Safety, State
 
 
 def test_emergency_in_flight_is_never_automatic_ok():

@@ -8,9 +8,17 @@ import pytest
 
 from controller_support.quad_model import Flight, QuadModel, hover_command
 from crazyflie_controller.pid import PidGains
-from crazyflie_controller.position_controller import (Command, ControllerConfig, PositionController, PoseSample,
-                                                      Safety, State, rotate_to_body, wrap_angle,
-                                                      yaw_from_quaternion)
+from crazyflie_controller.position_controller import (
+    Command,
+    ControllerConfig,
+    PoseSample,
+    PositionController,
+    Safety,
+    State,
+    rotate_to_body,
+    wrap_angle,
+    yaw_from_quaternion,
+)
 
 X = PidGains(40, 20, 2, -10, 10, -0.1, 0.1)
 Y = PidGains(-40, -20, -2, -10, 10, -0.1, 0.1)

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from crazyflie_controller.pid import PidGains
-from crazyflie_controller.position_controller import (Command, ControllerConfig, PositionController, State)
+from crazyflie_controller.position_controller import Command, ControllerConfig, PositionController, State
 
 pytest.importorskip("crazyflie_driver.sim.world.world")
 from controller_support import world_flight  # noqa: E402

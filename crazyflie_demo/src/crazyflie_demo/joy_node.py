@@ -15,7 +15,7 @@ import logging
 import rospy
 from sensor_msgs.msg import Joy
 
-from crazyflie_demo.joystick import Joystick, JoyState
+from crazyflie_demo.joystick import JoyState, Joystick
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
 
 DEFAULT_AUTOREPEAT_HZ = 20.0   # well inside the firmware's 2 s watchdog (and its 0.5 s level-off)

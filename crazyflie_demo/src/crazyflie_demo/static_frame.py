@@ -51,6 +51,7 @@ def main() -> None:
     import rospy
     import tf2_ros
     from geometry_msgs.msg import TransformStamped
+
     from crazyflie_driver.nodes.ros_signals import init_node
 
     argv = rospy.myargv(sys.argv)[1:]

@@ -20,13 +20,20 @@ import rospy
 from std_msgs.msg import String
 
 from crazyflie_demo.figure8 import figure8_pieces, trajectory_duration
-from crazyflie_demo.swarm_flight import (FORMATION_S, LAND_S, SETTLE_S, TAKEOFF_HEIGHT_M, TAKEOFF_S, TRAJECTORY_ID,
-                                         Phase, pyramid_goals)
+from crazyflie_demo.swarm_flight import (
+    FORMATION_S,
+    LAND_S,
+    SETTLE_S,
+    TAKEOFF_HEIGHT_M,
+    TAKEOFF_S,
+    TRAJECTORY_ID,
+    Phase,
+    pyramid_goals,
+)
 from crazyflie_driver.clock import Clock
 from crazyflie_driver.nodes.ros_clock import ros_clock, topic_clock
 from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 from crazyflie_driver.server.swarm.config import load_swarm_file
-
 
 PARALLEL_CALLS = 16
 

@@ -60,6 +60,7 @@ class Demo:
     def run(self) -> bool:
         """Fly until shut down; True once every waypoint was reached (the node keeps holding the last)."""
         import rospy
+
         from crazyflie_driver.nodes.ros_signals import init_node
         if not rospy.core.is_initialized():
             init_node(NODE_NAME, anonymous=True)
@@ -76,6 +77,7 @@ def _lookup(buffer, world: str, frame: str) -> Optional[Tuple[Tuple[float, float
     """(position, yaw in degrees, the pose's stamp) of ``frame`` in ``world``, or None when unknown or too old."""
     import rospy
     import tf2_ros
+
     from crazyflie_demo.rosutil import quaternion_to_yaw
     try:
         t = buffer.lookup_transform(world, frame, rospy.Time(0), rospy.Duration(0.05))
@@ -93,6 +95,7 @@ def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land
     from geometry_msgs.msg import PointStamped, PoseStamped
     from std_msgs.msg import Bool, Int32
     from std_srvs.srv import Empty
+
     from crazyflie_demo.rosutil import make_goal, say_launch_note, take_off_when_ready, wait_for_service
     from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
 
@@ -150,6 +153,7 @@ def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land
 def main() -> None:
     """scripts/demo.py run on its own: the waypoints come from the private parameter ~waypoints."""
     import rospy
+
     from crazyflie_driver.nodes.ros_signals import init_node
     init_node(NODE_NAME, anonymous=True)
     try:

@@ -15,7 +15,8 @@ import numbers
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Protocol, Sequence, Tuple
 
 from crazyflie_driver.errors import CommandValueError, NotSupported
-from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask
+from crazyflie_driver.protocol.checks import finite
+from crazyflie_driver.protocol.checks import group_mask as checked_group_mask
 from crazyflie_driver.protocol.trajectory import Piece, check_id
 
 Vec3 = Tuple[float, float, float]

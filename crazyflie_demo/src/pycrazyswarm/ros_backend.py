@@ -20,11 +20,20 @@ from std_msgs.msg import Empty as EmptyMsg
 from std_srvs.srv import Empty
 
 from crazyflie_driver.errors import CommandRejected, CrazyflieError
-from crazyflie_driver.nodes import ros_signals
 from crazyflie_driver.msg import FullState, Position, TrajectoryPolynomialPiece, VelocityWorld
+from crazyflie_driver.nodes import ros_signals
 from crazyflie_driver.protocol.trajectory import Piece
-from crazyflie_driver.srv import (GoTo, Land, NotifySetpointsStop, SetGroupMask, StartTrajectory, Stop, Takeoff,
-                                  UpdateParams, UploadTrajectory)
+from crazyflie_driver.srv import (
+    GoTo,
+    Land,
+    NotifySetpointsStop,
+    SetGroupMask,
+    StartTrajectory,
+    Stop,
+    Takeoff,
+    UpdateParams,
+    UploadTrajectory,
+)
 
 Vec3 = Tuple[float, float, float]
 #: Wall seconds to wait for the swarm server's services before saying what is missing.

@@ -25,6 +25,7 @@ from typing import Any, Dict, List, Tuple
 
 import rospy
 import rostest
+
 from crazyflie_driver.msg import GenericLogData
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package

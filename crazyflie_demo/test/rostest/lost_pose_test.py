@@ -5,8 +5,8 @@ take its safe action, visible on its state topic, and the vehicle must come down
 was, not fly away, and end with its motors stopped. Judged by the world's true state."""
 from __future__ import annotations
 
-import os
 import math
+import os
 import sys
 import threading
 import time

@@ -25,6 +25,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.fake_joystick import FakeJoystick
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.flight_support import WorldProbe, distance, inbound_connected, wait_until  # noqa: E402
 

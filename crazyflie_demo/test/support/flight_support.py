@@ -33,6 +33,7 @@ def inbound_connected(node: str, topic: str, caller: str = "/flight_support") ->
     subscriber whose connection is still being set up; tests wait for this before triggering it.
     """
     from xmlrpc.client import ServerProxy
+
     import rosgraph
     try:
         uri = rosgraph.Master(caller).lookupNode(node)

@@ -10,9 +10,20 @@ import time
 import pytest
 
 from crazyflie_demo.fake_joystick import FakeJoystick
-from crazyflie_demo.joystick import (EVENT_SIZE, JS_EVENT_AXIS, JS_EVENT_BUTTON, JS_EVENT_INIT,
-                                     Joystick, JoystickModel, JsEvent, clamp_deadzone,
-                                     open_failure_message, pack_event, parse_events, scale_axis)
+from crazyflie_demo.joystick import (
+    EVENT_SIZE,
+    JS_EVENT_AXIS,
+    JS_EVENT_BUTTON,
+    JS_EVENT_INIT,
+    Joystick,
+    JoystickModel,
+    JsEvent,
+    clamp_deadzone,
+    open_failure_message,
+    pack_event,
+    parse_events,
+    scale_axis,
+)
 
 
 def poll_until(js: Joystick, predicate, timeout: float = 2.0):

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from crazyflie_driver.errors import CommandValueError, NotSupported, SwarmConfigError, TrajectoryError
+from crazyflie_driver.server.swarm.config import parse_swarm
 from pycrazyswarm import args as arguments
 from pycrazyswarm import config
 from pycrazyswarm.crazyflie import Crazyflie, CrazyflieServer, TimeHelper
 from pycrazyswarm.sim_world import swarm_file_text
-from crazyflie_driver.server.swarm.config import parse_swarm
 from uav_trajectory.examples import figure8
 
 YAML = """

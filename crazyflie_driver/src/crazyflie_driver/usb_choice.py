@@ -46,9 +46,9 @@ def get_backend():
 
 def _sim_backend(address: str):
     # Imported here: a process flying real hardware never loads the simulator.
-    from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address
     from crazyflie_driver.sim.air.dongle_timing import DongleClock
     from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+    from crazyflie_driver.sim.air.medium import RemoteMedium, parse_address
     try:
         host, port = parse_address(address)
     except ValueError as exc:

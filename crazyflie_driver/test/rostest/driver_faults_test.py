@@ -16,8 +16,7 @@ from crazyflie_driver.msg import LogBlock
 from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest, UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (  # noqa: E402
-    RosoutRecorder, TopicRecorder, rates_per_world_second, start_test_node, wait_until)
+from support.rostest_support import RosoutRecorder, TopicRecorder, rates_per_world_second, start_test_node, wait_until  # noqa: E402
 
 NAMES = ("crazyflie1", "crazyflie2", "crazyflie3")
 

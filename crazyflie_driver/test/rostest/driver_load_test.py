@@ -17,8 +17,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (TopicRecorder, rates_per_world_second, start_test_node,  # noqa: E402
-                                     wait_served, wait_until)
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_served, wait_until  # noqa: E402
 
 NAMES = ["cf%d" % i for i in range(1, 13)]
 

@@ -14,8 +14,7 @@ from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Imu
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (TopicRecorder, rates_per_world_second, start_test_node,  # noqa: E402
-                                     wait_connected, wait_until)
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_connected, wait_until  # noqa: E402
 
 CRAZYFLIES = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702",
               "crazyflie3": "radio://1/90/2M/E7E7E7E703"}

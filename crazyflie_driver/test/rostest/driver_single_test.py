@@ -19,8 +19,7 @@ from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import UpdateParams
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (TopicRecorder, rates_per_world_second, start_test_node, wait_until,  # noqa: E402
-                                     world_window)
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until, world_window  # noqa: E402
 
 NS = "/crazyflie1"
 

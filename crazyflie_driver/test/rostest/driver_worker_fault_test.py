@@ -16,8 +16,14 @@ from crazyflie_driver.nodes.crazyflie_server import start_server
 from crazyflie_driver.srv import AddCrazyflieRequest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (Repeating, TopicRecorder, add_crazyflies, service_registered,  # noqa: E402
-                                     start_test_node, wait_until)
+from support.rostest_support import (  # noqa: E402
+    Repeating,
+    TopicRecorder,
+    add_crazyflies,
+    service_registered,
+    start_test_node,
+    wait_until,
+)
 
 URI = "radio://0/80/2M/E7E7E7E701"
 THRUST = 20000.0        # below hover: the vehicle stays on the floor

@@ -29,14 +29,34 @@ from std_msgs.msg import Empty as EmptyMsg
 from crazyflie_driver.crtp.ctypes import ctype
 from crazyflie_driver.crtp.firmware_limits import MAX_ANGLE_DEG, MAX_RATE_DEG_S, MAX_THRUST
 from crazyflie_driver.msg import FullState, Hover, Position, TrajectoryPolynomialPiece, VelocityWorld
-from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieRequest, GoTo, GoToRequest, Land, LandRequest,
-                                  RemoveCrazyflie, SetGroupMask, StartTrajectory, Stop, Takeoff, TakeoffRequest,
-                                  UpdateParams, UploadTrajectory)
 from crazyflie_driver.sim.world_clock import WorldClock
+from crazyflie_driver.srv import (
+    AddCrazyflie,
+    AddCrazyflieRequest,
+    GoTo,
+    GoToRequest,
+    Land,
+    LandRequest,
+    RemoveCrazyflie,
+    SetGroupMask,
+    StartTrajectory,
+    Stop,
+    Takeoff,
+    TakeoffRequest,
+    UpdateParams,
+    UploadTrajectory,
+)
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (RosoutRecorder, TopicRecorder, add_crazyflies, registered_services,  # noqa: E402
-                                     start_test_node, wait_connected, wait_until)
+from support.rostest_support import (  # noqa: E402
+    RosoutRecorder,
+    TopicRecorder,
+    add_crazyflies,
+    registered_services,
+    start_test_node,
+    wait_connected,
+    wait_until,
+)
 
 SEED = 16
 URI = "radio://0/80/2M/E7E7E7E701"

@@ -22,11 +22,9 @@ from std_msgs.msg import Float32
 from std_srvs.srv import Empty
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (Repeating, TopicRecorder, start_test_node, wait_connected,  # noqa: E402
-                                     wait_until)
-
 from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
 from crazyflie_driver.srv import Arm, Land, Stop, Takeoff, UpdateParams  # noqa: E402
+from support.rostest_support import Repeating, TopicRecorder, start_test_node, wait_connected, wait_until  # noqa: E402
 
 URIS = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702"}
 PARAM = "ring.headlightEnable"

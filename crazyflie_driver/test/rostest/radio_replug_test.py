@@ -26,9 +26,8 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, start_test_node, wait_until  # noqa: E402
-
 from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
+from support.rostest_support import RosoutRecorder, TopicRecorder, start_test_node, wait_until  # noqa: E402
 
 URI = "radio://0/80/2M/E7E7E7E701"
 THRUST = 42000            # counts: climbs (a hover needs about 36 300)

@@ -14,8 +14,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from tf2_msgs.msg import TFMessage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import wait_until, world, world_window  # noqa: E402
 from crazyflie_driver.mocap.vrpn_client import VrpnClient  # noqa: E402
+from support.rostest_support import wait_until, world, world_window  # noqa: E402
 
 NAMES = ("cf1", "cf2", "cf3")
 CHILDREN = tuple("vicon/%s/%s" % (n, n) for n in NAMES) + NAMES

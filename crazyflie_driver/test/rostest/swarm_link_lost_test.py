@@ -20,7 +20,6 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 from crazyflie_driver.sim.air.faults import parse_command
-
 from crazyflie_driver.srv import Takeoff
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package

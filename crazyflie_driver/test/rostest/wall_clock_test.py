@@ -18,10 +18,9 @@ import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import start_test_node, wait_until  # noqa: E402
-
 from crazyflie_driver.clock import WALL  # noqa: E402
 from crazyflie_driver.nodes.ros_clock import ros_clock, uses_sim_time  # noqa: E402
+from support.rostest_support import start_test_node, wait_until  # noqa: E402
 
 SOURCES = {"server": "crazyflie_server: crazyflie1", "controller": "crazyflie1/controller: "}
 WINDOW_S = 5.0            # wall seconds over which the diagnostics are counted

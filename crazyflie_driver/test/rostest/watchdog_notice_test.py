@@ -21,10 +21,15 @@ from geometry_msgs.msg import Twist
 from rosgraph_msgs.msg import Log
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (Repeating, RosoutRecorder, TopicRecorder, start_test_node,  # noqa: E402
-                                     wait_connected, wait_until)
-
 from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
+from support.rostest_support import (  # noqa: E402
+    Repeating,
+    RosoutRecorder,
+    TopicRecorder,
+    start_test_node,
+    wait_connected,
+    wait_until,
+)
 
 URIS = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702"}
 THRUST = 42000            # counts: climbs (a hover needs about 36 300)

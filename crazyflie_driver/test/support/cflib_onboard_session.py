@@ -26,7 +26,6 @@ import os
 import threading
 import time
 
-
 from support.cflib_session import RESULT, Step, emit, install_fake_dongle, start_watchdog  # noqa: E402
 
 MOCAP_PERIOD_S = 0.01
@@ -91,6 +90,7 @@ def run(args: argparse.Namespace) -> None:
     import cflib.crtp
     from cflib.crazyflie import Crazyflie
     from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+
     from crazyflie_driver.sim.air.medium import RemoteMedium
 
     backend = install_fake_dongle(2 if args.compressed else 1) if args.uri.startswith("radio://") else None
@@ -136,6 +136,7 @@ def plan_begin(mocap: Mocap) -> float:
 def fly_high_level(cf, control, mocap: Mocap, args: argparse.Namespace, phases: dict) -> None:
     """Upload the trajectory (Poly4D, write_data_sync), define it, take off, go_to, fly it, land."""
     import json
+
     from cflib.crazyflie.mem import MemoryElement, Poly4D
 
     with open(args.high_level) as f:
@@ -166,7 +167,9 @@ def fly_high_level(cf, control, mocap: Mocap, args: argparse.Namespace, phases: 
 def fly_compressed_broadcast(cf, control, mocap: Mocap, args: argparse.Namespace, phases: dict, backend) -> None:
     """Compressed upload through cflib, cflib's takeoff, then start and land as broadcasts to group 1."""
     import json
+
     from cflib.crazyflie.mem import CompressedSegment, CompressedStart, MemoryElement
+
     from crazyflie_driver.protocol import high_level as hl
     from crazyflie_driver.radio.broadcast import BroadcastLink
     from crazyflie_driver.radio.shared_radio import RadioManager

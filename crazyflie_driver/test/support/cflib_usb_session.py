@@ -10,10 +10,10 @@ import tempfile
 TEST = pathlib.Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TEST.parent / "src"), str(TEST)]
 
-from support.cflib_find_patch import install_find_patch  # noqa: E402
-from support.radio_rig import RadioRig  # noqa: E402
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming  # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
+from support.cflib_find_patch import install_find_patch  # noqa: E402
+from support.radio_rig import RadioRig  # noqa: E402
 
 
 def main() -> int:

@@ -13,13 +13,13 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.world.mocap import MocapModel
 from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 from crazyflie_driver.sim.world.world import World

@@ -14,8 +14,8 @@ from collections import deque
 from typing import Callable, Dict, List, Optional, Tuple
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import LinkTimeout
 from crazyflie_driver.crtp.uri import parse_uri
+from crazyflie_driver.errors import LinkTimeout
 from crazyflie_driver.radio.statistics import LinkStatistics
 
 ENOENT, E2BIG, ENOEXEC, ENOMEM, EEXIST = 2, 7, 8, 12, 17
@@ -304,6 +304,7 @@ class ScriptedLink:
 def make_crazyflie(protocol_version: int = 12, cache_dir=None, **firmware_options):
     """A connected Crazyflie over a ScriptedLink; returns (cf, link, firmware)."""
     import tempfile
+
     from crazyflie_driver.protocol.crazyflie import Crazyflie
     if cache_dir is None:  # never the user's real cache
         cache_dir = tempfile.mkdtemp(prefix="toc-cache-")

@@ -16,7 +16,6 @@ from crazyflie_driver.protocol.toc import Toc, TocEntry
 from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 
-
 LOG_VARS = {"acc.x": "float", "acc.y": "float", "acc.z": "float", "gyro.x": "float",
             "gyro.y": "float", "gyro.z": "float", "baro.temp": "float", "baro.pressure": "float",
             "mag.x": "float", "mag.y": "float", "mag.z": "float", "pm.vbat": "float",

@@ -8,9 +8,16 @@ import sys
 from typing import Callable, Optional
 
 from crazyflie_driver import usb_choice
+from crazyflie_driver.errors import (
+    CrazyflieError,
+    LinkTimeout,
+    RadioAccessDenied,
+    RadioInUse,
+    RadioNotFound,
+    UnknownName,
+    UriError,
+)
 from crazyflie_driver.protocol.crazyflie import Crazyflie
-from crazyflie_driver.errors import (CrazyflieError, LinkTimeout, RadioAccessDenied, RadioInUse,
-                                     RadioNotFound, UnknownName, UriError)
 
 from .sim_hint import sim_hint
 

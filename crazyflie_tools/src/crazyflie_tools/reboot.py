@@ -8,8 +8,8 @@ from __future__ import annotations
 import sys
 from typing import List, Optional
 
-from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver import usb_choice
+from crazyflie_driver.protocol.crazyflie import Crazyflie
 
 from .common import parser, run
 

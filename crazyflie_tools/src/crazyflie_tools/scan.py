@@ -6,10 +6,10 @@ import sys
 from typing import List, Optional
 
 from crazyflie_driver import usb_choice
+from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri
 from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.radio.scan import parse_address, scan
 from crazyflie_driver.radio.usb_crazyflie import list_usb_crazyflies
-from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri
 
 from .common import parser, run
 

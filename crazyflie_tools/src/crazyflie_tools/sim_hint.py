@@ -20,8 +20,8 @@ def sim_world_address() -> str:
 
 def world_listening(address: str, timeout: float = PROBE_TIMEOUT_S) -> bool:
     """True when a simulated world answers at ``address`` (host:port)."""
-    from crazyflie_driver.sim.air.medium import RemoteMedium   # lazily: hardware runs never load the sim
     from crazyflie_driver.errors import CrazyflieError
+    from crazyflie_driver.sim.air.medium import RemoteMedium  # lazily: hardware runs never load the sim
     try:
         medium = RemoteMedium(address, timeout=timeout)
     except CrazyflieError:

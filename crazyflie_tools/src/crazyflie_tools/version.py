@@ -5,8 +5,8 @@ import sys
 from typing import List, Optional
 
 from crazyflie_driver import usb_choice
-from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.errors import RadioAccessDenied, RadioNotFound
+from crazyflie_driver.radio.crazyradio import list_radios
 
 from .common import UDEV_HINT, open_crazyflie, parser, run
 

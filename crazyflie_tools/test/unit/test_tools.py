@@ -10,13 +10,22 @@ import pytest
 import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_tools import (battery, console, get_param, list_log_variables, list_params, reboot, scan,
-                             set_param, version)
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_tools import (
+    battery,
+    console,
+    get_param,
+    list_log_variables,
+    list_params,
+    reboot,
+    scan,
+    set_param,
+    version,
+)
 
 URI1 = "radio://0/80/2M/E7E7E7E701"
 URI2 = "radio://0/80/2M/E7E7E7E702"

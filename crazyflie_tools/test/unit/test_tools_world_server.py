@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import pytest
+
 from support.ports import free_port
 from support.served_world import served_world
 

@@ -4,8 +4,8 @@ stream the figure-8 from its CSV (position, velocity, acceleration, yaw, body ra
 above the take-off height, hand control back and land."""
 import numpy as np
 
-from pycrazyswarm import Crazyswarm
 import uav_trajectory
+from pycrazyswarm import Crazyswarm
 
 RATE_HZ = 30.0
 Z = 0.5

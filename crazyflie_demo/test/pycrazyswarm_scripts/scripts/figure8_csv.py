@@ -3,8 +3,8 @@
 off together, go above the start, fly it forwards, then backwards, land."""
 import numpy as np
 
-from pycrazyswarm import *          # noqa: F401,F403  (Crazyswarm's scripts import it this way)
 import uav_trajectory
+from pycrazyswarm import *  # noqa: F401,F403  (Crazyswarm's scripts import it this way)
 
 if __name__ == "__main__":
     swarm = Crazyswarm()            # noqa: F405

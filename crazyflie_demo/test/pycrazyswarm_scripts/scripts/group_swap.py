@@ -2,8 +2,8 @@
 """Two groups swap places and back with broadcast commands: cf1 in group 1, cf2 in group 2. Each
 group steps aside to its own lane (1 m apart), flies along it to the other's place, steps back in,
 then the same way home; one take-off and one landing for all."""
-from pycrazyswarm import *          # noqa: F401,F403
-import pycrazyswarm.cfsim.cffirmware as firm    # noqa: F401  (Crazyswarm's swap scripts import it)
+import pycrazyswarm.cfsim.cffirmware as firm  # noqa: F401  (Crazyswarm's swap scripts import it)
+from pycrazyswarm import *  # noqa: F401,F403
 
 LEG = 3.0
 STEP = 2.0

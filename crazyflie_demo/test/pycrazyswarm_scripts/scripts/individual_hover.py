@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """One Crazyflie after the other: each takes off and hovers until the operator's go-ahead, then
 lands while the next one takes off."""
-from pycrazyswarm import *          # noqa: F401,F403
+from pycrazyswarm import *  # noqa: F401,F403
 
 
 def main():

@@ -2,7 +2,8 @@
 """A tidy hover for the whole swarm: take off together, straighten up above each start, hold until
 the operator's go-ahead, land together."""
 import numpy as np
-from pycrazyswarm import *          # noqa: F401,F403
+
+from pycrazyswarm import *  # noqa: F401,F403
 
 Z = 1.0
 

@@ -9,7 +9,8 @@ The firmware's Mellinger controller flies no velocity setpoints (it holds only a
 from a velocity-world setpoint), so this script flies the Crazyflie on the PID controller and gives
 it back the swarm file's Mellinger after landing."""
 import numpy as np
-from pycrazyswarm import *          # noqa: F401,F403
+
+from pycrazyswarm import *  # noqa: F401,F403
 
 Z = 1.0
 RATE_HZ = 30.0

@@ -3,7 +3,8 @@
 first waypoint after take-off, then leaves each waypoint so that it reaches the next one at its
 arrival time; land when the last one is reached."""
 import numpy as np
-from pycrazyswarm import *          # noqa: F401,F403
+
+from pycrazyswarm import *  # noqa: F401,F403
 
 
 def load(path):

@@ -13,7 +13,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from crazyflie_driver.clock import WALL
 from crazyflie_driver.mocap import vrpn_protocol as vp
-from crazyflie_driver.mocap.frames import (quaternion_to_rotation_vector, y_up_to_z_up_quaternion, y_up_to_z_up_vector)
+from crazyflie_driver.mocap.frames import quaternion_to_rotation_vector, y_up_to_z_up_quaternion, y_up_to_z_up_vector
 from crazyflie_driver.mocap.names import clean_tracker_name, frame_name
 from crazyflie_driver.mocap.staleness import StalenessMonitor
 from crazyflie_driver.mocap.vrpn_client import PoseReport, TwistReport, parse_server

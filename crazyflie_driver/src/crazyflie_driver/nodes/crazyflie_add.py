@@ -14,11 +14,10 @@ from typing import Any, Dict
 import rospy
 
 from crazyflie_driver.msg import LogBlock
-from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
-
+from crazyflie_driver.nodes.ros_signals import init_node
 from crazyflie_driver.server.add_config import AddConfigError, config_from_params
 from crazyflie_driver.server.worker import WorkerConfig
-from crazyflie_driver.nodes.ros_signals import init_node
+from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
 
 
 def private_params() -> Dict[str, Any]:

@@ -30,35 +30,55 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 from std_msgs.msg import Float32
 from std_srvs.srv import Empty, EmptyResponse
 
-from crazyflie_driver.msg import GenericLogData
-from crazyflie_driver.srv import (AddCrazyflie, AddCrazyflieResponse, Arm, ArmResponse, RemoveCrazyflie,
-                                  RemoveCrazyflieResponse, UpdateParams, UpdateParamsResponse)
-
 from crazyflie_driver.clock import WALL, Clock
-from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, IMU_TOPIC, MAGNETIC_FIELD_TOPIC, PRESSURE_TOPIC,
-                        TEMPERATURE_TOPIC, LogBlockSpec)
-from crazyflie_driver.server.param_names import param_values
-from crazyflie_driver.server.add_config import check_config
-from crazyflie_driver.server.refusals import RefusalThrottle
-from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
-from crazyflie_driver.server.diagnostics import (UNKNOWN_BOTTLENECK, BottleneckFigures, CounterWindow,
-                                                 CrazyflieDiagnostics, Entry, RadioFigures, bottleneck_entry,
-                                                 radio_entry, world_speed_share)
-from crazyflie_driver.server import radio_budget
 from crazyflie_driver.crtp.uri import parse_uri, radio_uri_of
-from crazyflie_driver.server.registry import CrazyflieRegistry
-from crazyflie_driver.server.status import CrazyflieStatus, worker_status
-from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
-from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
+from crazyflie_driver.nodes.swarm_ros import start_swarm
+from crazyflie_driver.server import power_control, radio_budget
+from crazyflie_driver.server.add_config import check_config
+from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
+from crazyflie_driver.server.diagnostics import (
+    UNKNOWN_BOTTLENECK,
+    BottleneckFigures,
+    CounterWindow,
+    CrazyflieDiagnostics,
+    Entry,
+    RadioFigures,
+    bottleneck_entry,
+    radio_entry,
+    world_speed_share,
+)
+from crazyflie_driver.server.log_plan import (
+    BATTERY_TOPIC,
+    IMU_TOPIC,
+    MAGNETIC_FIELD_TOPIC,
+    PRESSURE_TOPIC,
+    TEMPERATURE_TOPIC,
+    LogBlockSpec,
+)
 from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
+from crazyflie_driver.server.param_names import param_values
+from crazyflie_driver.server.refusals import RefusalThrottle
+from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.safety import SafetyConfig
-from crazyflie_driver.server import power_control
-from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.server.safety_actions import worker_onboard_commands
+from crazyflie_driver.server.status import CrazyflieStatus, worker_status
+from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+from crazyflie_driver.srv import (
+    AddCrazyflie,
+    AddCrazyflieResponse,
+    Arm,
+    ArmResponse,
+    RemoveCrazyflie,
+    RemoveCrazyflieResponse,
+    UpdateParams,
+    UpdateParamsResponse,
+)
 
 GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
@@ -649,8 +669,8 @@ class CrazyflieServer:
 
 def make_factory(timeout: float, clock: Clock = WALL):
     """Crazyflies sharing one RadioManager (one SharedRadio per dongle), their request timeouts on ``clock``."""
-    from crazyflie_driver.protocol.crazyflie import Crazyflie
     from crazyflie_driver import usb_choice
+    from crazyflie_driver.protocol.crazyflie import Crazyflie
 
     manager = usb_choice.radio_manager()
     cache_dir = os.environ.get("CRAZYFLIE_TOC_CACHE") or None

@@ -20,10 +20,24 @@ from crazyflie_driver.msg import FullState, Hover, Position, VelocityWorld
 from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import pose_from_log
 from crazyflie_driver.server.refusals import RefusalThrottle
-from crazyflie_driver.srv import (GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
-                                  NotifySetpointsStopResponse, SetGroupMask, SetGroupMaskResponse, StartTrajectory,
-                                  StartTrajectoryResponse, Stop, StopResponse, Takeoff, TakeoffResponse,
-                                  UploadTrajectory, UploadTrajectoryResponse)
+from crazyflie_driver.srv import (
+    GoTo,
+    GoToResponse,
+    Land,
+    LandResponse,
+    NotifySetpointsStop,
+    NotifySetpointsStopResponse,
+    SetGroupMask,
+    SetGroupMaskResponse,
+    StartTrajectory,
+    StartTrajectoryResponse,
+    Stop,
+    StopResponse,
+    Takeoff,
+    TakeoffResponse,
+    UploadTrajectory,
+    UploadTrajectoryResponse,
+)
 
 
 class PosePublisher:

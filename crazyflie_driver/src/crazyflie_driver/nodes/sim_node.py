@@ -541,12 +541,12 @@ def main() -> None:
     from rosgraph_msgs.msg import Clock
 
     from crazyflie_driver.errors import CrazyflieError
+    from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
     from crazyflie_driver.sim.air.faults import describe_result as faults_text
     from crazyflie_driver.sim.air.medium import parse_address
     from crazyflie_driver.sim.air.server import WorldServer
     from crazyflie_driver.sim.world.pacing import start_pacing
     from crazyflie_driver.sim.world.world import World
-    from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
 
     init_node("crazyflie_sim")
     params = _private_params()

@@ -31,9 +31,24 @@ from crazyflie_driver.server.swarm.config import load_swarm_file
 from crazyflie_driver.server.swarm.options import options_from_params
 from crazyflie_driver.server.swarm.policy import SwarmPolicy
 from crazyflie_driver.server.worker import WorkerConfig
-from crazyflie_driver.srv import (Arm, ArmResponse, GoTo, GoToResponse, Land, LandResponse, NotifySetpointsStop,
-                                  NotifySetpointsStopResponse, StartTrajectory, StartTrajectoryResponse, Stop,
-                                  StopResponse, Takeoff, TakeoffResponse, UpdateParams, UpdateParamsResponse)
+from crazyflie_driver.srv import (
+    Arm,
+    ArmResponse,
+    GoTo,
+    GoToResponse,
+    Land,
+    LandResponse,
+    NotifySetpointsStop,
+    NotifySetpointsStopResponse,
+    StartTrajectory,
+    StartTrajectoryResponse,
+    Stop,
+    StopResponse,
+    Takeoff,
+    TakeoffResponse,
+    UpdateParams,
+    UpdateParamsResponse,
+)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 

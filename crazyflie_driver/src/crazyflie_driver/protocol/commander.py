@@ -14,8 +14,13 @@ import numbers
 import struct
 
 from crazyflie_driver.crtp.firmware_limits import MAX_RATE_DEG_S, MAX_THRUST
-from crazyflie_driver.crtp.packet import (PORT_COMMANDER, PORT_GENERIC_SETPOINT, PORT_LOCALIZATION, PORT_SUPERVISOR,
-                   CRTPPacket)
+from crazyflie_driver.crtp.packet import (
+    PORT_COMMANDER,
+    PORT_GENERIC_SETPOINT,
+    PORT_LOCALIZATION,
+    PORT_SUPERVISOR,
+    CRTPPacket,
+)
 
 #: Protocol version from which the emergency stop lives on the supervisor port (9:1).
 SUPERVISOR_FROM = 12

@@ -13,22 +13,22 @@ from typing import Optional, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp import nrf_system
+from crazyflie_driver.crtp.uri import LinkUri, UsbUri, parse_link_uri
 from crazyflie_driver.errors import LinkTimeout, NotSupported
 from crazyflie_driver.protocol.commander import Commander
 from crazyflie_driver.protocol.console import Console
 from crazyflie_driver.protocol.high_level import HighLevelCommander
 from crazyflie_driver.protocol.localization import LocalizationSender
+from crazyflie_driver.protocol.log import LogClient
 from crazyflie_driver.protocol.memory import MemoryClient
+from crazyflie_driver.protocol.param import ParamClient
+from crazyflie_driver.protocol.platform import Platform, toc_version
 from crazyflie_driver.protocol.setpoints import SetpointSender
 from crazyflie_driver.protocol.supervisor import Supervisor
+from crazyflie_driver.protocol.toccache import TocCache
 from crazyflie_driver.radio.link import RadioLink
 from crazyflie_driver.radio.shared_radio import RadioManager, default_manager
 from crazyflie_driver.radio.usb_crazyflie import UsbCrazyflie, UsbLink
-from crazyflie_driver.protocol.log import LogClient
-from crazyflie_driver.protocol.param import ParamClient
-from crazyflie_driver.protocol.platform import Platform, toc_version
-from crazyflie_driver.protocol.toccache import TocCache
-from crazyflie_driver.crtp.uri import LinkUri, UsbUri, parse_link_uri
 
 _LOG = logging.getLogger(__name__)
 

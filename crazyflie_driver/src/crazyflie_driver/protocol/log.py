@@ -11,12 +11,18 @@ import logging
 import struct
 from typing import Callable, Dict, List, Sequence
 
+from crazyflie_driver.crtp.ctypes import ctype, type_size
+from crazyflie_driver.crtp.firmware_limits import (
+    LOG_BLOCK_MAX_BYTES,
+    LOG_MAX_BLOCKS,
+    LOG_MAX_OPS,
+    LOG_PERIOD_MAX_MS,
+    LOG_PERIOD_MIN_MS,
+    LOG_PERIOD_UNIT_MS,
+    LOG_PERIOD_V2_MAX_MS,
+)
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, PORT_LOG, CRTPPacket
 from crazyflie_driver.errors import LogConfigError, ProtocolError
-from crazyflie_driver.crtp.ctypes import ctype, type_size
-from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_MAX_OPS,
-                                                   LOG_PERIOD_MAX_MS, LOG_PERIOD_MIN_MS, LOG_PERIOD_UNIT_MS,
-                                                   LOG_PERIOD_V2_MAX_MS)
 from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name
 
 _LOG = logging.getLogger(__name__)

@@ -12,9 +12,9 @@ import math
 import struct
 from typing import Any, Callable, Dict, List, Optional, Union
 
+from crazyflie_driver.crtp.ctypes import ctype, type_size
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, PORT_PARAM, CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam
-from crazyflie_driver.crtp.ctypes import ctype, type_size
 from crazyflie_driver.protocol.toc import TocEntry, TocPortClient, check_toc_name, request_all
 
 _LOG = logging.getLogger(__name__)

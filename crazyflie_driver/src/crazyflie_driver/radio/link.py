@@ -13,8 +13,8 @@ import time
 from typing import Callable, Dict, Optional, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
-from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
 from crazyflie_driver.crtp.nrf_system import SYS_RESET, is_nrf_command
+from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, LinkTimeout
 from crazyflie_driver.radio.crazyradio import RadioAck

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from typing import Iterable, List, Optional
 
-from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.crtp.uri import DATARATE_NAMES, DEFAULT_ADDRESS, MAX_CHANNEL, RadioUri
+from crazyflie_driver.radio.crazyradio import Crazyradio
 
 SCAN_PACKET = b"\xff"
 

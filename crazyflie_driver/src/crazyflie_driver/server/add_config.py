@@ -12,10 +12,10 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any, List, Mapping, Tuple
 
-from crazyflie_driver.errors import UriError
-from crazyflie_driver.server.setpoint import check_trim
-from crazyflie_driver.server.log_plan import LogBlockSpec, check_custom_log_limits, validate_log_block_specs
 from crazyflie_driver.crtp.uri import parse_link_uri
+from crazyflie_driver.errors import UriError
+from crazyflie_driver.server.log_plan import LogBlockSpec, check_custom_log_limits, validate_log_block_specs
+from crazyflie_driver.server.setpoint import check_trim
 from crazyflie_driver.server.worker import WorkerConfig
 
 

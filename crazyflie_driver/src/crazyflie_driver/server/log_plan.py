@@ -14,11 +14,15 @@ from dataclasses import dataclass, field
 from typing import AbstractSet, Dict, List, Sequence, Tuple
 
 from crazyflie_driver.crtp.ctypes import type_size
-from crazyflie_driver.crtp.firmware_limits import (LOG_BLOCK_MAX_BYTES, LOG_MAX_BLOCKS, LOG_MAX_OPS, LOG_PERIOD_MAX_MS,
-                                                   LOG_PERIOD_MIN_MS)
+from crazyflie_driver.crtp.firmware_limits import (
+    LOG_BLOCK_MAX_BYTES,
+    LOG_MAX_BLOCKS,
+    LOG_MAX_OPS,
+    LOG_PERIOD_MAX_MS,
+    LOG_PERIOD_MIN_MS,
+)
 from crazyflie_driver.errors import LogConfigError, UnknownName
 from crazyflie_driver.protocol.toc import check_toc_name
-
 
 IMU_TOPIC = "imu"
 TEMPERATURE_TOPIC = "temperature"

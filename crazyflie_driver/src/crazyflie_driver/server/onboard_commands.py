@@ -25,8 +25,8 @@ from typing import Any, Callable, Mapping, MutableMapping, Optional, Sequence
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import CrazyflieError, EmergencyActive
 from crazyflie_driver.protocol import high_level, setpoints
-from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.commander import stop_packet
+from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.localization import external_pose_packet, external_position_packet
 from crazyflie_driver.protocol.trajectory import make_piece
 from crazyflie_driver.server import power_control

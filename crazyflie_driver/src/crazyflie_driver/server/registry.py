@@ -11,8 +11,8 @@ from __future__ import annotations
 import threading
 from typing import Any, Callable, Dict, List, Optional
 
-from crazyflie_driver.server.log_plan import validate_log_block_specs
 from crazyflie_driver.crtp.uri import parse_link_uri
+from crazyflie_driver.server.log_plan import validate_log_block_specs
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
 
 #: s a failed add waits for its worker's connect sequence to end once the link is closed under it (one

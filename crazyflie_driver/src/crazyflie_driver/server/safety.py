@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, fields
 import threading
 from collections import deque
+from dataclasses import dataclass, fields
 from typing import Any, Callable, Deque, List, NamedTuple, Optional, Tuple
 
 from crazyflie_driver.crtp.firmware_limits import MAX_THRUST

@@ -32,25 +32,41 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
-from crazyflie_driver.crtp.packet import CRTPPacket
-from crazyflie_driver.errors import (CommandRejected, ConnectCancelled, CrazyflieError, LogConfigError,
-                                     RadioMediumGone, RadioNotFound, RadioUnplugged, UnknownName)
-from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
-from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
-from crazyflie_driver.server.log_plan import (BATTERY_TOPIC, DIAGNOSTIC_LOG_TOPICS, FIXED_LOG_TOPICS,
-                                              RADIO_RSSI_TOPIC, RSSI_LOG_VARIABLE, LogBlockSpec, PlannedBlock,
-                                              check_log_limits, log_packet_rate, plan_log_blocks)
 from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
+from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.errors import (
+    CommandRejected,
+    ConnectCancelled,
+    CrazyflieError,
+    LogConfigError,
+    RadioMediumGone,
+    RadioNotFound,
+    RadioUnplugged,
+    UnknownName,
+)
 from crazyflie_driver.protocol.commander import SUPERVISOR_FROM
 from crazyflie_driver.protocol.param import param_value
 from crazyflie_driver.protocol.supervisor import decode_state
+from crazyflie_driver.protocol.toc import toc_types
+from crazyflie_driver.radio.statistics import LINK_QUALITY_MIN_SAMPLES, LINK_QUALITY_RECOVERED, LINK_QUALITY_WARNING
+from crazyflie_driver.server import power_control, safety_actions, watchdog_notice
+from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
+from crazyflie_driver.server.log_plan import (
+    BATTERY_TOPIC,
+    DIAGNOSTIC_LOG_TOPICS,
+    FIXED_LOG_TOPICS,
+    RADIO_RSSI_TOPIC,
+    RSSI_LOG_VARIABLE,
+    LogBlockSpec,
+    PlannedBlock,
+    check_log_limits,
+    log_packet_rate,
+    plan_log_blocks,
+)
 from crazyflie_driver.server.log_timing import LATE_DATA_WARNING_S, OnboardClock, TopicTiming
 from crazyflie_driver.server.poll_pacer import PollPacer
-from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
-from crazyflie_driver.protocol.toc import toc_types
-from crazyflie_driver.server import power_control, watchdog_notice
-from crazyflie_driver.server import safety_actions
 from crazyflie_driver.server.safety import SafetyConfig, SafetyMonitor
+from crazyflie_driver.server.setpoint import Setpoint, limits_for_modes, setpoint_from_twist
 
 LOG = logging.getLogger("crazyflie_driver.server")
 

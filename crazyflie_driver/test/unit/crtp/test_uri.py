@@ -4,8 +4,8 @@ import dataclasses
 
 import pytest
 
-from crazyflie_driver.errors import UriError
 from crazyflie_driver.crtp.uri import DEFAULT_ADDRESS, RadioUri, UsbUri, parse_link_uri, parse_uri
+from crazyflie_driver.errors import UriError
 
 
 def test_full_uri():

@@ -14,7 +14,6 @@ from crazyflie_driver.mocap import vrpn_protocol as vp
 from crazyflie_driver.mocap.vrpn_bridge import VrpnBridge, config_from_params
 from crazyflie_driver.mocap.vrpn_client import VrpnClient
 from crazyflie_driver.mocap.vrpn_server import GARBAGE_KINDS, VrpnTestServer
-
 from support.ports import free_port
 
 

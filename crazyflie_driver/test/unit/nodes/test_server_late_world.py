@@ -10,7 +10,6 @@ from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.worker import WorkerConfig, WorkerListener, WorkerState
 from crazyflie_driver.sim.air.server import WorldServer
 from crazyflie_driver.sim.world.world import World
-
 from support.ports import free_port
 
 URI = "radio://0/80/2M/E7E7E7E701"

@@ -3,8 +3,14 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.nodes.sim_node import (MocapConfig, SimConfigError, dongles_needed, mocap_from_params,
-                                             vehicles_from_params, vrpn_port_from_params)
+from crazyflie_driver.nodes.sim_node import (
+    MocapConfig,
+    SimConfigError,
+    dongles_needed,
+    mocap_from_params,
+    vehicles_from_params,
+    vrpn_port_from_params,
+)
 
 
 def test_vehicle_list_and_single_vehicle():

@@ -7,7 +7,6 @@ from __future__ import annotations
 import struct
 
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
-
 from support.sim_doubles import FakeVehicle
 
 ADDRESS = bytes.fromhex("E7E7E7E701")

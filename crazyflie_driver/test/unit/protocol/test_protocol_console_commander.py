@@ -9,7 +9,6 @@ import pytest
 from crazyflie_driver.crtp.firmware_limits import MAX_RATE_DEG_S
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
-
 from support.scripted_link import make_crazyflie
 
 

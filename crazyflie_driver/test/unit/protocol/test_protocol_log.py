@@ -7,7 +7,6 @@ import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LogConfigError, ProtocolError, UnknownName
-
 from support.scripted_link import make_crazyflie
 
 

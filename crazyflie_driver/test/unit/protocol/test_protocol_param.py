@@ -9,7 +9,6 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ParamValueError, ProtocolError, ReadOnlyParam, UnknownName
 from crazyflie_driver.protocol.param import ParamClient, param_value
 from crazyflie_driver.protocol.toc import Toc, TocEntry
-
 from support.scripted_link import ScriptedLink, make_crazyflie
 
 ROLL_KP = TocEntry(0, "pid_rate", "roll_kp", "float")

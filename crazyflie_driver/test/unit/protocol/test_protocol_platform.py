@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
+from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.protocol.platform import Platform, toc_version
-
 from support.scripted_link import ScriptedFirmware, ScriptedLink
 
 

@@ -9,7 +9,6 @@ import struct
 import pytest
 
 from crazyflie_driver.crtp.packet import CRTPPacket
-
 from crazyflie_driver.errors import CommandRejected, CommandValueError, NotSupported, TrajectoryError
 from crazyflie_driver.protocol import high_level as hl
 from crazyflie_driver.protocol.localization import LocalizationSender
@@ -17,8 +16,8 @@ from crazyflie_driver.protocol.memory import MemoryClient
 from crazyflie_driver.protocol.setpoints import SetpointSender
 from crazyflie_driver.protocol.supervisor import Supervisor
 from crazyflie_driver.protocol.trajectory import PIECE_BYTES, make_piece, pack_compressed, pack_poly4d, pieces_from_rows
-
 from support.swarm_doubles import FirmwareDouble, LinkDouble
+
 
 def commander(version=12, **firmware):
     fw = FirmwareDouble(**firmware)

@@ -12,6 +12,7 @@ import struct
 import subprocess
 
 import pytest
+from test_cflib_peer import TEST, cflib_python
 
 from crazyflie_driver.crtp.quaternion import compress_quaternion, decompress_quaternion
 from crazyflie_driver.protocol import high_level as hl
@@ -20,7 +21,6 @@ from crazyflie_driver.protocol import setpoints as sp
 from crazyflie_driver.protocol import supervisor as sup
 from crazyflie_driver.protocol.memory import chunks, write_packet
 from crazyflie_driver.protocol.trajectory import make_piece, pack_compressed, pack_poly4d
-from test_cflib_peer import TEST, cflib_python
 
 ENCODERS = TEST / "support" / "cflib_encoders.py"
 

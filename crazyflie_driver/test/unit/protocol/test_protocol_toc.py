@@ -10,7 +10,6 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ProtocolError, UnknownName
 from crazyflie_driver.protocol.toc import TocEntry, TocFetcher, parse_item
 from crazyflie_driver.protocol.toccache import TocCache, default_cache_dir
-
 from support.scripted_link import ScriptedLink, make_crazyflie
 
 

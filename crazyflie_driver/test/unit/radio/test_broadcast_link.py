@@ -16,7 +16,6 @@ from crazyflie_driver.radio.link import RadioLink
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, FakeClock, NrfPeer, ScriptedMedium
 
 URI = "radio://0/80/2M/E7E7E7E701"

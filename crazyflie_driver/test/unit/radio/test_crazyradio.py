@@ -9,12 +9,11 @@ import pytest
 import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
-from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, inline_frame, list_radios, parse_inline_reply
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
+from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, inline_frame, list_radios, parse_inline_reply
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import parse_address
-
 from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 
 

@@ -15,7 +15,6 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.radio.statistics import LinkStatistics
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, NrfPeer, ScriptedMedium
 
 URI = "radio://0/80/2M/E7E7E7E701"

@@ -6,16 +6,15 @@ import pytest
 
 from crazyflie_driver.crtp.nrf_system import reboot_packets
 from crazyflie_driver.crtp.packet import CRTPPacket
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import CommandValueError, LinkTimeout
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.radio.link import open_link
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.crtp.uri import parse_uri
-
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle
 
 URI = "radio://0/80/2M/E7E7E7E701"

@@ -12,7 +12,6 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.radio.usb_crazyflie import UsbCrazyflie, UsbLink, list_usb_crazyflies
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import FakeClock, ScriptedMedium
 
 

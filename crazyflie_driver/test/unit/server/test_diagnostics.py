@@ -8,14 +8,33 @@ import pytest
 
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 from crazyflie_driver.server import diagnostic_thresholds as T
-from crazyflie_driver.server.diagnostics import (ABOVE, BELOW, ERROR, OK, STALE, WARN, BottleneckFigures,
-                                                 CounterWindow, CrazyflieDiagnostics, CrazyflieHealth, LinkFigures,
-                                                 RadioFigures, Reports, ack_ratio_tolerance, battery_entry,
-                                                 bottleneck_entry, commands_entry, graded, link_entry, radio_entry,
-                                                 supervisor_entry, world_speed_share, worst)
+from crazyflie_driver.server.diagnostics import (
+    ABOVE,
+    BELOW,
+    ERROR,
+    OK,
+    STALE,
+    WARN,
+    BottleneckFigures,
+    CounterWindow,
+    CrazyflieDiagnostics,
+    CrazyflieHealth,
+    LinkFigures,
+    RadioFigures,
+    Reports,
+    ack_ratio_tolerance,
+    battery_entry,
+    bottleneck_entry,
+    commands_entry,
+    graded,
+    link_entry,
+    radio_entry,
+    supervisor_entry,
+    world_speed_share,
+    worst,
+)
 from crazyflie_driver.server.status import worker_status
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
-
 from support.radio_rig import RadioRig
 
 

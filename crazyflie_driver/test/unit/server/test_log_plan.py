@@ -4,10 +4,16 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.errors import LogConfigError, UnknownName
-from crazyflie_driver.server.log_plan import (FIXED_LOG_TOPICS, LogBlockSpec, PlannedBlock, check_custom_log_limits,
-                                              check_log_limits, log_packet_rate, plan_log_blocks,
-                                              validate_log_block_specs)
-
+from crazyflie_driver.server.log_plan import (
+    FIXED_LOG_TOPICS,
+    LogBlockSpec,
+    PlannedBlock,
+    check_custom_log_limits,
+    check_log_limits,
+    log_packet_rate,
+    plan_log_blocks,
+    validate_log_block_specs,
+)
 from support.worker_doubles import LOG_VARS
 
 

@@ -3,8 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.server.log_timing import (MAX_DRIFT, ONBOARD_CLOCK_WRAP_MS, OnboardClock,
-                                                TopicTiming)
+from crazyflie_driver.server.log_timing import MAX_DRIFT, ONBOARD_CLOCK_WRAP_MS, OnboardClock, TopicTiming
 
 
 def test_age_is_the_delay_beyond_the_quickest_packet():

@@ -10,7 +10,6 @@ from crazyflie_driver.errors import CommandValueError, CrazyflieError, Trajector
 from crazyflie_driver.protocol.high_level import HighLevelCommander
 from crazyflie_driver.protocol.memory import MemoryClient
 from crazyflie_driver.server.onboard_commands import OnboardCommands
-
 from support.swarm_doubles import FirmwareDouble, LinkDouble
 from support.worker_doubles import FakeCrazyflie, started, wait_for
 

@@ -10,7 +10,6 @@ import pytest
 from crazyflie_driver.errors import LinkTimeout
 from crazyflie_driver.server.registry import CrazyflieRegistry, DuplicateCrazyflie
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
-
 from support.worker_doubles import FakeCrazyflie
 
 

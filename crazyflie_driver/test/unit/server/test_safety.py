@@ -11,12 +11,21 @@ from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.protocol import setpoints
 from crazyflie_driver.protocol.high_level import CMD_GO_TO_2, CMD_STOP
 from crazyflie_driver.protocol.supervisor import CMD_WATCHDOG
-from crazyflie_driver.server.safety import (ERROR, OK, WARN, Action, BatteryWatch, DescentPlan, Reaction,
-                                            SafetyConfig, SafetyMonitor, thrust_change_for)
+from crazyflie_driver.server.safety import (
+    ERROR,
+    OK,
+    WARN,
+    Action,
+    BatteryWatch,
+    DescentPlan,
+    Reaction,
+    SafetyConfig,
+    SafetyMonitor,
+    thrust_change_for,
+)
 from crazyflie_driver.server.safety_actions import setpoint_thrust
 from crazyflie_driver.server.setpoint import Setpoint
 from crazyflie_driver.server.status import worker_status
-
 from support.worker_doubles import FakeCrazyflie, Recorder, started, wait_for
 from support.worker_doubles import poll_actions as run
 

@@ -9,8 +9,7 @@ import time
 import pytest
 
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, FlightRefused
-from crazyflie_driver.protocol.high_level import (CMD_GO_TO_2, CMD_LAND_2, CMD_STOP, HighLevelCommander,
-                                                   TrajectoryInfo)
+from crazyflie_driver.protocol.high_level import CMD_GO_TO_2, CMD_LAND_2, CMD_STOP, HighLevelCommander, TrajectoryInfo
 from crazyflie_driver.protocol.memory import MemoryClient
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
@@ -22,7 +21,6 @@ from crazyflie_driver.server.swarm.commands import SwarmCommands, SwarmMember
 from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 from support.swarm_doubles import FirmwareDouble, LinkDouble
 from support.worker_doubles import FakeCrazyflie, started

@@ -4,8 +4,7 @@ from __future__ import annotations
 import pytest
 
 from crazyflie_driver.crtp.firmware_limits import MAX_ANGLE_DEG, MAX_RATE_DEG_S, MAX_THRUST
-from crazyflie_driver.server.setpoint import (Setpoint, SetpointLimits, check_trim, limits_for_modes,
-                                              setpoint_from_twist)
+from crazyflie_driver.server.setpoint import Setpoint, SetpointLimits, check_trim, limits_for_modes, setpoint_from_twist
 
 
 def test_cmd_vel_mapping_with_trims_and_pitch_sign():

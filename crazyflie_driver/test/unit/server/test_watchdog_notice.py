@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 
+from crazyflie_driver.clock import ManualClock
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.protocol import setpoints
 from crazyflie_driver.protocol.commander import stop_packet
@@ -11,9 +12,7 @@ from crazyflie_driver.protocol.supervisor import decode_state
 from crazyflie_driver.server.setpoint import Setpoint
 from crazyflie_driver.server.status import ERROR, WARN, worker_status
 from crazyflie_driver.server.watchdog_notice import WatchdogNotice, asks_for_thrust, cut_message
-from crazyflie_driver.clock import ManualClock
 from crazyflie_driver.server.worker import WorkerState
-
 from support.worker_doubles import FakeCrazyflie, started, wait_for
 
 UP = Setpoint(0.0, 0.0, 0.0, 40000)

@@ -10,7 +10,6 @@ from crazyflie_driver.errors import LogConfigError, RadioNotFound, UnknownName
 from crazyflie_driver.server.log_plan import LogBlockSpec
 from crazyflie_driver.server.setpoint import Setpoint
 from crazyflie_driver.server.worker import MAX_RESTARTS, CrazyflieWorker, WorkerConfig, WorkerState
-
 from support.worker_doubles import LOG_VARS, FakeCrazyflie, Recorder, started, wait_for
 
 

@@ -15,7 +15,6 @@ from crazyflie_driver.clock import ManualClock
 from crazyflie_driver.server.swarm.estimator_placement import EstimatorPlacement
 from crazyflie_driver.server.swarm.heartbeat import Heartbeat
 from crazyflie_driver.server.worker import WorkerState
-
 from support.worker_doubles import FakeCrazyflie, started, wait_for
 
 

@@ -5,7 +5,6 @@ import math
 
 from crazyflie_driver.protocol.trajectory import make_piece
 from crazyflie_driver.sim.firmware.decoded_values import DecodedValues
-
 from support.radio_rig import RadioRig
 
 

@@ -9,9 +9,8 @@ import usb.util
 
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
-from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 from support.cflib_find_patch import install_find_patch
+from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 
 VENDOR_OUT = 0x40
 

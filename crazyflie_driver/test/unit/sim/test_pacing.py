@@ -9,8 +9,18 @@ import time
 import pytest
 
 from crazyflie_driver.sim.world import pacing
-from crazyflie_driver.sim.world.pacing import (LAG_BOUND_S, MIN_SPEED, RECOVER_WINDOWS, AutoSpeed, HostDelay, Pacing,
-                                               PacingError, parse_pacing, read_schedstat, sibling_pids)
+from crazyflie_driver.sim.world.pacing import (
+    LAG_BOUND_S,
+    MIN_SPEED,
+    RECOVER_WINDOWS,
+    AutoSpeed,
+    HostDelay,
+    Pacing,
+    PacingError,
+    parse_pacing,
+    read_schedstat,
+    sibling_pids,
+)
 from crazyflie_driver.sim.world.world import World
 
 

@@ -11,7 +11,7 @@ from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air.faults import FaultError, parse_command, split_commands
 from crazyflie_driver.sim.air.medium import RemoteMedium
 from crazyflie_driver.sim.air.server import WorldServer
-from crazyflie_driver.sim.world.battery import CRITICAL_VOLTAGE, PM_SHUTDOWN, PERSIST_S
+from crazyflie_driver.sim.world.battery import CRITICAL_VOLTAGE, PERSIST_S, PM_SHUTDOWN
 from crazyflie_driver.sim.world.mocap import MocapModel
 from crazyflie_driver.sim.world.world import World
 

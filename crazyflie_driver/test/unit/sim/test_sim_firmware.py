@@ -11,7 +11,6 @@ from crazyflie_driver.crtp.nrf_system import reboot_packets, stm_power_off_packe
 from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.firmware.ports import boot_text
-
 from support.sim_doubles import FakeVehicle
 
 ADDR = b"\xe7\xe7\xe7\xe7\x01"

@@ -7,11 +7,10 @@ import struct
 
 import numpy as np
 import pytest
+from test_sim_onboard_flight import Rig
 
 from crazyflie_driver.sim.firmware.trajectory_memory import POLY4D_PIECE
 from crazyflie_driver.sim.world.planner import Evaluation, Piece, Plan, evaluate, online_piece, poly7_nojerk
-
-from test_sim_onboard_flight import Rig
 
 
 def test_poly7_nojerk_meets_its_constraints():

@@ -9,13 +9,12 @@ import struct
 
 import numpy as np
 import pytest
+from test_sim_high_level import ask, hl, takeoff
+from test_sim_onboard_flight import Rig
 
 from crazyflie_driver.protocol.trajectory import make_piece, pack_compressed
 from crazyflie_driver.sim.firmware.trajectory_memory import MEMORY_SIZE, decode_compressed
-from crazyflie_driver.sim.world.planner import Plan, Piece, figure_eight
-
-from test_sim_high_level import hl, ask, takeoff
-from test_sim_onboard_flight import Rig
+from crazyflie_driver.sim.world.planner import Piece, Plan, figure_eight
 
 ENOEXEC = 8
 

@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.air.medium import LocalMedium, RemoteMedium, WorldNotRunning, parse_address
-
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle
 
 ADDR = b"\xe7\xe7\xe7\xe7\x01"

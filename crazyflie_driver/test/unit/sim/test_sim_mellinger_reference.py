@@ -21,7 +21,6 @@ import pytest
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, MODE_DISABLE, MODE_VELOCITY, Setpoint
 from support.open_loop import fly_open_loop
 
-
 COUNTS = 2.0
 ABS, VEL, OFF = MODE_ABS, MODE_VELOCITY, MODE_DISABLE
 OMEGA = 2 * math.pi / 4.0

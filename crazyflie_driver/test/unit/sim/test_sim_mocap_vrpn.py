@@ -17,7 +17,6 @@ from crazyflie_driver.sim.world.mocap import MocapModel
 from crazyflie_driver.sim.world.mocap_vrpn import WorldVrpnServer, port_is_free
 from crazyflie_driver.sim.world.world import World
 
-
 SRC = pathlib.Path(__file__).resolve().parents[3] / "src"
 
 
@@ -210,8 +209,9 @@ def test_world_server_refuses_a_bad_swarm_file(tmp_path):
 
 
 def test_world_server_refuses_a_busy_vrpn_port(capsys):
-    from crazyflie_driver.sim.air.server import main
     import socket
+
+    from crazyflie_driver.sim.air.server import main
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
     s.listen(1)

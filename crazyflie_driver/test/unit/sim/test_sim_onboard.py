@@ -5,8 +5,8 @@ import math
 
 import pytest
 
-from crazyflie_driver.sim.world.stabilizer import default_params
 from crazyflie_driver.sim.world.physics import VehicleParams, euler_from_quat
+from crazyflie_driver.sim.world.stabilizer import default_params
 from crazyflie_driver.sim.world.world import World
 
 HOVER = int(round(VehicleParams().hover_command()))

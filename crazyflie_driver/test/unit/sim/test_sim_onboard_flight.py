@@ -10,8 +10,8 @@ import struct
 import numpy as np
 import pytest
 
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.crtp.quaternion import compress_quaternion as compress_quat
+from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.world.world import World
 
 ADDR = b"\xe7\xe7\xe7\xe7\x05"

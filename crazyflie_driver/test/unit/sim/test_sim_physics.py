@@ -6,8 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from crazyflie_driver.sim.world.physics import (BodyStates, RigidBodyBackend, VehicleParams, euler_from_quat,
-                                          quat_from_euler, quat_to_matrix)
+from crazyflie_driver.sim.world.physics import (
+    BodyStates,
+    RigidBodyBackend,
+    VehicleParams,
+    euler_from_quat,
+    quat_from_euler,
+    quat_to_matrix,
+)
 
 
 def bodies(*positions, params=None):

@@ -14,7 +14,6 @@ import pytest
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air.medium import RemoteMedium, WorldNotRunning
 from crazyflie_driver.sim.air.server import WorldServer, load_vehicle_config, main
-
 from support.sim_doubles import FakeWorld
 
 URI1 = "radio://0/80/2M/E7E7E7E701"
@@ -230,8 +229,8 @@ def test_cli_serves_and_stops_cleanly_on_signals(sig):
 
 def test_shipped_example_vehicle_config_loads():
     """The example file in crazyflie_driver/config is valid: URIs parse, positions are 3-vectors."""
-    from crazyflie_driver.sim.air.server import load_vehicle_config
     from crazyflie_driver.crtp.uri import parse_uri
+    from crazyflie_driver.sim.air.server import load_vehicle_config
     path = str(TEST.parent / "config" / "sim_vehicles.yaml")
     vehicles = load_vehicle_config(path)
     assert [v["name"] for v in vehicles] == ["crazyflie1", "crazyflie2", "crazyflie3"]

@@ -7,12 +7,19 @@ import struct
 
 import pytest
 
-from crazyflie_driver.sim.firmware import localization_decode as loc
 from crazyflie_driver.crtp.quaternion import compress_quaternion as compress_quat
 from crazyflie_driver.crtp.quaternion import decompress_quaternion as decompress_quat
 from crazyflie_driver.errors import CommandValueError
+from crazyflie_driver.sim.firmware import localization_decode as loc
 from crazyflie_driver.sim.firmware.setpoint_decode import (
-    EXPECTED_LENGTH, MODE_ABS, MODE_DISABLE, MODE_VELOCITY, FirmwareAssert, decode_meta, decode_setpoint)
+    EXPECTED_LENGTH,
+    MODE_ABS,
+    MODE_DISABLE,
+    MODE_VELOCITY,
+    FirmwareAssert,
+    decode_meta,
+    decode_setpoint,
+)
 
 
 def four(kind, a, b, c, d):

@@ -6,11 +6,10 @@ import math
 import struct
 
 import pytest
-
-from crazyflie_driver.sim.world.stabilizer import BRUSHLESS_IDLE_MOTOR
-
 from test_sim_high_level import ask, hl, takeoff
 from test_sim_onboard_flight import Rig
+
+from crazyflie_driver.sim.world.stabilizer import BRUSHLESS_IDLE_MOTOR
 
 CAN_ARM, ARMED, AUTO_ARM, CAN_FLY, FLYING, TUMBLED, LOCKED, CRASHED = (1 << k for k in range(8))
 HL_ACTIVE, HL_FINISHED, HL_DISABLED = 1 << 8, 1 << 9, 1 << 10

@@ -9,7 +9,6 @@ import pytest
 
 from crazyflie_driver.sim.air.server import WorldServer
 from crazyflie_driver.sim.air.udp import UdpEndpoint
-
 from support.sim_doubles import FakeWorld
 
 URI = "radio://0/80/2M/E7E7E7E701"

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_driver.errors import (CrazyflieError, FlightRefused, TrajectoryError,
-                                     UnknownName)
-from crazyflie_driver.protocol.checks import finite, group_mask as checked_group_mask, positive, positive_duration
+from crazyflie_driver.errors import CrazyflieError, FlightRefused, TrajectoryError, UnknownName
+from crazyflie_driver.protocol.checks import finite, positive, positive_duration
+from crazyflie_driver.protocol.checks import group_mask as checked_group_mask
 from crazyflie_driver.protocol.high_level import in_groups, nobody_addressed
 from crazyflie_driver.protocol.param import param_value, set_by_name_packet
 from crazyflie_driver.server.param_names import Lookup, param_values, ros_param_name

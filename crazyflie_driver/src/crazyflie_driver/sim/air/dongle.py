@@ -16,8 +16,19 @@ import usb.core
 
 # The dongle's USB identity and vendor requests are shared with the host driver.
 from crazyflie_driver.radio.crazyradio import (
-    ACK_ENABLE, INLINE_HEADER, PRODUCT_ID, SCAN_CHANNELS, SET_CONT_CARRIER, SET_DATA_RATE, SET_INLINE_MODE,
-    SET_RADIO_ADDRESS, SET_RADIO_ARC, SET_RADIO_ARD, SET_RADIO_CHANNEL, SET_RADIO_POWER)
+    ACK_ENABLE,
+    INLINE_HEADER,
+    PRODUCT_ID,
+    SCAN_CHANNELS,
+    SET_CONT_CARRIER,
+    SET_DATA_RATE,
+    SET_INLINE_MODE,
+    SET_RADIO_ADDRESS,
+    SET_RADIO_ARC,
+    SET_RADIO_ARD,
+    SET_RADIO_CHANNEL,
+    SET_RADIO_POWER,
+)
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.usb_descriptors import PA_9955, PA_MODELS, DongleModel
 

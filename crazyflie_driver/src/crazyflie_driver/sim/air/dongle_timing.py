@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 from crazyflie_driver.clock import WALL, Clock, ScaledClock
 
-
 #: Seconds one vendor request takes on a Crazyradio 2.0 (a user's measurement, docs/simulation.md).
 CRAZYRADIO_2_CONTROL_TRANSFER_S = 0.0025
 

@@ -13,8 +13,12 @@ import threading
 from collections import deque
 from typing import Deque, Optional
 
-from crazyflie_driver.radio.usb_crazyflie import (CRAZYFLIE_MANUFACTURER, CRAZYFLIE_PRODUCT_ID, CRAZYFLIE_VENDOR_ID,
-                                                  SET_CRTP_TO_USB)
+from crazyflie_driver.radio.usb_crazyflie import (
+    CRAZYFLIE_MANUFACTURER,
+    CRAZYFLIE_PRODUCT_ID,
+    CRAZYFLIE_VENDOR_ID,
+    SET_CRTP_TO_USB,
+)
 from crazyflie_driver.sim.air.dongle import VENDOR_REQUEST_LOG
 from crazyflie_driver.sim.air.usb_descriptors import DESC_DEVICE, Descriptor, DongleModel
 

@@ -39,14 +39,25 @@ import usb.backend
 import usb.core
 
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
 from crazyflie_driver.sim.air import fake_cable
+from crazyflie_driver.sim.air.dongle import DongleFirmware, FakeDongle, fill, no_device, stall, usb_timeout
 from crazyflie_driver.sim.air.dongle_timing import DongleClock, DongleTiming
 from crazyflie_driver.sim.air.fake_cable import FakeCableCrazyflie
 from crazyflie_driver.sim.air.usb_descriptors import (
-    DESC_CONFIG, DESC_DEVICE, DESC_STRING, MODELS, PA_MODELS, DongleModel, config_descriptor_bytes,
-    configuration_descriptor, device_descriptor, device_descriptor_bytes, endpoint_descriptor,
-    interface_descriptor, string_descriptor)
+    DESC_CONFIG,
+    DESC_DEVICE,
+    DESC_STRING,
+    MODELS,
+    PA_MODELS,
+    DongleModel,
+    config_descriptor_bytes,
+    configuration_descriptor,
+    device_descriptor,
+    device_descriptor_bytes,
+    endpoint_descriptor,
+    interface_descriptor,
+    string_descriptor,
+)
 
 _GET_STATUS = 0x00
 _GET_DESCRIPTOR = 0x06

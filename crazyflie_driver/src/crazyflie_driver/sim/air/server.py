@@ -24,10 +24,16 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.sim.air import server_framing as framing
-from crazyflie_driver.sim.air.faults import (MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M, MAX_RADIO_LATENCY_S,
-                                             MIN_MOCAP_RATE_HZ, ControlArgs, FaultError)
-from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
+from crazyflie_driver.sim.air.faults import (
+    MAX_MOCAP_LATENCY_S,
+    MAX_MOCAP_NOISE_M,
+    MAX_RADIO_LATENCY_S,
+    MIN_MOCAP_RATE_HZ,
+    ControlArgs,
+    FaultError,
+)
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
+from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
 from crazyflie_driver.sim.world import battery as battery_model
 from crazyflie_driver.sim.world.mocap_feed import MocapEstimatorFeed
 from crazyflie_driver.sim.world.pacing import parse_pacing, start_pacing

@@ -16,7 +16,6 @@ from typing import Any, Callable, Dict, Iterable, List, Tuple
 
 import numpy as np
 
-
 _FIELD_NAMES: Dict[type, Tuple[str, ...]] = {}
 _CHILD: Dict[Tuple[str, Any], str] = {}
 _CHILDREN: Dict[Tuple[str, int], Tuple[str, ...]] = {}

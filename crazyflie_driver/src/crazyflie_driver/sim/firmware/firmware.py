@@ -17,13 +17,19 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Deque, Dict, Optional, Sequence, Tuple, Union
 
-from crazyflie_driver.crtp.packet import CRTPPacket, MAX_PAYLOAD
+from crazyflie_driver.crtp.nrf_system import (
+    RESET_TO_FIRMWARE,
+    SYS_ALL_OFF,
+    SYS_RESET,
+    SYS_RESET_INIT,
+    SYS_STM_OFF,
+    SYS_STM_ON,
+)
+from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
 from crazyflie_driver.sim.firmware import ports
 from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.decoded_values import DecodedValues, trajectory_values
 from crazyflie_driver.sim.firmware.high_level_port import ENOEXEC, high_level_port
-from crazyflie_driver.crtp.nrf_system import (RESET_TO_FIRMWARE, SYS_ALL_OFF, SYS_RESET, SYS_RESET_INIT, SYS_STM_OFF,
-                                             SYS_STM_ON)
 from crazyflie_driver.sim.firmware.link import NrfLink
 from crazyflie_driver.sim.firmware.log import LogService
 from crazyflie_driver.sim.firmware.param import ParamService

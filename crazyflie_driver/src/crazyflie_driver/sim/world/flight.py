@@ -13,16 +13,26 @@ import numpy as np
 
 from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_DISABLE, Setpoint
-from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS, PREDICT_EVERY, Estimator
+from crazyflie_driver.sim.world.estimator import DEFAULTS as ESTIMATOR_DEFAULTS
+from crazyflie_driver.sim.world.estimator import PREDICT_EVERY, Estimator
 from crazyflie_driver.sim.world.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
-from crazyflie_driver.sim.world.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS, MELLINGER_EVERY
+from crazyflie_driver.sim.world.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS
+from crazyflie_driver.sim.world.mellinger import MELLINGER_EVERY
 from crazyflie_driver.sim.world.physics import BodyStates
 from crazyflie_driver.sim.world.planner import IDLE, Evaluation, Piece, Plan
-from crazyflie_driver.sim.world.vehicle_rows import Vector
-from crazyflie_driver.sim.world.stabilizer import firmware_attitude
-from crazyflie_driver.sim.world.position_control import (CONTROLLER_PID, M_X, M_Y, NULL_MODES, POSITION_EVERY,
-                                                         PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PositionControl)
+from crazyflie_driver.sim.world.position_control import (
+    CONTROLLER_PID,
+    M_X,
+    M_Y,
+    NULL_MODES,
+    POSITION_EVERY,
+    PRIORITY_CRTP,
+    PRIORITY_HIGH_LEVEL,
+    PositionControl,
+)
 from crazyflie_driver.sim.world.position_control import default_params as control_defaults
+from crazyflie_driver.sim.world.stabilizer import firmware_attitude
+from crazyflie_driver.sim.world.vehicle_rows import Vector
 
 assert PREDICT_EVERY % MELLINGER_EVERY == 0 and HL_RATE_EVERY % MELLINGER_EVERY == 0   # see OnboardFlight.step
 GROUPS = ("stateEstimate", "stateEstimateZ", "locSrv", "locSrvZ", "ctrltarget", "posCtl")

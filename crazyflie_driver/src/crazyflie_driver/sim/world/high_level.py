@@ -16,8 +16,21 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.firmware.setpoint_decode import MODE_ABS, Setpoint
-from crazyflie_driver.sim.world.planner import (AXES, DISABLED, FLYING, IDLE, LANDING, N_COEFFS, Evaluation, Piece,
-                                                Plan, normalize_radians, online_piece, poly7_nojerk, yaw_turn)
+from crazyflie_driver.sim.world.planner import (
+    AXES,
+    DISABLED,
+    FLYING,
+    IDLE,
+    LANDING,
+    N_COEFFS,
+    Evaluation,
+    Piece,
+    Plan,
+    normalize_radians,
+    online_piece,
+    poly7_nojerk,
+    yaw_turn,
+)
 
 HL_RATE_EVERY = 10                 # ticks: the high-level commander runs at 100 Hz
 HL_SETPOINT_KIND = 100             # not a port-7 type: marks setpoints of the high-level commander

@@ -21,12 +21,16 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from crazyflie_driver.crtp.firmware_limits import (MAX_THRUST, MIN_THRUST, SETPOINT_WATCHDOG_CUT_S,
-                                                   SETPOINT_WATCHDOG_LEVEL_S)
+from crazyflie_driver.crtp.firmware_limits import (
+    MAX_THRUST,
+    MIN_THRUST,
+    SETPOINT_WATCHDOG_CUT_S,
+    SETPOINT_WATCHDOG_LEVEL_S,
+)
 from crazyflie_driver.sim.world import mellinger as _mel
-from crazyflie_driver.sim.world.vehicle_rows import Rows
 from crazyflie_driver.sim.world.physics import BodyStates, quadratic_form
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
+from crazyflie_driver.sim.world.vehicle_rows import Rows
 
 GEN_CURRENT = "current"
 GEN_2016 = "2016.02"

@@ -17,12 +17,24 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from crazyflie_driver.sim.world import battery as _battery
-from crazyflie_driver.sim.world import sensors as _sensors
 from crazyflie_driver.sim.world import flight as _flight
-from crazyflie_driver.sim.world.stabilizer import (GEN_CURRENT, LOCK_ASSERT, LOCK_EMERGENCY, LOCK_NAMES, LOCK_NONE,
-                                                   LOCK_TUMBLE, TUMBLE_TILT_COS, OnboardController, check_generation,
-                                                   PLATFORM_BRUSHLESS, PLATFORM_CF2, PLATFORMS, default_params)
+from crazyflie_driver.sim.world import sensors as _sensors
 from crazyflie_driver.sim.world.physics import BodyStates, Drive, RigidBodyBackend, VehicleParams, quat_to_matrix
+from crazyflie_driver.sim.world.stabilizer import (
+    GEN_CURRENT,
+    LOCK_ASSERT,
+    LOCK_EMERGENCY,
+    LOCK_NAMES,
+    LOCK_NONE,
+    LOCK_TUMBLE,
+    PLATFORM_BRUSHLESS,
+    PLATFORM_CF2,
+    PLATFORMS,
+    TUMBLE_TILT_COS,
+    OnboardController,
+    check_generation,
+    default_params,
+)
 from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FIRMWARE_TICK_S
 
 _log = logging.getLogger(__name__)

@@ -8,11 +8,10 @@ import threading
 
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
-from crazyflie_driver.server.swarm.mocap_stream import MocapStream, usable_quaternion
 from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
+from crazyflie_driver.server.swarm.mocap_stream import MocapStream, usable_quaternion
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, ScriptedMedium
 
 URIS = {"cf1": "radio://0/80/2M/E7E7E7E701", "cf2": "radio://0/80/2M/E7E7E7E702",

@@ -8,15 +8,14 @@ import threading
 import pytest
 
 from crazyflie_driver.crtp.quaternion import compress_quaternion
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import CommandValueError, CrazyflieError, TrajectoryError
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster, group_by_link
 from crazyflie_driver.server.swarm.heartbeat import Heartbeat
-from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 
 URIS = ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702", "radio://0/80/2M/E7E7E7E703",

@@ -14,7 +14,6 @@ from crazyflie_driver.server.swarm.broadcast import SwarmBroadcaster
 from crazyflie_driver.server.swarm.commands import SwarmCommands, SwarmMember, in_groups, update_param_values
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 
 URIS = ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702", "radio://1/90/2M/E7E7E7E703"]

@@ -10,8 +10,14 @@ from typing import Any, Callable, Dict, List, Optional
 import pytest
 
 from crazyflie_driver.clock import ManualClock
-from crazyflie_driver.errors import (CommandRejected, CommandValueError, CrazyflieError, EmergencyActive,
-                                     FlightRefused, LinkLost)
+from crazyflie_driver.errors import (
+    CommandRejected,
+    CommandValueError,
+    CrazyflieError,
+    EmergencyActive,
+    FlightRefused,
+    LinkLost,
+)
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.swarm.commands import SwarmMember
@@ -21,7 +27,6 @@ from crazyflie_driver.server.swarm.policy import LAND_RETRY_S, SwarmPolicy, init
 from crazyflie_driver.server.worker import WorkerState
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
-
 from support.radio_doubles import AirReply, ScriptedMedium
 
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "config", "swarm_example.yaml")
