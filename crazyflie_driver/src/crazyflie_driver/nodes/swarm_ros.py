@@ -67,12 +67,11 @@ def count_dongles(wait_s: float) -> int:
     Wall seconds: finding USB devices (or the world's fake ones) is a matter of the host, as on hardware."""
     deadline = time.monotonic() + wait_s
     while True:
+        error: Optional[Exception] = None
         try:
             n = len(list_radios(usb_choice.get_backend()))
         except (CrazyflieError, OSError, ConnectionError) as e:
             n, error = 0, e
-        else:
-            error = None
         if n or time.monotonic() >= deadline or shutting_down():
             if error is not None and not n:
                 rospy.logwarn("swarm: no Crazyradio found (%s)", error)
@@ -130,8 +129,9 @@ class RosSwarm:
             self._sources.append(swarm_mocap_sources.start(self.options, names, self.policy.pose, self.clock))
         threading.Thread(target=self.policy.watch_loop, name="swarm watch", daemon=True).start()
         threading.Thread(target=self._diagnostics_loop, name="swarm diagnostics", daemon=True).start()
+        links = self.policy.broadcaster.links if self.policy.broadcaster is not None else {}
         rospy.loginfo("swarm ready: %d Crazyflies on %d radio link(s), motion capture: %s", len(self.policy.members),
-                      len(self.policy.broadcaster.links), self.options.mocap)
+                      len(links), self.options.mocap)
 
     # -- services ---------------------------------------------------------------------------------
     def _advertise(self) -> None:

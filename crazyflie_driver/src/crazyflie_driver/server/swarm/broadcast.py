@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.crtp.uri import RadioUri, parse_uri
@@ -157,12 +157,12 @@ class SwarmBroadcaster:
         return self._everywhere(emergency_stop_packet(self.protocol_version))
 
     # -- motion capture ----------------------------------------------------------------------
-    def send_poses(self, poses: Mapping[object, Pose], position_only: bool = False) -> int:
+    def send_poses(self, poses: Mapping[Any, Pose], position_only: bool = False) -> int:
         """One mocap frame: ``poses`` by Crazyflie URI; each link sends, in one burst, the poses of the
         Crazyflies it reaches. Returns the USB transfers made."""
         by_link: Dict[LinkKey, List[tuple]] = {}
         for uri, pose in poses.items():
-            u = parse_uri(uri) if isinstance(uri, str) else uri
+            u: RadioUri = parse_uri(uri) if isinstance(uri, str) else uri
             key = (u.index, u.channel, u.datarate)
             if address_id(u.address) not in self.members.get(key, ()):
                 raise ValueError("%s is not in this swarm" % (u,))

@@ -225,6 +225,7 @@ def _broadcastable(members: Sequence[SwarmMember], names: Sequence[str], lookup:
         if len(types) != 1 or None in types:
             continue
         ctype_name = types.pop()
+        assert ctype_name is not None       # None was excluded above
         try:
             set_by_name_packet(full, ctype_name, value)
         except (ValueError, CrazyflieError):

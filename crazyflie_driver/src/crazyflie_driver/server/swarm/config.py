@@ -295,14 +295,14 @@ def _crazyflies(doc: _Doc, entries: List[Any], types: Dict[str, CrazyflieType], 
             dongle_of[e["channel"]] = next_free
             used.add(next_free)
     out: List[SwarmCrazyflie] = []
-    seen_ids: Dict[int, int] = {}
-    seen_uris: Dict[str, int] = {}
+    seen_ids: Dict[Any, int] = {}
+    seen_uris: Dict[Any, int] = {}
     seen_prefixes: Dict[str, int] = {}
     for e in parsed:
         i, where = e["index"], e["where"]
         uri = e["uri"]
         if uri is None:
-            uri = parse_uri("radio://%d/%d/%s/%s%02X" % (dongle_of[e["channel"]], e["channel"],
+            uri = parse_uri("radio://%d/%d/%s/%s%02X" % (dongle_of[int(e["channel"])], e["channel"],
                                                           DATARATE_NAMES[DEFAULT_DATARATE], ADDRESS_PREFIX, e["id"]))
         key = str(uri)
         # unique ids also keep packed motion capture unambiguous: it names a Crazyflie by its id

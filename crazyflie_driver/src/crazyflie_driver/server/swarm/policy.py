@@ -123,7 +123,7 @@ def height_in_safety(member: SwarmMember, clock: Clock) -> Optional[float]:
     return member.worker.safety.current_height(clock.now())
 
 
-def _daemon(target: Callable[[], None], name: str) -> None:
+def _daemon(target: Callable[[], object], name: str) -> None:
     threading.Thread(target=target, name=name, daemon=True).start()
 
 
@@ -132,7 +132,7 @@ class SwarmPolicy:
     a background task (a daemon thread; a test may run it inline)."""
 
     def __init__(self, server: SwarmServer, options: SwarmOptions, config: SwarmConfig,
-                 spawn: Callable[[Callable[[], None], str], None] = _daemon) -> None:
+                 spawn: Callable[[Callable[[], object], str], None] = _daemon) -> None:
         self.server = server
         self.clock: Clock = server.clock
         self.options = options
@@ -174,7 +174,7 @@ class SwarmPolicy:
             if member is not None:
                 self.members.append(member)
             else:
-                self.failed[cf.tf_prefix] = error
+                self.failed[cf.tf_prefix] = error or "not added"
                 LOG.error("swarm: %s (%s) was not added: %s", cf.tf_prefix, cf.uri, error)
         LOG.info("swarm: %d of %d Crazyflies connected and configured in %.2f s", len(self.members),
                  len(crazyflies), self.connect_s)
@@ -205,8 +205,9 @@ class SwarmPolicy:
             # no motion capture to take the first fix from: the file's initial position
             params.update(initial_position_params(cf.initial_position))
         _, errors = member.worker.update_params(params)
-        for e in errors:
-            LOG.error("swarm: %s: firmware parameter from %s not written: %s", cf.tf_prefix, self.config.source, e)
+        for error in errors:
+            LOG.error("swarm: %s: firmware parameter from %s not written: %s", cf.tf_prefix, self.config.source,
+                      error)
         try:
             if cf.group_mask:
                 member.onboard.set_group_mask(cf.group_mask)

@@ -97,7 +97,8 @@ class SwarmWatch:
                     events.append(WatchEvent(name, "fresh", age))
             if w.land_sent:
                 continue
-            if w.stale_since is not None and now - w.stale_since >= self.hold:
+            if w.stale_since is not None and w.last_pose is not None and now - w.stale_since >= self.hold:
+                # stale_since is only ever set from a pose's time
                 w.land_sent, w.land_reason = True, "no pose for %.2f s" % (now - w.last_pose)
                 events.append(WatchEvent(name, "land", now - w.last_pose, w.land_reason))
             elif w.link_lost_since is not None and now - w.link_lost_since >= self.hold:
