@@ -125,7 +125,8 @@ class WorldServer:
     def remove_crazyflie(self, uri_or_name: str) -> None:
         with self._lock:
             entry = self._find(uri_or_name)
-            self.medium.remove_crazyflie(*entry.key)
+            cf = entry.crazyflie              # where it listens now (its EEPROM may have moved it)
+            self.medium.remove_crazyflie(cf.radio_channel, cf.radio_datarate, cf.address)
             if entry.udp is not None:
                 entry.udp.stop()
             del self._entries[entry.name]
