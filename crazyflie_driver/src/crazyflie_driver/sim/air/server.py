@@ -90,9 +90,10 @@ class WorldServer:
     # --- Crazyflies --------------------------------------------------------------------------
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position: Sequence[float] = (0.0, 0.0, 0.0),
                       firmware: str = "current", yaw: float = 0.0, mocap_to_estimator: bool = False,
-                      platform: str = PLATFORM_CF2) -> SimulatedCrazyflie:
+                      platform: str = PLATFORM_CF2, decks: Sequence[str] = ()) -> SimulatedCrazyflie:
         """A simulated Crazyflie on ``uri``; ``mocap_to_estimator`` switches on the simulator extension
-        that feeds the world's motion capture straight into its estimator (``set_mocap_to_estimator``)."""
+        that feeds the world's motion capture straight into its estimator (``set_mocap_to_estimator``);
+        ``decks``: board names of the decks plugged in (their one-wire memories identify them)."""
         if firmware not in PROFILES:
             raise ValueError("unknown firmware %r for %s (choose one of: %s)" % (firmware, uri, ", ".join(PROFILES)))
         key = key_of(uri)
@@ -107,7 +108,12 @@ class WorldServer:
                 raise ValueError("a simulated Crazyflie is already called %r" % name)
             extra = {"platform": platform} if platform != PLATFORM_CF2 else {}
             vehicle = self.world.add_vehicle(name, position=pos, yaw=float(yaw), firmware=firmware, **extra)
-            cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware, auto_arm=getattr(vehicle, "auto_arm", True))
+            try:
+                cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware, auto_arm=getattr(vehicle, "auto_arm", True),
+                                        decks=tuple(decks))
+            except ValueError:
+                self.world.remove_vehicle(name)
+                raise
             self.medium.add_crazyflie(cf, key[0], key[1])
             entry = SimEntry(uri, name, key, cf)
             if self.udp_base_port is not None:
@@ -281,7 +287,8 @@ class WorldServer:
         uri = a.text("uri")
         self.add_crazyflie(uri, a.text("name", None), a.args.get("position") or (0.0, 0.0, 0.0),
                            a.text("firmware", "current"), mocap_to_estimator=a.flag("mocap_to_estimator", False),
-                           platform=a.text("platform", PLATFORM_CF2))
+                           platform=a.text("platform", PLATFORM_CF2),
+                           decks=[str(d) for d in a.args.get("decks") or ()])
         return self._find(uri).describe()
 
     def _op_remove_crazyflie(self, a: ControlArgs) -> None:
@@ -639,7 +646,8 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         for i, v in enumerate(vehicles):
             pos = v.get("position") or (0.5 * i, 0.0, 0.0)
             server.add_crazyflie(str(v["uri"]), v.get("name"), pos, str(v.get("firmware") or args.firmware),
-                                 float(v.get("yaw") or 0.0), platform=str(v.get("platform") or PLATFORM_CF2))
+                                 float(v.get("yaw") or 0.0), platform=str(v.get("platform") or PLATFORM_CF2),
+                                 decks=[str(d) for d in v.get("decks") or ()])
         for name in args.usb:
             server.plug_usb(name)
         server.start()
