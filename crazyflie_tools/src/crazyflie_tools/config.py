@@ -13,13 +13,7 @@ from crazyflie_driver.crtp import config_block as cb
 
 from .common import open_crazyflie, parser, run
 
-RATES = {name: code for code, name in cb.DATARATES.items()}
-
-
-def describe(block: cb.ConfigBlock) -> str:
-    return ("channel %d, data rate %s, address %s, pitch trim %g, roll trim %g"
-            % (block.channel, cb.DATARATES.get(block.datarate, str(block.datarate)),
-               block.address_bytes.hex().upper(), block.pitch_trim, block.roll_trim))
+describe = cb.describe
 
 
 def changed(block: cb.ConfigBlock, args) -> cb.ConfigBlock:
@@ -28,14 +22,9 @@ def changed(block: cb.ConfigBlock, args) -> cb.ConfigBlock:
     if args.channel is not None:
         fields["channel"] = args.channel
     if args.datarate is not None:
-        if args.datarate not in RATES:
-            raise ValueError("--datarate must be one of %s, got %r" % (", ".join(RATES), args.datarate))
-        fields["datarate"] = RATES[args.datarate]
+        fields["datarate"] = cb.parse_datarate(args.datarate)
     if args.address is not None:
-        try:
-            fields["address"] = int(args.address, 16)
-        except ValueError:
-            raise ValueError("--address must be 10 hex digits such as E7E7E7E7E7, got %r" % args.address) from None
+        fields["address"] = cb.parse_address(args.address)
     if args.pitch_trim is not None:
         fields["pitch_trim"] = args.pitch_trim
     if args.roll_trim is not None:

@@ -45,7 +45,7 @@ def test_config_reads_writes_and_takes_effect_after_reboot(sim, capsys):  # noqa
 
 @pytest.mark.parametrize("argv,says", [
     (["--channel", "126"], "channel 126 is out of range"),
-    (["--datarate", "3M"], "--datarate must be one of"),
+    (["--datarate", "3M"], "data rate '3M' is unknown"),
     (["--address", "XYZ"], "10 hex digits"),
 ])
 def test_config_refuses_bad_values_in_one_line_and_writes_nothing(sim, capsys, argv, says):  # noqa: F811

@@ -24,6 +24,7 @@ from __future__ import annotations
 import struct
 from typing import NamedTuple
 
+from crazyflie_driver.crtp.uri import DATARATE_NAMES
 from crazyflie_driver.errors import ConfigBlockError
 
 MAGIC = b"0xBC"
@@ -38,7 +39,7 @@ _V0 = struct.Struct("<4sBBBff")
 SIZE = _V1.size + 1
 SIZE_V0 = _V0.size + 1
 MAX_CHANNEL = 125
-DATARATES = {0: "250K", 1: "1M", 2: "2M"}
+DATARATES = dict(enumerate(DATARATE_NAMES))
 #: Factory settings: channel 80, 2 Mbit/s, address 0xE7E7E7E7E7, no trims.
 DEFAULT_CHANNEL = 80
 DEFAULT_DATARATE = 2
@@ -108,3 +109,30 @@ def decode(data: bytes) -> ConfigBlock:
         return ConfigBlock(channel, rate, pitch, roll, DEFAULT_ADDRESS)
     _, _, channel, rate, pitch, roll, upper, lower = _V1.unpack_from(data)
     return ConfigBlock(channel, rate, pitch, roll, upper << 32 | lower)
+
+
+def parse_datarate(text: str) -> int:
+    """``"250K"``/``"1M"``/``"2M"`` (any case) -> the block's code 0/1/2."""
+    names = [n.upper() for n in DATARATE_NAMES]
+    if str(text).strip().upper() not in names:
+        raise ConfigBlockError("radio data rate %r is unknown: use one of %s" % (text, ", ".join(DATARATE_NAMES)))
+    return names.index(str(text).strip().upper())
+
+
+def parse_address(text: str) -> int:
+    """10 hex digits (``E7E7E7E7E7``, optional 0x) -> the 40-bit address."""
+    digits = str(text).strip()
+    digits = digits[2:] if digits.lower().startswith("0x") else digits
+    try:
+        if len(digits) != 10:
+            raise ValueError
+        return int(digits, 16)
+    except ValueError:
+        raise ConfigBlockError("radio address %r is not 10 hex digits such as E7E7E7E7E7" % text) from None
+
+
+def describe(block: ConfigBlock) -> str:
+    """One line for people: every field with its unit."""
+    return ("channel %d, data rate %s, address %s, pitch trim %g, roll trim %g"
+            % (block.channel, DATARATES.get(block.datarate, str(block.datarate)),
+               block.address_bytes.hex().upper(), block.pitch_trim, block.roll_trim))

@@ -603,6 +603,9 @@ class SimulatedCrazyflie:
                 "tx_last_wait_s": s.tx_last_wait_s,
                 "safelink": self.link.safelink,
                 "reboots": s.reboots,
+                "radio": {"channel": self.radio_channel, "datarate": self.radio_datarate},
+                "config_block": self.config_block()._asdict(),
+                "decks": list(self.decks),
                 "uptime_ms": self.timestamp_ms(),
                 "params_changed": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)
                                    if self.params.values[i] != self.params.default_of(i)},
