@@ -126,3 +126,13 @@ def test_plugged_decks_come_first_as_one_wire_memories_cflib_can_parse():
 def test_an_unknown_deck_is_refused_with_the_known_names():
     with pytest.raises(ValueError, match="bcFlow2"):
         make(decks=("bcNoSuchDeck",))
+
+
+def test_world_config_plugs_decks_and_names_the_known_ones(tmp_path):
+    from crazyflie_driver.sim.air.server import load_vehicle_config
+    good = tmp_path / "v.yaml"
+    good.write_text("- uri: radio://0/80/2M/E7E7E7E701\n  decks: [bcFlow2, bcMultiranger]\n")
+    assert load_vehicle_config(str(good))[0]["decks"] == ["bcFlow2", "bcMultiranger"]
+    good.write_text("- uri: radio://0/80/2M/E7E7E7E701\n  decks: [bcFlow3]\n")
+    with pytest.raises(ValueError, match="decks must be a list of deck names out of bcDWM1000"):
+        load_vehicle_config(str(good))

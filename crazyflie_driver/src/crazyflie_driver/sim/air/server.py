@@ -34,6 +34,7 @@ from crazyflie_driver.sim.air.faults import (
 )
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
+from crazyflie_driver.sim.firmware.memory_port import DECKS
 from crazyflie_driver.sim.world import battery as battery_model
 from crazyflie_driver.sim.world.mocap_feed import MocapEstimatorFeed
 from crazyflie_driver.sim.world.pacing import parse_pacing, start_pacing
@@ -546,7 +547,8 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
     for i, item in enumerate(items):
         if not isinstance(item, dict) or "uri" not in item:
             raise ValueError("vehicle config %s: entry %d needs at least a 'uri'" % (path, i + 1))
-        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator", "platform"}
+        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator", "platform",
+                               "decks"}
         if unknown:
             raise ValueError("vehicle config %s: entry %d has unknown keys %s" % (path, i + 1, sorted(unknown)))
         if not isinstance(item.get("mocap_to_estimator", False), bool):
@@ -556,6 +558,10 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
         if item.get("platform", PLATFORM_CF2) not in PLATFORMS:
             raise ValueError("vehicle config %s: entry %d: platform must be one of %s (brushless: must be armed "
                              "before its motors spin), got %r" % (path, i + 1, ", ".join(PLATFORMS), item["platform"]))
+        decks = item.get("decks", [])
+        if not isinstance(decks, list) or any(d not in DECKS for d in decks):
+            raise ValueError("vehicle config %s: entry %d: decks must be a list of deck names out of %s, got %r"
+                             % (path, i + 1, ", ".join(sorted(DECKS)), decks))
         out.append(dict(item))
     return out
 
