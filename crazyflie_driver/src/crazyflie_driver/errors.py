@@ -106,3 +106,7 @@ class SwarmConfigError(CrazyflieError, ValueError):
 
 class FirmwareTableError(CrazyflieError, ValueError):
     """A simulated firmware variable table that cannot be loaded; the message names the file, the line and the fix."""
+
+
+class ConfigBlockError(CrazyflieError, ValueError):
+    """Bytes that are not a valid EEPROM configuration block, or values one cannot hold."""

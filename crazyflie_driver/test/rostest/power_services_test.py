@@ -6,6 +6,8 @@ crazyflie1: a parameter is set, then the Crazyflie is rebooted through ``reboot`
 itself, sets the parameter again and creates its log blocks again: the battery topic flows again.
 crazyflie2, a Brushless Crazyflie: a takeoff before ``arm`` leaves its motors at 0 on the floor; armed,
 its motors idle, it takes off to 0.5 m, lands, and disarmed its motors stop.
+crazyflie2's EEPROM configuration is read and written through ``read_config``/``write_config``: the
+simulated firmware holds the written block, a bad channel is refused and changes nothing.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from std_srvs.srv import Empty
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
-from crazyflie_driver.srv import Arm, Land, Stop, Takeoff, UpdateParams  # noqa: E402
+from crazyflie_driver.srv import Arm, Land, ReadConfig, Stop, Takeoff, UpdateParams, WriteConfig  # noqa: E402
 from support.rostest_support import Repeating, TopicRecorder, start_test_node, wait_connected, wait_until  # noqa: E402
 
 URIS = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702"}
@@ -37,7 +39,7 @@ class PowerServices(unittest.TestCase):
         cls.world = start_test_node("power_services_test", list(URIS))
         cls.clock = WorldClock(cls.world.ping)
         for name in URIS:
-            for s in ("arm", "recover", "reboot", "power_off", "power_on"):
+            for s in ("arm", "recover", "reboot", "power_off", "power_on", "read_config", "write_config"):
                 rospy.wait_for_service("/%s/%s" % (name, s), 10.0)
         cls.battery = TopicRecorder("/crazyflie1/battery", Float32)
         cls.mocap = rospy.Publisher("/crazyflie2/external_position", PointStamped, queue_size=1)
@@ -86,6 +88,21 @@ class PowerServices(unittest.TestCase):
         self.assertTrue(wait_until(set_up_again, 15.0), self.firmware("crazyflie1"))
         self.assertTrue(wait_until(lambda: len(self.battery.since(rebooted_at)) > 5, 10.0),
                         "the battery topic did not flow again after the reboot")
+
+    def test_c_config_block_read_and_written(self):
+        read = rospy.ServiceProxy("/crazyflie2/read_config", ReadConfig)
+        write = rospy.ServiceProxy("/crazyflie2/write_config", WriteConfig)
+        got = read()
+        self.assertEqual((got.channel, got.datarate, got.address), (80, "2M", "E7E7E7E702"))
+        answer = write(channel=80, datarate="2M", address="E7E7E7E702", pitch_trim=-0.5, roll_trim=1.5)
+        self.assertEqual(answer.uri_after_reboot, URIS["crazyflie2"])
+        block = self.firmware("crazyflie2")["config_block"]
+        self.assertEqual((block["channel"], block["datarate"], block["address"], block["pitch_trim"],
+                          block["roll_trim"]), (80, 2, 0xE7E7E7E702, -0.5, 1.5))
+        with self.assertRaisesRegex(rospy.ServiceException, "channel 126 is out of range"):
+            write(channel=126, datarate="2M", address="E7E7E7E702", pitch_trim=0.0, roll_trim=0.0)
+        self.assertEqual(self.firmware("crazyflie2")["config_block"]["channel"], 80)
+        self.assertEqual(read().roll_trim, 1.5)
 
     def motors(self, name):
         return self.truth(name)["motors"]

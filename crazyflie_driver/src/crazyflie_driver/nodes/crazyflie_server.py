@@ -38,7 +38,7 @@ from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.nodes.swarm_ros import start_swarm
-from crazyflie_driver.server import power_control, radio_budget
+from crazyflie_driver.server import memory_config, power_control, radio_budget
 from crazyflie_driver.server.add_config import check_config
 from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
 from crazyflie_driver.server.diagnostics import (
@@ -74,10 +74,14 @@ from crazyflie_driver.srv import (
     AddCrazyflieResponse,
     Arm,
     ArmResponse,
+    ReadConfig,
+    ReadConfigResponse,
     RemoveCrazyflie,
     RemoveCrazyflieResponse,
     UpdateParams,
     UpdateParamsResponse,
+    WriteConfig,
+    WriteConfigResponse,
 )
 
 GRAVITY = 9.81
@@ -179,6 +183,9 @@ class RosCrazyflie(WorkerListener):
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
         self._services.append(rospy.Service(name(power_control.ARM_SERVICE), Arm, self._on_arm))
+        self._services.append(rospy.Service(name(memory_config.READ_CONFIG_SERVICE), ReadConfig, self._on_read_config))
+        self._services.append(rospy.Service(name(memory_config.WRITE_CONFIG_SERVICE), WriteConfig,
+                                            self._on_write_config))
         for service, call in ((power_control.RECOVER_SERVICE, worker.recover),
                               (power_control.REBOOT_SERVICE, worker.reboot),
                               (power_control.POWER_OFF_SERVICE, worker.power_off),
@@ -265,6 +272,21 @@ class RosCrazyflie(WorkerListener):
         except CrazyflieError as e:
             raise rospy.ServiceException(str(e)) from e
         return ArmResponse()
+
+    def _on_read_config(self, _req) -> ReadConfigResponse:
+        try:
+            return ReadConfigResponse(*memory_config.fields_of(self._attached().read_config()))
+        except CrazyflieError as e:
+            raise rospy.ServiceException("%s: %s" % (memory_config.READ_CONFIG_SERVICE, e)) from e
+
+    def _on_write_config(self, req) -> WriteConfigResponse:
+        try:
+            block = memory_config.block_of(memory_config.ConfigFields(
+                req.channel, req.datarate, req.address, req.pitch_trim, req.roll_trim))
+            self._attached().write_config(block)
+        except CrazyflieError as e:
+            raise rospy.ServiceException("%s: %s" % (memory_config.WRITE_CONFIG_SERVICE, e)) from e
+        return WriteConfigResponse(memory_config.uri_after_reboot(self.config.uri, block))
 
     def _empty_service(self, service: str, call: Callable[[], None]) -> Callable[[Any], EmptyResponse]:
         """A std_srvs/Empty handler: the worker's refusal or failure becomes the service's error."""

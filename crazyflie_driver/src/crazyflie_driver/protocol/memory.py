@@ -7,10 +7,12 @@ Writes are idempotent (same bytes at the same address), so a lost reply is simpl
 from __future__ import annotations
 
 import struct
-from typing import Callable, List, NamedTuple, Optional
+import zlib
+from typing import Callable, Dict, List, NamedTuple, Optional
 
+from crazyflie_driver.crtp import config_block
 from crazyflie_driver.crtp.packet import PORT_MEM, CRTPPacket
-from crazyflie_driver.errors import CommandRejected, ProtocolError
+from crazyflie_driver.errors import CommandRejected, NotSupported, ProtocolError
 
 CH_INFO = 0
 CH_READ = 1
@@ -18,8 +20,20 @@ CH_WRITE = 2
 CMD_NUMBER = 1
 CMD_DETAILS = 2
 
-#: Memory type of the high-level commander's trajectory memory.
+#: Memory types (the firmware's MemoryType_t): the EEPROM, a deck's one-wire memory, the
+#: high-level commander's trajectory memory.
+TYPE_EEPROM = config_block.MEMORY_TYPE_EEPROM
+TYPE_ONE_WIRE = 0x01
 TYPE_TRAJECTORY = 0x12
+#: Names of the memory types a Crazyflie may list (for listings; unknown types print as numbers).
+TYPE_NAMES: Dict[int, str] = {
+    0x00: "EEPROM", 0x01: "1-wire", 0x10: "LED ring", 0x11: "Loco", 0x12: "trajectory", 0x13: "Loco 2",
+    0x14: "Lighthouse", 0x15: "memory tester", 0x16: "uSD", 0x17: "LED timing", 0x18: "app",
+    0x19: "deck memory", 0x1A: "Multi-ranger", 0x1B: "PAA3905", 0x20: "deck ctrl DFU", 0x21: "deck ctrl",
+}
+#: Bytes of a deck's one-wire memory read first: the 8-byte header, the elements' version and length.
+ONE_WIRE_HEAD = 10
+ONE_WIRE_MAGIC = 0xEB
 #: Bytes of data per read/write packet (30-byte payload minus id and u32 address, rounded to 4).
 CHUNK = 24
 _DETAILS = struct.Struct("<BBBI8s")
@@ -55,6 +69,39 @@ def read_packet(mem_id: int, address: int, length: int) -> CRTPPacket:
     if not 0 < length <= CHUNK:
         raise ValueError("a memory read asks for 1..%d bytes, got %d" % (CHUNK, length))
     return CRTPPacket(PORT_MEM, CH_READ, _ADDRESS.pack(mem_id, address) + bytes([length]))
+
+
+class DeckInfo(NamedTuple):
+    """A deck as its one-wire memory names it."""
+
+    vid: int
+    pid: int
+    name: str
+    revision: str
+
+
+def type_name(kind: int) -> str:
+    return TYPE_NAMES.get(kind, "type 0x%02X" % kind)
+
+
+def parse_one_wire(data: bytes) -> DeckInfo:
+    """The deck described by the first bytes of a one-wire memory: header ``[0xEB, used pins u32, vid,
+    pid, crc]`` then ``[version, length, (id, len, text)…, crc]`` (element 1 board name, 2 revision);
+    each crc is the low byte of the CRC-32 of its part. ProtocolError when a part does not check."""
+    data = bytes(data)
+    if len(data) < 10 or data[0] != ONE_WIRE_MAGIC or zlib.crc32(data[:7]) & 0xFF != data[7]:
+        raise ProtocolError("one-wire memory has no valid deck header: %s" % data[:8].hex(" "))
+    vid, pid = data[5], data[6]
+    end = 10 + data[9]
+    if len(data) < end + 1 or zlib.crc32(data[8:end]) & 0xFF != data[end]:
+        raise ProtocolError("one-wire memory of deck 0x%02X:0x%02X has broken elements" % (vid, pid))
+    texts: Dict[int, str] = {}
+    at = 10
+    while at + 2 <= end:
+        ident, size = data[at], data[at + 1]
+        texts[ident] = data[at + 2:at + 2 + size].decode("latin-1")
+        at += 2 + size
+    return DeckInfo(vid, pid, texts.get(1, ""), texts.get(2, ""))
 
 
 def parse_details(data: bytes) -> MemoryInfo:
@@ -104,6 +151,43 @@ class MemoryClient:
             if info.type == kind:
                 return info
         return None
+
+    def _eeprom(self) -> MemoryInfo:
+        info = self.find(TYPE_EEPROM)
+        if info is None:
+            raise NotSupported("%s lists no EEPROM memory (type 0x00): this Crazyflie keeps no "
+                               "configuration block" % self.label)
+        return info
+
+    def read_config(self) -> config_block.ConfigBlock:
+        """The EEPROM's configuration block; ConfigBlockError when it is not valid (the firmware then
+        runs on the defaults)."""
+        info = self._eeprom()
+        head = self.read(info.id, 0, config_block.SIZE_V0)
+        if len(head) > 4 and head[4] >= 1:
+            head += self.read(info.id, config_block.SIZE_V0, config_block.SIZE - config_block.SIZE_V0)
+        return config_block.decode(head)
+
+    def write_config(self, block: config_block.ConfigBlock) -> None:
+        """Write ``block`` as a version 1 block (the firmware takes it at its next boot); read back
+        and compared, so a write the EEPROM lost is reported, not assumed."""
+        info = self._eeprom()
+        image = config_block.encode(block)
+        self.write(info.id, 0, image)
+        back = self.read(info.id, 0, len(image))
+        if back != image:
+            raise CommandRejected("%s: the EEPROM reads back %s after writing %s: write the configuration again"
+                                  % (self.label, back.hex(" "), image.hex(" ")))
+
+    def decks(self) -> List[DeckInfo]:
+        """The decks plugged in, one per one-wire memory."""
+        out = []
+        for info in self.memories():
+            if info.type == TYPE_ONE_WIRE:
+                head = self.read(info.id, 0, ONE_WIRE_HEAD)
+                rest = min(head[9] + 1, info.size - ONE_WIRE_HEAD) if head[0] == ONE_WIRE_MAGIC else 0
+                out.append(parse_one_wire(head + (self.read(info.id, ONE_WIRE_HEAD, rest) if rest > 0 else b"")))
+        return out
 
     def write(self, mem_id: int, address: int, data: bytes) -> None:
         """Write ``data`` at ``address``, chunk by chunk; CommandRejected when a chunk is refused."""

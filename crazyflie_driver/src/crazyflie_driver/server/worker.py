@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
+from crazyflie_driver.crtp import config_block as cb
 from crazyflie_driver.crtp.firmware_limits import SETPOINT_WATCHDOG_CUT_S
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import (
@@ -381,6 +382,21 @@ class CrazyflieWorker:
         if not self.cf.supervisor.arm(do_arm):
             raise CommandRejected("%s: the Crazyflie refused to %s (its supervisor is locked or crashed: see its "
                                   "status)" % (self.uri, "arm" if do_arm else "disarm"))
+
+    def read_config(self) -> cb.ConfigBlock:
+        """The EEPROM configuration block; CommandRejected while the link does not run."""
+        offline = self._offline()
+        if offline:
+            raise CommandRejected("%s: cannot read its configuration: %s" % (self.uri, offline))
+        return self.cf.memory.read_config()
+
+    def write_config(self, block: cb.ConfigBlock) -> None:
+        """Write the EEPROM configuration block (taken by the firmware at its next boot)."""
+        cb.check(block)
+        offline = self._offline()
+        if offline:
+            raise CommandRejected("%s: cannot write its configuration: %s" % (self.uri, offline))
+        self.cf.memory.write_config(block)
 
     def recover(self) -> None:
         """Leave the crashed state (after a tumble); CommandRejected when refused or still upside down."""

@@ -90,15 +90,6 @@ def test_platform_versions(fw, proto, version, devtype):
     assert ask(cf, b"\xdd\x09") == []
 
 
-def test_memories_current_has_the_trajectory_memory_2016_none():
-    cf, _ = make()
-    assert one(cf, b"\x4c\x01") == b"\x4c\x01\x01"
-    assert one(cf, b"\x4c\x02\x00") == b"\x4c\x02\x00\x12" + struct.pack("<I", 4096) + bytes(8)
-    assert one(cf, b"\x4c\x02\x01") == b"\x4c\x02\x01"                   # no such memory: short reply
-    old, _ = make("2016.02")
-    assert one(old, b"\x4c\x01") == b"\x4c\x01\x00"
-
-
 # --- parameters -------------------------------------------------------------------------------
 def chained_crc(items):
     crc = 0

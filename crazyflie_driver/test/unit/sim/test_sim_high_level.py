@@ -12,6 +12,8 @@ from test_sim_onboard_flight import Rig
 from crazyflie_driver.sim.firmware.trajectory_memory import POLY4D_PIECE
 from crazyflie_driver.sim.world.planner import Evaluation, Piece, Plan, evaluate, online_piece, poly7_nojerk
 
+TRAJ_MEM = 1      # memory id: the EEPROM is memory 0
+
 
 def test_poly7_nojerk_meets_its_constraints():
     c = poly7_nojerk(2.0, (0.1, 0.3, -0.2), (1.5, 0.0, 0.0))
@@ -209,10 +211,10 @@ def test_trajectory_upload_define_start_and_errors():
     rig = Rig()
     data = b"".join(POLY4D_PIECE.pack(*c.reshape(-1), d) for d, c in figure_eight_pieces())
     for offset in range(0, len(data), 24):                           # memory writes, 24 bytes each
-        header = bytes([0]) + struct.pack("<I", offset)
+        header = bytes([TRAJ_MEM]) + struct.pack("<I", offset)
         assert ask(rig, 4, 2, header + data[offset:offset + 24]) == b"\x4e" + header + b"\x00"
-    assert ask(rig, 4, 2, bytes([0]) + struct.pack("<I", 4090) + bytes(8))[-1] == 5    # past the end: EIO
-    assert ask(rig, 4, 1, bytes([0]) + struct.pack("<IB", 132, 20))[6:] == b"\x00" + data[132:152]   # read back
+    assert ask(rig, 4, 2, bytes([TRAJ_MEM]) + struct.pack("<I", 4090) + bytes(8))[-1] == 5    # past the end: EIO
+    assert ask(rig, 4, 1, bytes([TRAJ_MEM]) + struct.pack("<IB", 132, 20))[6:] == b"\x00" + data[132:152]   # read back
     assert hl(rig, struct.pack("<BBBBIB", 6, 31, 1, 0, 0, 4))[-1] == 8    # id out of range: ENOEXEC
     assert hl(rig, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 3, 1.0))[-1] == 8   # undefined: ENOEXEC
     assert hl(rig, struct.pack("<BBBBIB", 6, 3, 1, 0, 4000, 4))[-1] == 0       # defined, overflowing
@@ -248,7 +250,7 @@ def test_mellinger_tracks_the_figure_eight_with_feed_forward():
         pieces = figure_eight(0.6, 0.3, 6.0, 6, 0.5)
         data = b"".join(POLY4D_PIECE.pack(*p.coeffs.reshape(-1), p.duration) for p in pieces)
         for offset in range(0, len(data), 24):
-            ask(rig, 4, 2, bytes([0]) + struct.pack("<I", offset) + data[offset:offset + 24])
+            ask(rig, 4, 2, bytes([TRAJ_MEM]) + struct.pack("<I", offset) + data[offset:offset + 24])
         hl(rig, struct.pack("<BBBBIB", 6, 1, 1, 0, 0, len(pieces)))
         assert hl(rig, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 1, 1.0))[-1] == 0
         plan = Plan(1, pieces, rig.world.time)

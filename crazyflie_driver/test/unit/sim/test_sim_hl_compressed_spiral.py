@@ -16,6 +16,8 @@ from crazyflie_driver.protocol.trajectory import make_piece, pack_compressed
 from crazyflie_driver.sim.firmware.trajectory_memory import MEMORY_SIZE, decode_compressed
 from crazyflie_driver.sim.world.planner import Piece, Plan, figure_eight
 
+TRAJ_MEM = 1      # memory id: the EEPROM is memory 0
+
 ENOEXEC = 8
 
 
@@ -25,7 +27,7 @@ def host_pieces(pieces):
 
 def upload(rig, data, offset=0):
     for at in range(0, len(data), 24):
-        header = bytes([0]) + struct.pack("<I", offset + at)
+        header = bytes([TRAJ_MEM]) + struct.pack("<I", offset + at)
         assert ask(rig, 4, 2, header + data[at:at + 24])[-1] == 0
 
 

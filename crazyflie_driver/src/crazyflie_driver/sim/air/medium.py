@@ -111,7 +111,22 @@ class LocalMedium:
                                  % (key[0], key[1], key[2].hex().upper()))
             self._crazyflies[key] = crazyflie
             self._rssi[key] = rssi or RssiModel(mean_dbm=crazyflie.rssi_dbm)
+        bind = getattr(crazyflie, "bind_radio", None)
+        if bind is not None:
+            bind(key[0], key[1], lambda ch, dr, addr: self._move(crazyflie, (int(ch), int(dr), bytes(addr))))
         return key
+
+    def _move(self, crazyflie, new: Key) -> bool:
+        """A Crazyflie booted with other radio settings (its EEPROM changed): it now listens on
+        ``new``; False, and nothing moved, when another Crazyflie already listens there."""
+        with self._lock:
+            old = next((k for k, c in self._crazyflies.items() if c is crazyflie), None)
+            if old is None or (new in self._crazyflies and self._crazyflies[new] is not crazyflie):
+                return False
+            del self._crazyflies[old]
+            self._crazyflies[new] = crazyflie
+            self._rssi[new] = self._rssi.pop(old)
+        return True
 
     def remove_crazyflie(self, channel: int, datarate: int, address: bytes):
         key = (int(channel), int(datarate), bytes(address))

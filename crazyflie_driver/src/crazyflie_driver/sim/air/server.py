@@ -34,6 +34,7 @@ from crazyflie_driver.sim.air.faults import (
 )
 from crazyflie_driver.sim.air.medium import DEFAULT_HOST, DEFAULT_PORT, LocalMedium, key_of, parse_address
 from crazyflie_driver.sim.firmware.firmware import PROFILES, SimulatedCrazyflie
+from crazyflie_driver.sim.firmware.memory_port import DECKS
 from crazyflie_driver.sim.world import battery as battery_model
 from crazyflie_driver.sim.world.mocap_feed import MocapEstimatorFeed
 from crazyflie_driver.sim.world.pacing import parse_pacing, start_pacing
@@ -90,9 +91,10 @@ class WorldServer:
     # --- Crazyflies --------------------------------------------------------------------------
     def add_crazyflie(self, uri: str, name: Optional[str] = None, position: Sequence[float] = (0.0, 0.0, 0.0),
                       firmware: str = "current", yaw: float = 0.0, mocap_to_estimator: bool = False,
-                      platform: str = PLATFORM_CF2) -> SimulatedCrazyflie:
+                      platform: str = PLATFORM_CF2, decks: Sequence[str] = ()) -> SimulatedCrazyflie:
         """A simulated Crazyflie on ``uri``; ``mocap_to_estimator`` switches on the simulator extension
-        that feeds the world's motion capture straight into its estimator (``set_mocap_to_estimator``)."""
+        that feeds the world's motion capture straight into its estimator (``set_mocap_to_estimator``);
+        ``decks``: board names of the decks plugged in (their one-wire memories identify them)."""
         if firmware not in PROFILES:
             raise ValueError("unknown firmware %r for %s (choose one of: %s)" % (firmware, uri, ", ".join(PROFILES)))
         key = key_of(uri)
@@ -107,7 +109,12 @@ class WorldServer:
                 raise ValueError("a simulated Crazyflie is already called %r" % name)
             extra = {"platform": platform} if platform != PLATFORM_CF2 else {}
             vehicle = self.world.add_vehicle(name, position=pos, yaw=float(yaw), firmware=firmware, **extra)
-            cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware, auto_arm=getattr(vehicle, "auto_arm", True))
+            try:
+                cf = SimulatedCrazyflie(key[2], vehicle, firmware=firmware, auto_arm=getattr(vehicle, "auto_arm", True),
+                                        decks=tuple(decks))
+            except ValueError:
+                self.world.remove_vehicle(name)
+                raise
             self.medium.add_crazyflie(cf, key[0], key[1])
             entry = SimEntry(uri, name, key, cf)
             if self.udp_base_port is not None:
@@ -125,7 +132,8 @@ class WorldServer:
     def remove_crazyflie(self, uri_or_name: str) -> None:
         with self._lock:
             entry = self._find(uri_or_name)
-            self.medium.remove_crazyflie(*entry.key)
+            cf = entry.crazyflie              # where it listens now (its EEPROM may have moved it)
+            self.medium.remove_crazyflie(cf.radio_channel, cf.radio_datarate, cf.address)
             if entry.udp is not None:
                 entry.udp.stop()
             del self._entries[entry.name]
@@ -280,7 +288,8 @@ class WorldServer:
         uri = a.text("uri")
         self.add_crazyflie(uri, a.text("name", None), a.args.get("position") or (0.0, 0.0, 0.0),
                            a.text("firmware", "current"), mocap_to_estimator=a.flag("mocap_to_estimator", False),
-                           platform=a.text("platform", PLATFORM_CF2))
+                           platform=a.text("platform", PLATFORM_CF2),
+                           decks=[str(d) for d in a.args.get("decks") or ()])
         return self._find(uri).describe()
 
     def _op_remove_crazyflie(self, a: ControlArgs) -> None:
@@ -538,7 +547,8 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
     for i, item in enumerate(items):
         if not isinstance(item, dict) or "uri" not in item:
             raise ValueError("vehicle config %s: entry %d needs at least a 'uri'" % (path, i + 1))
-        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator", "platform"}
+        unknown = set(item) - {"uri", "name", "position", "firmware", "yaw", "mocap_to_estimator", "platform",
+                               "decks"}
         if unknown:
             raise ValueError("vehicle config %s: entry %d has unknown keys %s" % (path, i + 1, sorted(unknown)))
         if not isinstance(item.get("mocap_to_estimator", False), bool):
@@ -548,6 +558,10 @@ def load_vehicle_config(path: str) -> List[Dict[str, Any]]:
         if item.get("platform", PLATFORM_CF2) not in PLATFORMS:
             raise ValueError("vehicle config %s: entry %d: platform must be one of %s (brushless: must be armed "
                              "before its motors spin), got %r" % (path, i + 1, ", ".join(PLATFORMS), item["platform"]))
+        decks = item.get("decks", [])
+        if not isinstance(decks, list) or any(d not in DECKS for d in decks):
+            raise ValueError("vehicle config %s: entry %d: decks must be a list of deck names out of %s, got %r"
+                             % (path, i + 1, ", ".join(sorted(DECKS)), decks))
         out.append(dict(item))
     return out
 
@@ -638,7 +652,8 @@ def main(argv: Optional[Sequence[str]] = None, read_swarm: Optional[SwarmReader]
         for i, v in enumerate(vehicles):
             pos = v.get("position") or (0.5 * i, 0.0, 0.0)
             server.add_crazyflie(str(v["uri"]), v.get("name"), pos, str(v.get("firmware") or args.firmware),
-                                 float(v.get("yaw") or 0.0), platform=str(v.get("platform") or PLATFORM_CF2))
+                                 float(v.get("yaw") or 0.0), platform=str(v.get("platform") or PLATFORM_CF2),
+                                 decks=[str(d) for d in v.get("decks") or ()])
         for name in args.usb:
             server.plug_usb(name)
         server.start()

@@ -15,8 +15,9 @@ import logging
 import threading
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable, Deque, Dict, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple, Union
 
+from crazyflie_driver.crtp import config_block as cb
 from crazyflie_driver.crtp.nrf_system import (
     RESET_TO_FIRMWARE,
     SYS_ALL_OFF,
@@ -32,9 +33,10 @@ from crazyflie_driver.sim.firmware.decoded_values import DecodedValues, trajecto
 from crazyflie_driver.sim.firmware.high_level_port import ENOEXEC, high_level_port
 from crazyflie_driver.sim.firmware.link import NrfLink
 from crazyflie_driver.sim.firmware.log import LogService
+from crazyflie_driver.sim.firmware.memory_port import DECKS, Memory, deck_memory, eeprom, memory_port
 from crazyflie_driver.sim.firmware.param import ParamService
 from crazyflie_driver.sim.firmware.state import SimState
-from crazyflie_driver.sim.firmware.trajectory_memory import TrajectoryMemory, trajectory_memory_port
+from crazyflie_driver.sim.firmware.trajectory_memory import TrajectoryMemory
 
 _log = logging.getLogger(__name__)
 
@@ -76,9 +78,20 @@ class SimulatedCrazyflie:
 
     def __init__(self, address: bytes, vehicle: Any, firmware: str = T.GEN_CURRENT,
                  rssi_dbm: float = -40.0, param_table: Optional[Sequence[T.ParamVar]] = None,
-                 log_table: Optional[Sequence[T.LogVar]] = None, auto_arm: bool = True) -> None:
-        """``auto_arm`` False: a platform that must be armed before its motors spin (a Brushless one)."""
+                 log_table: Optional[Sequence[T.LogVar]] = None, auto_arm: bool = True,
+                 decks: Sequence[str] = ()) -> None:
+        """``auto_arm`` False: a platform that must be armed before its motors spin (a Brushless one).
+        ``decks``: board names (memory_port.DECKS) of the decks plugged in, one one-wire memory each."""
         self.address = bytes(address)
+        unknown = [d for d in decks if d not in DECKS]
+        if unknown:
+            raise ValueError("unknown deck %s: use one of %s" % (", ".join(unknown), ", ".join(sorted(DECKS))))
+        self.decks = tuple(decks)
+        # The radio settings in force (set by the medium that carries this Crazyflie) and the EEPROM,
+        # which keeps its bytes across reboots; ``_radio_moved`` tells the medium of new settings.
+        self.radio_channel, self.radio_datarate = cb.DEFAULT_CHANNEL, cb.DEFAULT_DATARATE
+        self.eeprom = eeprom(cb.ConfigBlock(address=int.from_bytes(self.address, "big")))
+        self._radio_moved: Optional[Callable[[int, int, bytes], bool]] = None
         self.auto_arm = bool(auto_arm)
         self.vehicle = vehicle
         self.profile = profile_for(firmware)
@@ -117,9 +130,13 @@ class SimulatedCrazyflie:
         def hook(name: str, *args) -> bool:
             decoded.observe(name, args)
             return vehicle_hook(name, *args)
+        self._apply_config_block()
         self.trajectory_memory = TrajectoryMemory()           # RAM: empty after every boot
-        memory = trajectory_memory_port(self.send, self.trajectory_memory) if 8 in profile.ports \
-            else ports.memory_port(self.send)
+        self.memories: List[Memory] = [deck_memory(DECKS[name], slot) for slot, name in enumerate(self.decks)]
+        self.memories.append(self.eeprom)
+        if 8 in profile.ports:
+            self.memories.append(self.trajectory_memory)  # type: ignore[arg-type]
+        memory = memory_port(self.send, self.memories)
         handlers = {
             2: self.params.handle,
             3: ports.commander_port(state, hook),
@@ -139,6 +156,44 @@ class SimulatedCrazyflie:
             if self.params.ident("cpu.id0") is not None else "0" * 24
         self.console.write(ports.boot_text(self.profile.device_type, self.profile.firmware_version, cpu_id,
                                            self.profile.production))
+
+    def bind_radio(self, channel: int, datarate: int, moved: Optional[Callable[[int, int, bytes], bool]]) -> None:
+        """The medium carries this Crazyflie on ``channel``/``datarate`` at its address: the EEPROM is
+        programmed with them (as a Crazyflie configured for that swarm slot), and ``moved(channel,
+        datarate, address)`` is asked at a later boot whose EEPROM names other settings (it returns
+        False when the medium cannot take them; the Crazyflie then stays where it was)."""
+        with self.lock:
+            self.radio_channel, self.radio_datarate = int(channel), int(datarate)
+            self._radio_moved = moved
+            try:
+                current = cb.decode(bytes(self.eeprom.data[:cb.SIZE]))
+            except ValueError:
+                current = cb.ConfigBlock()
+            self.eeprom.data[:cb.SIZE] = cb.encode(current._replace(
+                channel=self.radio_channel, datarate=self.radio_datarate,
+                address=int.from_bytes(self.address, "big")))
+
+    def config_block(self) -> cb.ConfigBlock:
+        """What the firmware reads from the EEPROM at boot: the block, or the defaults when it is invalid."""
+        try:
+            return cb.decode(bytes(self.eeprom.data[:cb.SIZE]))
+        except ValueError:
+            return cb.ConfigBlock()
+
+    def _apply_config_block(self) -> None:
+        """At boot the radio takes the EEPROM's channel, data rate and address (the firmware hands
+        them to the nRF); a change moves this Crazyflie on the medium."""
+        block = self.config_block()
+        wanted = (block.channel, block.datarate, block.address_bytes)
+        if wanted == (self.radio_channel, self.radio_datarate, self.address):
+            return
+        moved = self._radio_moved
+        if moved is not None and not moved(*wanted):
+            _log.warning("simulated Crazyflie %s keeps channel %d, rate %d: another Crazyflie listens on "
+                         "channel %d, rate %d, address %s", self.address.hex().upper(), self.radio_channel,
+                         self.radio_datarate, wanted[0], wanted[1], wanted[2].hex().upper())
+            return
+        self.radio_channel, self.radio_datarate, self.address = wanted
 
     def reboot(self, bootloader: bool = False, reset_nrf: bool = True) -> None:
         """Power cycle: protocol state back to boot (params, log blocks, console text, uptime); with
@@ -548,6 +603,9 @@ class SimulatedCrazyflie:
                 "tx_last_wait_s": s.tx_last_wait_s,
                 "safelink": self.link.safelink,
                 "reboots": s.reboots,
+                "radio": {"channel": self.radio_channel, "datarate": self.radio_datarate},
+                "config_block": self.config_block()._asdict(),
+                "decks": list(self.decks),
                 "uptime_ms": self.timestamp_ms(),
                 "params_changed": {e.full_name: self.params.values[i] for i, e in enumerate(self.params.entries)
                                    if self.params.values[i] != self.params.default_of(i)},

@@ -118,21 +118,6 @@ def generic_setpoint_port(state: SimState, hook: VehicleHook, halt: Callable[[st
     return handle
 
 
-def memory_port(send: Send) -> Handler:
-    """Port 4: a Crazyflie without memories (``[1]`` -> ``[1, 0]``)."""
-    def handle(header: int, channel: int, data: bytes) -> None:
-        if not data:
-            return
-        if channel == 0:
-            if data[0] == 1:
-                send(header, b"\x01\x00")
-            elif data[0] == 2 and len(data) >= 2:
-                send(header, bytes(data[:2]))  # short info reply: no such memory
-        elif channel in (1, 2) and len(data) >= 5:
-            send(header, bytes(data[:5]) + bytes([EIO]))
-    return handle
-
-
 def localization_port(state: SimState, hook: VehicleHook, emergency_stop: Callable[[str], None],
                       now: Callable[[], float], my_id: int) -> Handler:
     """Port 6: external position/pose (single, and packed items matched by ``my_id``, the radio

@@ -1,7 +1,8 @@
 """The trajectory memory of the current firmware (port 4) and the trajectory descriptors of port 8.
 
-One memory, id 0, type 0x12, 4096 bytes, read and written 1:1; a trajectory is a descriptor
-(location, type, offset, number of pieces) pointing into it. poly4d pieces are 33 little-endian
+One memory of type 0x12 (its id is its place in the table of memory_port.py), 4096 bytes, read
+and written 1:1; a trajectory is a descriptor (location, type, offset, number of pieces) pointing
+into it. poly4d pieces are 33 little-endian
 floats: eight coefficients each of x, y, z and yaw (ascending powers), then the duration. The
 compressed format (a start point, then Bezier segments until one of duration 0) is decoded into the
 same pieces, as the firmware decodes it, traps included (docs/simulation.md, "Compressed
@@ -11,11 +12,10 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
-MEMORY_ID = 0
 MEMORY_TYPE_TRAJECTORY = 0x12
 MEMORY_SIZE = 4096                  # bytes
 MAX_TRAJECTORIES = 31
@@ -28,11 +28,6 @@ CONTROL_POINTS = (0, 1, 3, 7)                 # stored points of each kind (the 
 DISTANCE_SCALE = 1000.0                       # stored mm per m
 # The firmware divides a stored yaw by 0.1 and uses the result as radians (not a tenth of a degree).
 YAW_SCALE = 0.1
-EIO = 5
-INFO_SERIAL = bytes(8)
-
-Handler = Callable[[int, int, bytes], None]
-Send = Callable[[int, bytes], bool]
 
 
 class Descriptor(NamedTuple):
@@ -102,7 +97,13 @@ def decode_compressed(data: bytes, offset: int) -> Tuple[Pieces, bool]:
 
 
 class TrajectoryMemory:
-    """The memory bytes and the 31 trajectory descriptors of one Crazyflie."""
+    """The memory bytes and the 31 trajectory descriptors of one Crazyflie (a memory of the table
+    in memory_port.py: kind, size, serial, read, write)."""
+
+    kind = MEMORY_TYPE_TRAJECTORY
+    size = MEMORY_SIZE
+    serial = bytes(8)
+    writable = True
 
     def __init__(self) -> None:
         self.data = bytearray(MEMORY_SIZE)
@@ -149,28 +150,3 @@ class TrajectoryMemory:
             compressed = self.compressed(trajectory_id)
             pieces = compressed[0] if compressed is not None else None
         return pieces
-
-
-def trajectory_memory_port(send: Send, memory: TrajectoryMemory) -> Handler:
-    """Port 4 with one memory: enumeration (ch 0), reads (ch 1) and writes (ch 2)."""
-    def handle(header: int, channel: int, data: bytes) -> None:
-        if not data:
-            return
-        if channel == 0:
-            if data[0] == 1:
-                send(header, bytes([1, 1]))
-            elif data[0] == 2 and len(data) >= 2:
-                if data[1] == MEMORY_ID:
-                    send(header, bytes([2, MEMORY_ID, MEMORY_TYPE_TRAJECTORY]) + struct.pack("<I", MEMORY_SIZE)
-                         + INFO_SERIAL)
-                else:
-                    send(header, bytes(data[:2]))          # short reply: no such memory
-        elif channel == 1 and len(data) >= 6:
-            ident, address, length = data[0], struct.unpack_from("<I", data, 1)[0], data[5]
-            got = memory.read(address, length) if ident == MEMORY_ID else None
-            send(header, bytes(data[:5]) + (bytes([0]) + got if got is not None else bytes([EIO])))
-        elif channel == 2 and len(data) >= 5:
-            ident, address = data[0], struct.unpack_from("<I", data, 1)[0]
-            ok = ident == MEMORY_ID and memory.write(address, bytes(data[5:]))
-            send(header, bytes(data[:5]) + bytes([0 if ok else EIO]))
-    return handle
