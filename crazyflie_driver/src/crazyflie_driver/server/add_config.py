@@ -20,6 +20,7 @@ from crazyflie_driver.server.log_plan import (
     check_custom_log_limits,
     validate_log_block_specs,
 )
+from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.setpoint import check_trim
 from crazyflie_driver.server.worker import WorkerConfig
 
@@ -126,6 +127,9 @@ def log_blocks_from_params(params: Mapping[str, Any]) -> Tuple[LogBlockSpec, ...
     return tuple(blocks)
 
 
+#: ms between the ``pose`` topic's log packets with ``enable_logging_pose`` (the original driver's period).
+HEAD_POSE_PERIOD_MS = 10
+
 #: The original driver's switches we accept and read but that change nothing here (the reason is in
 #: docs/coming_from_crazyswarm.md): raw packets have no topic yet; every stamp is already ROS time.
 ACCEPTED_SWITCHES = ("enable_logging_packets", "use_ros_time")
@@ -169,4 +173,7 @@ def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
         log_blocks=log_blocks_from_params(params),
     )
     config = apply_topic_switches(config, params)
+    if _as_bool("enable_logging_pose", params.get("enable_logging_pose", False)):
+        # the original's onboard pose topic rides in the chapter's request as a custom block the server knows
+        config = replace(config, log_blocks=config.log_blocks + (pose_block(HEAD_POSE_PERIOD_MS),))
     return check_config(config, allow_empty_tf_prefix=True)

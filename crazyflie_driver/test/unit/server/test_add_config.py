@@ -12,6 +12,7 @@ from crazyflie_driver.server.add_config import (
     topic_switches_from_params,
 )
 from crazyflie_driver.server.log_plan import LogBlockSpec
+from crazyflie_driver.server.onboard_pose import is_pose_block
 from crazyflie_driver.server.worker import WorkerConfig
 
 
@@ -31,6 +32,8 @@ def test_topic_switches_of_the_original_driver():
     switches = topic_switches_from_params({"enable_logging_battery": 0})
     assert switches["enable_logging_battery"] is False and switches["use_ros_time"] is True
     assert apply_topic_switches(c, {}).disabled_topics == frozenset()
+    c = config_from_params({"uri": "radio://0/80/2M", "enable_logging_pose": True})
+    assert [(b.topic_name, b.period_ms) for b in c.log_blocks] == [("pose", 10)] and is_pose_block(c.log_blocks[0])
     with pytest.raises(AddConfigError, match="enable_logging_imu"):
         config_from_params({"uri": "radio://0/80/2M", "enable_logging_imu": "maybe"})
 
