@@ -3,7 +3,10 @@
 Private parameters (as in the original): ``uri`` (required), ``tf_prefix``, ``roll_trim``,
 ``pitch_trim``, ``enable_logging``, ``enable_parameters``, ``genericLogTopics``,
 ``genericLogTopicFrequencies`` (a PERIOD in milliseconds per topic, despite the name) and
-``genericLogTopic_<name>_Variables``. ``service_timeout`` (s, default 30): how long to wait for
+``genericLogTopic_<name>_Variables``, ``enable_logging_{imu,temperature,magnetic_field,pressure,battery,
+packets}`` and ``use_ros_time`` (each default true). The chapter's AddCrazyflie request has no fields
+for the last ones, so they are left as parameters under the Crazyflie's namespace, where the server
+reads them when the request arrives. ``service_timeout`` (s, default 30): how long to wait for
 the server to appear.
 """
 from __future__ import annotations
@@ -15,7 +18,7 @@ import rospy
 
 from crazyflie_driver.msg import LogBlock
 from crazyflie_driver.nodes.ros_signals import init_node
-from crazyflie_driver.server.add_config import AddConfigError, config_from_params
+from crazyflie_driver.server.add_config import AddConfigError, config_from_params, topic_switches_from_params
 from crazyflie_driver.server.worker import WorkerConfig
 from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest
 
@@ -48,6 +51,9 @@ def run() -> int:
     except AddConfigError as e:
         rospy.logerr("crazyflie_add: %s", e)
         return 1
+    ns = "/" + config.tf_prefix if config.tf_prefix else ""
+    for key, value in topic_switches_from_params(params).items():   # checked by config_from_params
+        rospy.set_param(ns + "/" + key, value)
     wait = float(params.get("service_timeout", 30.0))
     try:
         rospy.wait_for_service("/add_crazyflie", timeout=wait)

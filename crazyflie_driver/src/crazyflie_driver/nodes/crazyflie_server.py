@@ -39,7 +39,7 @@ from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.server import memory_config, power_control, radio_budget
-from crazyflie_driver.server.add_config import check_config
+from crazyflie_driver.server.add_config import ACCEPTED_SWITCHES, apply_topic_switches, check_config
 from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
 from crazyflie_driver.server.diagnostics import (
     UNKNOWN_BOTTLENECK,
@@ -58,6 +58,7 @@ from crazyflie_driver.server.log_plan import (
     MAGNETIC_FIELD_TOPIC,
     PRESSURE_TOPIC,
     TEMPERATURE_TOPIC,
+    TOPIC_SWITCHES,
     LogBlockSpec,
 )
 from crazyflie_driver.server.onboard_commands import OnboardCommands
@@ -166,11 +167,11 @@ class RosCrazyflie(WorkerListener):
         name = lambda topic: self.ns + "/" + topic
         pubs: Dict[str, rospy.Publisher] = {}
         if config.enable_logging:
-            pubs[IMU_TOPIC] = rospy.Publisher(name("imu"), Imu, queue_size=10)
-            pubs[TEMPERATURE_TOPIC] = rospy.Publisher(name("temperature"), Temperature, queue_size=10)
-            pubs[MAGNETIC_FIELD_TOPIC] = rospy.Publisher(name("magnetic_field"), MagneticField, queue_size=10)
-            pubs[PRESSURE_TOPIC] = rospy.Publisher(name("pressure"), Float32, queue_size=10)
-            pubs[BATTERY_TOPIC] = rospy.Publisher(name("battery"), Float32, queue_size=10)
+            for topic, kind in ((IMU_TOPIC, Imu), (TEMPERATURE_TOPIC, Temperature),
+                                (MAGNETIC_FIELD_TOPIC, MagneticField), (PRESSURE_TOPIC, Float32),
+                                (BATTERY_TOPIC, Float32)):
+                if topic not in config.disabled_topics:     # a switched-off topic is not advertised
+                    pubs[topic] = rospy.Publisher(name(topic), kind, queue_size=10)
         self._custom = {b.topic_name: rospy.Publisher(name(b.topic_name), GenericLogData, queue_size=10)
                         for b in config.log_blocks if not is_pose_block(b)}
         self._pose = next((PosePublisher(name(b.topic_name), self.frame_id_world)
@@ -411,6 +412,14 @@ class RosLogHandler(logging.Handler):
             rospy.logdebug(text)
 
 
+def topic_switches_of(tf_prefix: str) -> Dict[str, Any]:
+    """The original driver's ``enable_logging_<topic>``/``use_ros_time`` switches that ``crazyflie_add``
+    left under the Crazyflie's namespace (the chapter's AddCrazyflie request has no fields for them)."""
+    names = [n for n, _ in TOPIC_SWITCHES] + list(ACCEPTED_SWITCHES)
+    ns = namespace(tf_prefix)
+    return {n: rospy.get_param(ns + "/" + n) for n in names if rospy.has_param(ns + "/" + n)}
+
+
 def config_from_request(req) -> WorkerConfig:
     return WorkerConfig(
         uri=req.uri, tf_prefix=req.tf_prefix.strip("/"), roll_trim=float(req.roll_trim),
@@ -571,6 +580,7 @@ class CrazyflieServer:
     def _on_add(self, req) -> AddCrazyflieResponse:
         try:
             config = check_config(config_from_request(req), self.allow_empty_tf_prefix)
+            config = apply_topic_switches(config, topic_switches_of(config.tf_prefix))
             self.registry.canonical_uri(config.uri)      # a malformed URI is refused here
         except ValueError as e:
             rospy.logerr("add_crazyflie: %s", e)

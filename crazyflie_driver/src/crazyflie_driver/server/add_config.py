@@ -10,11 +10,17 @@ Crazyflie's log TOC, so the server checks those and its error comes back through
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any, List, Mapping, Tuple
+from typing import Any, Dict, List, Mapping, Tuple
 
 from crazyflie_driver.crtp.uri import parse_link_uri
 from crazyflie_driver.errors import UriError
-from crazyflie_driver.server.log_plan import LogBlockSpec, check_custom_log_limits, validate_log_block_specs
+from crazyflie_driver.server.log_plan import (
+    TOPIC_SWITCHES,
+    LogBlockSpec,
+    check_custom_log_limits,
+    validate_log_block_specs,
+)
+from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.setpoint import check_trim
 from crazyflie_driver.server.worker import WorkerConfig
 
@@ -121,6 +127,29 @@ def log_blocks_from_params(params: Mapping[str, Any]) -> Tuple[LogBlockSpec, ...
     return tuple(blocks)
 
 
+#: ms between the ``pose`` topic's log packets with ``enable_logging_pose`` (the original driver's period).
+HEAD_POSE_PERIOD_MS = 10
+
+#: The original driver's switches we accept and read but that change nothing here (the reason is in
+#: docs/coming_from_crazyswarm.md): raw packets have no topic yet; every stamp is already ROS time.
+ACCEPTED_SWITCHES = ("enable_logging_packets", "use_ros_time")
+
+
+def topic_switches_from_params(params: Mapping[str, Any]) -> Dict[str, bool]:
+    """The original driver's per-topic switches (each default true), checked; AddConfigError naming a
+    value that is not a boolean. These travel beside the chapter's AddCrazyflie request as parameters
+    under the Crazyflie's namespace (:func:`apply_topic_switches` reads them back in the server)."""
+    names = [n for n, _ in TOPIC_SWITCHES] + list(ACCEPTED_SWITCHES)
+    return {n: _as_bool(n, params.get(n, True)) for n in names}
+
+
+def apply_topic_switches(config: WorkerConfig, switches: Mapping[str, Any]) -> WorkerConfig:
+    """``config`` with the fixed topics whose switch is false left out of the log plan."""
+    checked = topic_switches_from_params(switches)
+    disabled = frozenset(topic for name, topic in TOPIC_SWITCHES if not checked[name])
+    return replace(config, disabled_topics=disabled)
+
+
 def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
     """A full add request from crazyflie_add's private parameters (names without the ``~``)."""
     if "uri" not in params or params["uri"] in ("", None):
@@ -143,4 +172,8 @@ def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
         enable_parameters=_as_bool("enable_parameters", params.get("enable_parameters", True)),
         log_blocks=log_blocks_from_params(params),
     )
+    config = apply_topic_switches(config, params)
+    if _as_bool("enable_logging_pose", params.get("enable_logging_pose", False)):
+        # the original's onboard pose topic rides in the chapter's request as a custom block the server knows
+        config = replace(config, log_blocks=config.log_blocks + (pose_block(HEAD_POSE_PERIOD_MS),))
     return check_config(config, allow_empty_tf_prefix=True)

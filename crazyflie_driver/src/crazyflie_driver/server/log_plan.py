@@ -40,6 +40,22 @@ FIXED_LOG_TOPICS: Tuple[Tuple[str, int, Tuple[str, ...]], ...] = (
     (PRESSURE_TOPIC, 100, ("baro.pressure",)),
     (BATTERY_TOPIC, 100, ("pm.vbat",)),
 )
+#: crazyflie_add's per-topic switches (the original driver's names) and the fixed topic each turns off.
+TOPIC_SWITCHES: Tuple[Tuple[str, str], ...] = (
+    ("enable_logging_imu", IMU_TOPIC),
+    ("enable_logging_temperature", TEMPERATURE_TOPIC),
+    ("enable_logging_magnetic_field", MAGNETIC_FIELD_TOPIC),
+    ("enable_logging_pressure", PRESSURE_TOPIC),
+    ("enable_logging_battery", BATTERY_TOPIC),
+)
+
+
+def fixed_log_topics(disabled: AbstractSet[str]) -> List[Tuple[str, int, Tuple[str, ...]]]:
+    """The fixed sensor topics without the ``disabled`` ones: a topic switched off is not asked of the
+    firmware at all, so its log packets leave the radio."""
+    return [t for t in FIXED_LOG_TOPICS if t[0] not in disabled]
+
+
 RSSI_LOG_VARIABLE = "radio.rssi"    # current firmware: RSSI is a log variable, not in the acks
 # Topics only /diagnostics reads (no ROS topic): (topic, the fixed topic whose period it takes, variables).
 # Each fits in that topic's block (IMU 24 + 2 bytes; the 100 ms topics 24 + 1, + 1 for radio.rssi), so

@@ -29,7 +29,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union
 
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp import config_block as cb
@@ -55,12 +55,12 @@ from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHea
 from crazyflie_driver.server.log_plan import (
     BATTERY_TOPIC,
     DIAGNOSTIC_LOG_TOPICS,
-    FIXED_LOG_TOPICS,
     RADIO_RSSI_TOPIC,
     RSSI_LOG_VARIABLE,
     LogBlockSpec,
     PlannedBlock,
     check_log_limits,
+    fixed_log_topics,
     log_packet_rate,
     plan_log_blocks,
 )
@@ -93,6 +93,8 @@ class WorkerConfig:
     enable_logging: bool = True
     enable_parameters: bool = True
     log_blocks: Tuple[LogBlockSpec, ...] = ()
+    # fixed topics switched off by crazyflie_add's enable_logging_<topic> (not logged, not published)
+    disabled_topics: FrozenSet[str] = frozenset()
     # s between polls when nothing is queued, with sparse pacing, polls behind the other round trips waiting
     # for the dongle (swarm mode); 0: the server's period, eager pacing
     keepalive_period: float = 0.0
@@ -583,7 +585,7 @@ class CrazyflieWorker:
         plan: List[PlannedBlock] = []
         self.missing_fixed_topics = []
         if cfg.enable_logging:
-            fixed = list(FIXED_LOG_TOPICS)
+            fixed = fixed_log_topics(cfg.disabled_topics)
             rssi = self.cf.link.stats.rssi
             if rssi is None and RSSI_LOG_VARIABLE in types:
                 fixed.append((RADIO_RSSI_TOPIC, 100, (RSSI_LOG_VARIABLE,)))

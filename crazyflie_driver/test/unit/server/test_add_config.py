@@ -3,8 +3,16 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.server.add_config import AddConfigError, check_config, check_tf_prefix, config_from_params
+from crazyflie_driver.server.add_config import (
+    AddConfigError,
+    apply_topic_switches,
+    check_config,
+    check_tf_prefix,
+    config_from_params,
+    topic_switches_from_params,
+)
 from crazyflie_driver.server.log_plan import LogBlockSpec
+from crazyflie_driver.server.onboard_pose import is_pose_block
 from crazyflie_driver.server.worker import WorkerConfig
 
 
@@ -12,6 +20,22 @@ def test_defaults_like_the_original():
     c = config_from_params({"uri": "radio://0/80/2M"})
     assert (c.tf_prefix, c.roll_trim, c.pitch_trim, c.enable_logging, c.enable_parameters, c.log_blocks) == \
         ("", 0.0, 0.0, True, True, ())
+
+
+def test_topic_switches_of_the_original_driver():
+    c = config_from_params({"uri": "radio://0/80/2M"})
+    assert c.disabled_topics == frozenset()
+    c = config_from_params({"uri": "radio://0/80/2M", "enable_logging_imu": False,
+                            "enable_logging_pressure": "false", "use_ros_time": False,
+                            "enable_logging_packets": False})
+    assert c.disabled_topics == frozenset({"imu", "pressure"})
+    switches = topic_switches_from_params({"enable_logging_battery": 0})
+    assert switches["enable_logging_battery"] is False and switches["use_ros_time"] is True
+    assert apply_topic_switches(c, {}).disabled_topics == frozenset()
+    c = config_from_params({"uri": "radio://0/80/2M", "enable_logging_pose": True})
+    assert [(b.topic_name, b.period_ms) for b in c.log_blocks] == [("pose", 10)] and is_pose_block(c.log_blocks[0])
+    with pytest.raises(AddConfigError, match="enable_logging_imu"):
+        config_from_params({"uri": "radio://0/80/2M", "enable_logging_imu": "maybe"})
 
 
 def test_custom_log_blocks_period_in_ms():

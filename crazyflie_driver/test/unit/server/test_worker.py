@@ -72,6 +72,22 @@ def test_missing_sensor_skips_its_topic_only():
         w.stop()
 
 
+def test_switched_off_imu_asks_the_firmware_for_no_imu_block():
+    on, cf_on, _ = started(config=WorkerConfig(uri="radio://0/80/2M/E7E7E7E701"))
+    off, cf_off, _ = started(config=WorkerConfig(uri="radio://0/80/2M/E7E7E7E701",
+                                                 disabled_topics=frozenset({"imu"})))
+    try:
+        imu_vars = {"acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z"}
+        assert all(not imu_vars & set(b.variables) for b in cf_off.log.blocks)
+        assert any(imu_vars <= set(b.variables) for b in cf_on.log.blocks)
+        assert "imu" not in off.log_topics and "battery" in off.log_topics
+        # the 10 ms block (imu, with supervisor.info riding along) is gone: 100 packets/s fewer
+        assert on.log_packet_rate - off.log_packet_rate == pytest.approx(100.0)
+    finally:
+        on.stop()
+        off.stop()
+
+
 def test_unknown_custom_variable_fails_the_add_clearly():
     cfg = WorkerConfig(uri="radio://0/80/2M/E7E7E7E701",
                        log_blocks=(LogBlockSpec("x", 10, ("acc.x", "foo.bar")),))

@@ -1,0 +1,63 @@
+#!/usr/bin/env python3
+"""crazyflie_add's enable_logging_imu:=false: no imu topic, no imu log block on the firmware, fewer log
+packets on the radio than the same Crazyflie with imu on (both judged on the world's truth)."""
+from __future__ import annotations
+
+import os
+import sys
+import unittest
+
+import rospy
+import rostest
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float32
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until  # noqa: E402
+
+ON, OFF = "radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702"
+IMU_VARIABLES = {"acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z"}
+
+
+def running_blocks(state) -> list:
+    return [b for b in state["log_blocks"].values() if b["running"]]
+
+
+def firmware_packet_rate(state) -> float:
+    """Log packets per simulated second the firmware's running blocks send (one per block per period)."""
+    return sum(1000.0 / b["period_ms"] for b in running_blocks(state))
+
+
+class AddTopicSwitches(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.world = start_test_node("add_topic_switches_test", ["crazyflie1", "crazyflie2"])
+        cls.recorders = {"imu1": TopicRecorder("/crazyflie1/imu", Imu),
+                         "imu2": TopicRecorder("/crazyflie2/imu", Imu),
+                         "battery1": TopicRecorder("/crazyflie1/battery", Float32),
+                         "battery2": TopicRecorder("/crazyflie2/battery", Float32)}
+        wait_until(lambda: cls.recorders["battery2"].latest() is not None
+                   and cls.recorders["imu1"].latest() is not None, 20.0)
+
+    def test_no_imu_topic_but_the_others(self):
+        rates = rates_per_world_second(self.recorders, self.world, 2.0)
+        self.assertGreater(rates["imu1"], 50.0, rates)
+        self.assertEqual(rates["imu2"], 0.0, rates)
+        self.assertGreater(rates["battery2"], 5.0, rates)
+        published = {name for name, _ in rospy.get_published_topics()}
+        self.assertNotIn("/crazyflie2/imu", published)
+        self.assertIn("/crazyflie1/imu", published)
+
+    def test_firmware_has_no_imu_block_and_the_radio_carries_less(self):
+        on, off = self.world.crazyflie_state(ON), self.world.crazyflie_state(OFF)
+        on_vars = {v for b in running_blocks(on) for v in b["variables"]}
+        off_vars = {v for b in running_blocks(off) for v in b["variables"]}
+        self.assertTrue(IMU_VARIABLES <= on_vars, on["log_blocks"])
+        self.assertFalse(IMU_VARIABLES & off_vars, off["log_blocks"])
+        self.assertIn("pm.vbat", off_vars)
+        # the 10 ms block goes: 100 log packets per simulated second fewer
+        self.assertAlmostEqual(firmware_packet_rate(on) - firmware_packet_rate(off), 100.0, delta=1.0)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("crazyflie_driver", "add_topic_switches_test", AddTopicSwitches)
