@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from typing import Callable, Optional
 
 from crazyflie_driver import usb_choice
@@ -41,6 +42,21 @@ def open_crazyflie(args: argparse.Namespace, cache_dir: Optional[str] = None) ->
     cf = Crazyflie(args.uri, usb_choice.radio_manager(), cache_dir=cache_dir, timeout=args.timeout)
     cf.connect()
     return cf
+
+
+POLL_PAUSE_S = 0.002
+"""Pause [s] between two polls of a tool that listens (keep-alives fetch what the Crazyflie queued)."""
+
+
+def listen_then_close(cf: Crazyflie, seconds: float) -> None:
+    """Poll ``cf`` for ``seconds`` of wall time (the person's --seconds; no ROS here), then close its link."""
+    try:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            cf.send_keepalive()
+            time.sleep(POLL_PAUSE_S)
+    finally:
+        cf.close()
 
 
 def describe_error(error: BaseException) -> str:

@@ -2,15 +2,12 @@
 from __future__ import annotations
 
 import sys
-import time
 from typing import List, Optional
 
 from crazyflie_driver import usb_choice
 from crazyflie_driver.protocol.crazyflie import Crazyflie
 
-from .common import parser, run
-
-POLL_PAUSE_S = 0.002
+from .common import listen_then_close, parser, run
 
 
 def _write(text: str) -> None:
@@ -24,13 +21,7 @@ def _console(args) -> int:
     cf = Crazyflie(args.uri, usb_choice.radio_manager(), timeout=args.timeout)
     cf.console.on_text(_write)   # before connect: the boot text arrives right away
     cf.connect()
-    try:
-        deadline = time.monotonic() + args.seconds      # wall clock: the person's --seconds (no ROS here)
-        while time.monotonic() < deadline:
-            cf.send_keepalive()
-            time.sleep(POLL_PAUSE_S)
-    finally:
-        cf.close()
+    listen_then_close(cf, args.seconds)
     return 0
 
 

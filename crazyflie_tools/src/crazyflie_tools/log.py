@@ -2,12 +2,9 @@
 from __future__ import annotations
 
 import sys
-import time
 from typing import List, Optional
 
-from .common import open_crazyflie, parser, run
-
-POLL_PAUSE_S = 0.002
+from .common import listen_then_close, open_crazyflie, parser, run
 
 
 def _log(args) -> int:
@@ -21,12 +18,10 @@ def _log(args) -> int:
         sys.stdout.flush()
     try:
         cf.log.create_block(names, args.period_ms, show)
-        deadline = time.monotonic() + args.seconds      # wall clock: the person's --seconds (no ROS here)
-        while time.monotonic() < deadline:
-            cf.send_keepalive()
-            time.sleep(POLL_PAUSE_S)
-    finally:
+    except BaseException:
         cf.close()
+        raise
+    listen_then_close(cf, args.seconds)
     return 0
 
 
