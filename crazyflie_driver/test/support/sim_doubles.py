@@ -88,3 +88,8 @@ class FakeWorld:
 
     def stop(self):
         self.stopped = True
+
+
+def drain(cf) -> List[bytes]:
+    """Every packet a simulated Crazyflie has queued for the host, oldest first (the queue is left empty)."""
+    return list(iter(cf.pop_outgoing, None))

@@ -7,15 +7,11 @@ from __future__ import annotations
 import struct
 
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
-from support.sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle, drain
 
 ADDRESS = bytes.fromhex("E7E7E7E701")
 LOG_CONTROL = 0x51   # port 5, channel 1
 LOG_DATA = 0x52      # port 5, channel 2
-
-
-def drain(cf):
-    return [p for p in iter(cf.pop_outgoing, None)]
 
 
 def test_log_block_over_packet_link_survives_an_earlier_radio_users_silence():

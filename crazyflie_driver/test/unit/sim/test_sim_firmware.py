@@ -11,7 +11,7 @@ from crazyflie_driver.crtp.nrf_system import reboot_packets, stm_power_off_packe
 from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.firmware.ports import boot_text
-from support.sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle, drain
 
 ADDR = b"\xe7\xe7\xe7\xe7\x01"
 
@@ -21,15 +21,6 @@ def make(firmware="current", **kw):
     cf = SimulatedCrazyflie(ADDR, v, firmware=firmware, **kw)
     drain(cf)
     return cf, v
-
-
-def drain(cf):
-    out = []
-    while True:
-        p = cf.pop_outgoing()
-        if p is None:
-            return out
-        out.append(p)
 
 
 def ask(cf, raw: bytes):

@@ -11,7 +11,7 @@ from crazyflie_driver.crtp import config_block as cb
 from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_driver.sim.firmware.memory_port import ONE_WIRE_SIZE, maxim_crc8
-from support.sim_doubles import FakeVehicle
+from support.sim_doubles import FakeVehicle, drain
 
 ADDR = b"\xe7\xe7\xe7\xe7\x01"
 MEM = 0x40            # port 4, channels 0 info, 1 read, 2 write
@@ -21,15 +21,6 @@ def make(**kw):
     cf = SimulatedCrazyflie(ADDR, FakeVehicle(), **kw)
     drain(cf)
     return cf
-
-
-def drain(cf):
-    out = []
-    while True:
-        p = cf.pop_outgoing()
-        if p is None:
-            return out
-        out.append(p)
 
 
 def one(cf, raw: bytes) -> bytes:
