@@ -105,7 +105,7 @@ class MultiHoverJoy(unittest.TestCase):
             self.assertTrue(landed, "%s not on the ground after emergency: %s" % (n, self.probe.position(n)))
         # and it stays that way: still stopped, still not "ok", another take-off does nothing
         self.press(TAKEOFF)
-        time.sleep(1.0)
+        self.probe.sleep(1.0)                  # world seconds: long enough for a take-off to show
         for n in self.names:
             self.assertEqual(self.last_status(n), EMERGENCY_STATUS)
             self.assertEqual(max(self.probe.state(n)["motors"]), 0, "%s motors restarted" % n)

@@ -35,7 +35,7 @@ JS_EVENT_BUTTON, JS_EVENT_AXIS, JS_EVENT_INIT = 0x01, 0x02, 0x80
 YAW_STICK, THRUST_STICK, ROLL_STICK, PITCH_STICK = 0, 1, 3, 4     # xpad: left x, left y, right x, right y
 AXES, BUTTONS = 8, 11
 STILL_THRUST = 37500.0      # counts: a little above the ~36300 a hover needs
-STILL_S = 3.5               # s without a joystick event: longer than the firmware's 2 s watchdog
+STILL_S = 3.5               # world s without a joystick event: longer than the firmware's 2 s watchdog
 
 
 def js_event(ms: int, value: int, kind: int, number: int) -> bytes:
@@ -138,7 +138,7 @@ class TeleopXbox360(unittest.TestCase):
         self.assertTrue(wait_until(lambda: not self.probe.state(NAME)["on_ground"], 10.0), "did not lift off")
         t0 = rospy.Time.now()
         z0 = self.probe.state(NAME)["position"][2]
-        time.sleep(STILL_S)                                    # nothing written to the pad meanwhile
+        self.probe.sleep(STILL_S)          # world seconds (the watchdog's clock); nothing written meanwhile
         s = self.probe.state(NAME)
         repeats = [m for m in self.joy if m.header.stamp > t0]
         print("TELEOP still stick: %d Joy messages in %.1f s, z %.2f -> %.2f m, motors %s, lock %r"

@@ -9,6 +9,7 @@ import time
 import pytest
 
 from crazyflie_driver.sim.world import pacing
+from crazyflie_driver.sim.world import world as world_module
 from crazyflie_driver.sim.world.pacing import (
     LAG_BOUND_S,
     MIN_SPEED,
@@ -21,6 +22,7 @@ from crazyflie_driver.sim.world.pacing import (
     read_schedstat,
     sibling_pids,
 )
+from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
 from crazyflie_driver.sim.world.world import World
 
 
@@ -227,3 +229,41 @@ def test_a_started_pacer_stops():
     pacer = pacing.AutoPacer(world, Pacing(True, 1.0), host).start()
     pacer.stop()
     assert not pacer._thread.is_alive()
+
+
+def _stalled_world(max_lag_s: float):
+    """A world at real time whose thread is held up 150 ms of wall time once, at world time 50 ms;
+    the ticks it steps back to back after the stall, and its overrun count."""
+    w = World(speed=1.0, seed=1)
+    w.add_vehicle("cf1")
+    w.max_lag_s = max_lag_s
+    stalled = []
+
+    def stall(now: float) -> None:
+        if now >= 0.05 and not stalled:
+            stalled.append(now)
+            time.sleep(0.15)
+    w.add_tick_listener(stall, 0.001)
+    steps = []
+    step = w.step
+
+    def recording_step(n: int = 1) -> None:
+        steps.append((stalled[:], n))
+        step(n)
+    w.step = recording_step            # the thread's calls, each with whether the stall had happened
+    w.start()
+    try:
+        assert wait_for(lambda: w.time >= 0.3, 10.0)
+    finally:
+        w.stop()
+    after = [n for was, n in steps if was]
+    return after, w.overruns
+
+
+def test_an_auto_world_held_up_starts_a_new_schedule_instead_of_bursting():
+    """150 ms late, a world that catches up would step 150 ticks back to back (world time racing
+    the host); an auto world lets go: its next step is one wake-up's worth, and it counts an overrun."""
+    after, overruns = _stalled_world(pacing.AUTO_MAX_LAG_S)
+    assert after[0] == round(world_module.WAKE_PERIOD_S / FIRMWARE_TICK_S) and overruns >= 1, after[:5]
+    after, _ = _stalled_world(0.25)             # a fixed-speed world catches up, 20 ticks at a time
+    assert after[0] == world_module.MAX_CHUNK_TICKS, after[:5]

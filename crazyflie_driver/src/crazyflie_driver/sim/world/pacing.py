@@ -47,6 +47,12 @@ SPEED_UP_FACTOR = 1.15
 """Per calm sample, ``auto`` speeds the world up by this factor (up to its target)."""
 MAX_SLOW_DOWN = 0.5
 """Per laggy sample, ``auto`` at most halves the speed."""
+AUTO_MAX_LAG_S = 0.02
+"""World seconds [s] an ``auto`` world may trail its schedule and still catch up (stepping ticks back
+to back); further behind, it starts a new schedule from where it is. Catching up runs world time
+faster than real time, a burst the host cannot follow: its setpoints and external positions miss
+the burst's control periods, so under load the flight would get worse instead of slower. Two
+control periods: a world thread woken a little late still keeps its schedule."""
 BEHIND_TICKS = 50
 """Firmware ticks (50 ms of world time) the world may trail its own schedule before ``auto`` takes
 the speed it achieves."""
@@ -259,7 +265,9 @@ class AutoPacer:
 
 
 def start_pacing(world, pacing: Pacing) -> Optional[AutoPacer]:
-    """The pacer of an ``auto`` world (started), None for a fixed one (whose speed the world has)."""
+    """The pacer of an ``auto`` world (started; the world then catches up at most AUTO_MAX_LAG_S),
+    None for a fixed one (whose speed the world has, catching up its schedule as far as it can)."""
     if not pacing.auto:
         return None
+    world.max_lag_s = AUTO_MAX_LAG_S
     return AutoPacer(world, pacing).start()

@@ -40,7 +40,7 @@ from crazyflie_driver.sim.world.ticks import CONTROL_PERIOD_S, CONTROL_TICKS, FI
 _log = logging.getLogger(__name__)
 
 BATTERY_EVERY = 10                 # ticks between battery updates
-MAX_LAG_S = 0.25                   # real-time thread: further behind than this, it stops catching up
+MAX_LAG_S = 0.25                   # real-time thread: further behind than this [world s], it stops catching up
 WAKE_PERIOD_S = CONTROL_TICKS * FIRMWARE_TICK_S   # real-time thread: world time stepped per wake-up
 MAX_CHUNK_TICKS = 20               # real-time thread: most ticks stepped in one go when catching up
 FAST_CHUNK_TICKS = 10              # speed 0: ticks per loop
@@ -316,6 +316,7 @@ class World:
         self._drive: Optional[Drive] = None        # physics drive of the current motor commands
         self.realtime_factor = 0.0                 # measured by the background thread
         self.overruns = 0                          # times the thread could not keep up and let go
+        self.max_lag_s = MAX_LAG_S                 # world s the thread may trail its schedule and still catch up
         self._anchor: Optional[Tuple[float, float]] = None     # the thread's schedule: (host time.time(), world time)
         self.ticks_behind = 0                      # how far world time trails wall time × speed, in ticks
         self._last_behind_warning = -math.inf
@@ -557,7 +558,7 @@ class World:
             if due < wake_ticks:
                 self._stop.wait((wake_ticks - due) * FIRMWARE_TICK_S / self.speed)
                 continue
-            if due * FIRMWARE_TICK_S > MAX_LAG_S:
+            if due * FIRMWARE_TICK_S > self.max_lag_s:
                 self.overruns += 1
                 wall0, world0 = now, self.time
                 self._anchor = (_time.time(), world0)
