@@ -415,11 +415,15 @@ class CrazyflieWorker:
         sup_flying = bits is not None and at is not None and now - at < 1.0 and bool(decode_state(bits).flags["flying"])
         return self.watchdog.flying_for(now), sup_flying
 
+    def reboot_refusal(self) -> Optional[str]:
+        """Why a reboot is refused now (it flies), or None."""
+        flying_for, sup_flying = self._airborne()
+        return power_control.power_change_refusal("reboot", flying_for, sup_flying, self._emergency)
+
     def reboot(self) -> None:
         """Restart it into its firmware; the worker then waits for it and sets up again what the server
         set up (log blocks, the parameters written through ``update_params``), and an emergency is over."""
-        flying_for, sup_flying = self._airborne()
-        refusal = power_control.power_change_refusal("reboot", flying_for, sup_flying, self._emergency)
+        refusal = self.reboot_refusal()
         if refusal is not None:
             raise CommandRejected("%s: %s" % (self.uri, refusal))
         with self._send_lock:
