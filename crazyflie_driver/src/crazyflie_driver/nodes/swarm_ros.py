@@ -255,6 +255,8 @@ def start_swarm(server) -> Optional[RosSwarm]:
     load_swarm_file(options.swarm_file, options.swarm_types_file or None)     # file faults first, fast
     dongles = count_dongles(options.dongle_wait)
     config = load_swarm_file(options.swarm_file, options.swarm_types_file or None, dongles=dongles)
+    for note in config.notes:
+        rospy.logwarn("swarm: %s: %s", options.swarm_file, note)
     if not rospy.has_param("~budget_setpoint_rate"):
         server.budget_setpoint_rate = 0.0     # nothing streams setpoints in swarm mode
     swarm = RosSwarm(SwarmPolicy(ServerPort(server), options, config))
