@@ -56,7 +56,7 @@ class SwarmLinkLost(unittest.TestCase):
         # every Crazyflie, cf4 among them: cf4 would take off from where its estimator believes it is
         with self.assertRaises(rospy.ServiceException) as refused:
             takeoff(groupMask=0, height=HEIGHT, duration=rospy.Duration(2.0))
-        self.assertIn("/takeoff: cf4: no first motion-capture pose", str(refused.exception))
+        self.assertIn("/takeoff refused: cf4: no first motion-capture pose", str(refused.exception))
         for n in every + ("unseen4",):      # nothing was sent: all still on the floor, motors off (cf4 is the
             # world's unseen4)
             s = self.state(n)

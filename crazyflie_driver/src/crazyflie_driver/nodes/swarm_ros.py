@@ -29,7 +29,7 @@ from crazyflie_driver.server import radio_budget
 from crazyflie_driver.server.swarm.commands import SwarmMember
 from crazyflie_driver.server.swarm.config import load_swarm_file
 from crazyflie_driver.server.swarm.options import options_from_params
-from crazyflie_driver.server.swarm.policy import REBOOT_ALL_SERVICE, SwarmPolicy
+from crazyflie_driver.server.swarm.policy import REBOOT_ALL_SERVICE, SwarmPolicy, refusal_text
 from crazyflie_driver.server.worker import WorkerConfig
 from crazyflie_driver.srv import (
     Arm,
@@ -160,8 +160,9 @@ class RosSwarm:
             try:
                 handler(req)
             except (ValueError, CrazyflieError) as e:
-                rospy.logerr("swarm: %s refused: %s", name, e)
-                raise rospy.ServiceException("%s: %s" % (name, e)) from e
+                text = refusal_text(name, e)
+                rospy.logerr("swarm: %s", text)
+                raise rospy.ServiceException(text) from e
             return response()
         return callback
 

@@ -129,6 +129,13 @@ def height_in_safety(member: SwarmMember, clock: Clock) -> Optional[float]:
     return member.worker.safety.current_height(clock.now())
 
 
+def refusal_text(service: str, error: Exception) -> str:
+    """``<service> refused: <why>`` for a swarm service's caller and log, naming the service once (the
+    policy's own refusals already start with it)."""
+    why = str(error)
+    return why if why.startswith(service + " ") else "%s refused: %s" % (service, why)
+
+
 def _daemon(target: Callable[[], object], name: str) -> None:
     threading.Thread(target=target, name=name, daemon=True).start()
 

@@ -29,6 +29,7 @@ from crazyflie_driver.server.swarm.policy import (
     REBOOT_BACK_S,
     SwarmPolicy,
     initial_position_params,
+    refusal_text,
 )
 from crazyflie_driver.server.worker import WorkerState
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
@@ -376,3 +377,12 @@ def test_a_reboot_of_all_is_refused_whole_while_one_flies_and_one_that_never_com
     assert port.clock.now() >= REBOOT_BACK_S and p.emergency_active
     with pytest.raises(CommandRejected, match=REBOOT_ALL_SERVICE):
         p.land(0, 0.0, 2.0)
+
+
+def test_a_refusal_names_its_service_once():
+    p = policy()
+    with pytest.raises(CommandRejected) as e:
+        p.takeoff(0, 0.5, 2.0)
+    assert refusal_text("/takeoff", e.value) == str(e.value) == (
+        "/takeoff refused: the swarm has not started (no Crazyflie added yet)")
+    assert refusal_text("/update_params", ValueError("1 not applied: x")) == "/update_params refused: 1 not applied: x"
