@@ -24,6 +24,7 @@ from fault_table.harness import (
     node_pid,
     roslaunch,
 )
+from fault_table.rows import battery_levels
 
 SWARM_FILE = os.path.join(REPO, "crazyflie_demo", "config", "swarm4.yaml")
 SIM_ADDRESS = "127.0.0.1:19894"
@@ -283,17 +284,9 @@ def land_while_one_hidden(bench: SwarmBench) -> None:
     bench.rospy.ServiceProxy("/land", Land)(groupMask=0, height=0.0, duration=bench.rospy.Duration(2.0))
 
 
-def critical_voltage() -> float:
-    """A battery voltage [V] just below cf1's type's critical level in the swarm file."""
-    from crazyflie_driver.server.swarm.config import load_swarm_file
-    config = load_swarm_file(SWARM_FILE)
-    cf1 = config.by_tf_prefix()["cf1"]
-    return round(config.type_of(cf1).battery_voltage_critical - 0.05, 2)
-
-
 def rows() -> List[SwarmRow]:
     shared = ("cf1", "cf2")
-    critical_v = critical_voltage()
+    _, critical_v, _, source = battery_levels()       # the server's levels, as the chapter's rows use
     return [
         SwarmRow("swarm_loss30", "30 % packet loss on the radio two Crazyflies share", shared,
                  inject("loss %d --packet 0.3" % SHARED_DONGLE), 6.0, clear),
@@ -302,8 +295,8 @@ def rows() -> List[SwarmRow]:
         SwarmRow("swarm_freeze2", "mocap of one body frozen 2 s", ("cf1",), inject("mocap cf1 --freeze 2"), 6.0, clear),
         SwarmRow("swarm_hide", "mocap of one body lost for good (hidden)", ("cf1",), inject("mocap cf1 --hide"), 8.0,
                  clear),
-        SwarmRow("swarm_battery_crit", "one Crazyflie's battery below its type's critical level (%.2f V)"
-                 % critical_v, ("cf1",), inject("battery cf1 %.2f" % critical_v), 10.0,
+        SwarmRow("swarm_battery_crit", "one Crazyflie's battery at critical (%.2f V; levels: %s)"
+                 % (critical_v, source), ("cf1",), inject("battery cf1 %.2f" % critical_v), 10.0,
                  lambda b: fault("battery cf1 100%")),
         SwarmRow("swarm_poweroff", "one Crazyflie switched off", ("cf1",), inject("power cf1 off"), 4.0,
                  lambda b: fault("power cf1 on")),

@@ -54,6 +54,7 @@ from crazyflie_driver.server import power_control, safety_actions, watchdog_noti
 from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (
     BATTERY_TOPIC,
+    BATTERY_VARIABLE,
     DIAGNOSTIC_LOG_TOPICS,
     RADIO_RSSI_TOPIC,
     RSSI_LOG_VARIABLE,
@@ -98,6 +99,14 @@ class WorkerConfig:
     # s between polls when nothing is queued, with sparse pacing, polls behind the other round trips waiting
     # for the dongle (swarm mode); 0: the server's period, eager pacing
     keepalive_period: float = 0.0
+    # ms between battery samples logged for the safety monitor alone when enable_logging is off (swarm
+    # mode); 0: none, so no battery reaction without enable_logging
+    battery_watch_ms: int = 0
+
+    @property
+    def logs_anything(self) -> bool:
+        """Whether the connection sets up log blocks at all."""
+        return bool(self.enable_logging or self.log_blocks or self.battery_watch_ms)
 
 
 class WorkerListener:
@@ -542,7 +551,7 @@ class CrazyflieWorker:
         cfg, cf = self.config, self.cf
         self._connect_link()
         self._check_cancelled()
-        if cfg.enable_logging or cfg.log_blocks:
+        if cfg.logs_anything:
             cf.log.reset()
         if cfg.enable_parameters:
             self._check_cancelled()
@@ -553,7 +562,7 @@ class CrazyflieWorker:
             self.param_values = dict(values)
             self._check_cancelled()
             self.listener.on_params(dict(values))
-        if cfg.enable_logging or cfg.log_blocks:
+        if cfg.logs_anything:
             self._check_cancelled()
             cf.log.fetch_toc()
             self._log_plan = self._plan_logging(toc_types(cf.log.toc))
@@ -607,6 +616,9 @@ class CrazyflieWorker:
                 if host_periods and all(v in types for v in variables):
                     topics.append((name, host_periods[0], variables))
             plan.extend(plan_log_blocks(topics, types, share=True))
+        elif cfg.battery_watch_ms and BATTERY_TOPIC not in cfg.disabled_topics and BATTERY_VARIABLE in types:
+            plan.extend(plan_log_blocks([(BATTERY_TOPIC, cfg.battery_watch_ms, (BATTERY_VARIABLE,))], types,
+                                        share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
         plan.extend(plan_log_blocks(custom, types, share=False))
         log = self.cf.log       # the firmware's limits over all blocks, before the first is created

@@ -43,6 +43,10 @@ PLACEMENT_LOGGED_ATTEMPTS = 3
 PLACEMENT_LOG_EVERY = 10
 #: s between a swarm Crazyflie's polls when nothing is queued: the radio budget's keep-alive floor.
 SWARM_KEEPALIVE_S = 1.0 / radio_budget.KEEPALIVE_FLOOR_HZ
+#: ms between battery samples each swarm Crazyflie logs for its safety monitor when the sensor topics are
+#: off (~enable_logging false, the default): without them a critical battery went unnoticed in the air
+#: (bench/bench_faults_swarm.py). One log packet per 0.5 s, under the monitor's 1 s staleness.
+BATTERY_WATCH_MS = 500
 #: s between two tries of a watch's unicast land whose link is down.
 LAND_RETRY_S = 0.1
 #: s between two log lines about a land not delivered yet (one Crazyflie).
@@ -95,13 +99,15 @@ def pose_periods(config: SwarmConfig, options: SwarmOptions) -> Dict[str, int]:
 
 
 def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0) -> WorkerConfig:
-    """No parameter read-back at connect: reading every parameter of 49 Crazyflies one by one takes
+    """The battery logged for the safety monitor even with the sensor topics off. No parameter read-back at
+    connect: reading every parameter of 49 Crazyflies one by one takes
     ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types.
     Polls at the keep-alive floor: nothing streams setpoints, and 17 Crazyflies polling every 10 ms
     would fill their radio."""
     blocks = (pose_block(pose_period_ms),) if pose_period_ms else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
-                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S)
+                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S,
+                        battery_watch_ms=BATTERY_WATCH_MS)
 
 
 def initial_position_params(position: Sequence[float]) -> Dict[str, Any]:

@@ -386,3 +386,10 @@ def test_a_refusal_names_its_service_once():
     assert refusal_text("/takeoff", e.value) == str(e.value) == (
         "/takeoff refused: the swarm has not started (no Crazyflie added yet)")
     assert refusal_text("/update_params", ValueError("1 not applied: x")) == "/update_params refused: 1 not applied: x"
+
+
+def test_swarm_workers_log_their_battery_for_the_safety_monitor_with_the_sensor_topics_off():
+    config = load_swarm_file(EXAMPLE, dongles=2)
+    from crazyflie_driver.server.swarm.policy import BATTERY_WATCH_MS, worker_config
+    wc = worker_config(config.crazyflies[0], SwarmOptions(swarm_file=EXAMPLE))
+    assert wc.enable_logging is False and wc.battery_watch_ms == BATTERY_WATCH_MS > 0
