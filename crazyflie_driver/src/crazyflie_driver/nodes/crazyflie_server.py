@@ -38,6 +38,7 @@ from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.nodes.swarm_ros import start_swarm
+from crazyflie_driver.protocol.console import rosout_line
 from crazyflie_driver.server import memory_config, power_control, radio_budget
 from crazyflie_driver.server.add_config import ACCEPTED_SWITCHES, apply_topic_switches, check_config
 from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
@@ -374,6 +375,9 @@ class RosCrazyflie(WorkerListener):
 
     def on_link_restored(self) -> None:
         self.publish_status()
+
+    def on_console(self, line: str) -> None:
+        rospy.loginfo(rosout_line(self.ns.strip("/") or str(self.config.uri), line))
 
     def on_log_late(self, message: str, late: bool) -> None:
         self.publish_status()

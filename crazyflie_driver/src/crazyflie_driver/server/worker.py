@@ -142,6 +142,9 @@ class WorkerListener:
     def on_link_restored(self) -> None:
         """The Crazyflie answers again after ``on_link_lost``."""
 
+    def on_console(self, line: str) -> None:
+        """One line of the Crazyflie's console (port 0), without its newline; runs in the link's thread."""
+
     def on_emergency(self) -> None:
         """Emergency was triggered (runs in the caller's thread)."""
 
@@ -173,6 +176,9 @@ class CrazyflieWorker:
         self.config = config
         self.cf = crazyflie
         self.listener = listener or WorkerListener()
+        console = getattr(crazyflie, "console", None)
+        if console is not None:     # the listener is asked each time: a server may attach its own later
+            console.on_line(lambda line: self.listener.on_console(line))
         self.keepalive_period = config.keepalive_period or keepalive_period
         self.link_lost_timeout = link_lost_timeout
         self.lost_retry_period = lost_retry_period
