@@ -33,7 +33,7 @@ from std_srvs.srv import Empty, EmptyResponse
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.uri import parse_uri, radio_uri_of
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.msg import GenericLogData
+from crazyflie_driver.msg import GenericLogData, crtpPacket
 from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.ros_clock import ros_clock
 from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
@@ -65,6 +65,7 @@ from crazyflie_driver.server.log_plan import (
 from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 from crazyflie_driver.server.param_names import param_values
+from crazyflie_driver.server.raw_packets import PACKETS_TOPIC, SEND_PACKET_SERVICE, packet_fields, raw_packet
 from crazyflie_driver.server.refusals import RefusalThrottle
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.safety import SafetyConfig
@@ -84,6 +85,8 @@ from crazyflie_driver.srv import (
     UpdateParamsResponse,
     WriteConfig,
     WriteConfigResponse,
+    sendPacket,
+    sendPacketResponse,
 )
 
 GRAVITY = 9.81
@@ -144,6 +147,7 @@ class RosCrazyflie(WorkerListener):
         self.ns = namespace(config.tf_prefix)
         self.frame_id = (config.tf_prefix.strip("/") + "/base_link") if config.tf_prefix.strip("/") else "base_link"
         self.worker: Optional[CrazyflieWorker] = None
+        self._packets_pub: Optional[Any] = None     # the packets topic, once attached (enable_logging_packets)
         self._services: List[Any] = []
         self._subscribers: List[Any] = []
         # Publishers are made once the Crazyflie answered (attach): an absent one costs the server
@@ -183,6 +187,9 @@ class RosCrazyflie(WorkerListener):
         self._subscribers.append(rospy.Subscriber(name("cmd_vel"), Twist, self._on_cmd_vel, queue_size=1,
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
+        self._services.append(rospy.Service(name(SEND_PACKET_SERVICE), sendPacket, self._on_send_packet))
+        self._packets_pub = (rospy.Publisher(name(PACKETS_TOPIC), crtpPacket, queue_size=100)
+                             if config.log_packets else None)
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
         self._services.append(rospy.Service(name(power_control.ARM_SERVICE), Arm, self._on_arm))
         self._services.append(rospy.Service(name(memory_config.READ_CONFIG_SERVICE), ReadConfig, self._on_read_config))
@@ -375,6 +382,22 @@ class RosCrazyflie(WorkerListener):
 
     def on_link_restored(self) -> None:
         self.publish_status()
+
+    def on_packet(self, packet) -> None:
+        pub = self._packets_pub
+        if pub is not None:
+            size, header, data = packet_fields(packet)
+            pub.publish(crtpPacket(size=size, header=header, data=data))
+
+    def _on_send_packet(self, req):
+        p = req.packet
+        if self.worker is None:
+            raise rospy.ServiceException("send_packet: %s is not connected yet" % self.config.uri)
+        try:
+            self.worker.send_raw(raw_packet(p.header, p.size, bytearray(p.data)))
+        except CrazyflieError as e:
+            raise rospy.ServiceException(str(e)) from e
+        return sendPacketResponse()
 
     def on_console(self, line: str) -> None:
         rospy.loginfo(rosout_line(self.ns.strip("/") or str(self.config.uri), line))

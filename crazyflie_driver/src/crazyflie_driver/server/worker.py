@@ -102,6 +102,8 @@ class WorkerConfig:
     # ms between battery samples logged for the safety monitor alone when enable_logging is off (swarm
     # mode); 0: none, so no battery reaction without enable_logging
     battery_watch_ms: int = 0
+    # the original driver's enable_logging_packets: packets nothing in the server reads go to on_packet
+    log_packets: bool = False
 
     @property
     def logs_anything(self) -> bool:
@@ -145,6 +147,9 @@ class WorkerListener:
     def on_console(self, line: str) -> None:
         """One line of the Crazyflie's console (port 0), without its newline; runs in the link's thread."""
 
+    def on_packet(self, packet: CRTPPacket) -> None:
+        """A packet nothing in the server reads (``WorkerConfig.log_packets``); runs in the link's thread."""
+
     def on_emergency(self) -> None:
         """Emergency was triggered (runs in the caller's thread)."""
 
@@ -179,6 +184,9 @@ class CrazyflieWorker:
         console = getattr(crazyflie, "console", None)
         if console is not None:     # the listener is asked each time: a server may attach its own later
             console.on_line(lambda line: self.listener.on_console(line))
+        link = getattr(crazyflie, "link", None)
+        if config.log_packets and link is not None and hasattr(link, "on_unclaimed"):
+            link.on_unclaimed(lambda packet: self.listener.on_packet(packet))
         self.keepalive_period = config.keepalive_period or keepalive_period
         self.link_lost_timeout = link_lost_timeout
         self.lost_retry_period = lost_retry_period
@@ -429,6 +437,15 @@ class CrazyflieWorker:
         bits, at = self.health.supervisor_bits, self.health.supervisor_at
         sup_flying = bits is not None and at is not None and now - at < 1.0 and bool(decode_state(bits).flags["flying"])
         return self.watchdog.flying_for(now), sup_flying
+
+    def send_raw(self, packet: CRTPPacket) -> None:
+        """A packet built by ``raw_packets.raw_packet`` (the original's send_packet), sent once as it is;
+        CommandRejected after an emergency (nothing goes to a stopped Crazyflie but a reboot)."""
+        if self._emergency:
+            raise CommandRejected("%s: send_packet refused: emergency is active; %s"
+                                  % (self.uri, power_control.REBOOT_ADVICE))
+        with self._send_lock:
+            self.cf.link.send(packet)
 
     def reboot_refusal(self) -> Optional[str]:
         """Why a reboot is refused now (it flies), or None."""
