@@ -13,10 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import signal
-import subprocess
 import sys
-import tempfile
 import time
 from typing import Any, Dict, List, Tuple
 
@@ -25,6 +22,7 @@ try:
 except ImportError:
     sys.exit("bench_faults_swarm: the catkin workspace is not on the path: source tools/env.sh first")
 
+from fault_table import harness  # noqa: E402
 from fault_table.harness import HOVER_SPEED_MS, HOVER_TOLERANCE_M, SAMPLE_HZ  # noqa: E402
 from fault_table.swarm import SWARM_FILE, SwarmBench, SwarmRow, rows  # noqa: E402
 
@@ -59,54 +57,30 @@ def main() -> int:
     ap.add_argument("--rows", help="comma-separated row keys (default: all): " + ",".join(r.key for r in rows()))
     ap.add_argument("--out", default=os.path.join(bs.RESULTS, "faults_swarm.txt"), help="'-' for stdout only")
     args = ap.parse_args()
-    chosen = rows()
-    if args.rows:
-        keys = args.rows.split(",")
-        unknown = set(keys) - {r.key for r in chosen}
-        if unknown:
-            print("bench_faults_swarm: error: unknown rows %s" % ", ".join(sorted(unknown)), file=sys.stderr)
-            return 1
-        chosen = [r for r in chosen if r.key in keys]
-    work = tempfile.mkdtemp(prefix="cf_faults_swarm_")
-    port = bs.free_port()
-    os.environ["ROS_MASTER_URI"] = "http://127.0.0.1:%d" % port
-    os.environ["ROS_LOG_DIR"] = os.path.join(work, "log")
-    os.environ["CRAZYFLIE_TOC_CACHE"] = os.path.join(work, "toc")
-    os.environ.setdefault("ROS_IP", "127.0.0.1")
-    core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-    commit = subprocess.run(["git", "-C", bs.REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
-                            text=True).stdout.strip()[:100]
+    chosen = harness.chosen(rows(), args.rows, "bench_faults_swarm")
+    if chosen is None:
+        return 1
+    commit = harness.commit_line()
     t_start = time.monotonic()
     results: List[Tuple[SwarmRow, Dict[str, Any]]] = []
     bench = None
-    try:
-        import rosgraph
-        deadline = time.monotonic() + 30.0
-        while not rosgraph.is_master_online() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        import rospy
-        rospy.init_node("bench_faults_swarm", disable_signals=True)
-        bench = SwarmBench(work)
-        for row in chosen:
-            print("%s ..." % row.title, flush=True)
-            try:
-                r = bench.run(row)
-            except Exception as e:
-                r = {"error": "%s: %s" % (type(e).__name__, e)}
-                if bench.graph is not None:
-                    bench.graph.stop()
-                    bench.graph = None
-            results.append((row, r))
-            print("\n".join(lines(row, r)), flush=True)
-    finally:
-        if bench is not None:
-            bench.close()
-        os.killpg(core.pid, signal.SIGINT)
+    with harness.bench_master("cf_faults_swarm_", "bench_faults_swarm") as work:
         try:
-            core.wait(15)
-        except subprocess.TimeoutExpired:
-            os.killpg(core.pid, signal.SIGKILL)
+            bench = SwarmBench(work)
+            for row in chosen:
+                print("%s ..." % row.title, flush=True)
+                try:
+                    r = bench.run(row)
+                except Exception as e:
+                    r = {"error": "%s: %s" % (type(e).__name__, e)}
+                    if bench.graph is not None:
+                        bench.graph.stop()
+                        bench.graph = None
+                results.append((row, r))
+                print("\n".join(lines(row, r)), flush=True)
+        finally:
+            if bench is not None:
+                bench.close()
     head = ["fault table, swarm mode: %s (4 Crazyflies, cf1 and cf2 on one radio, cf3 and cf4 on one each), "
             "hovering at 0.5 m over their initial positions on the onboard high-level commander; the server's "
             "packed motion-capture broadcasts from the world's VRPN at 100 Hz; its emergency-stop watchdog "

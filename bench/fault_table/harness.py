@@ -2,14 +2,17 @@
 and of the world's truth, ``Bench.run`` (one row: hover, inject, observe) and the reading of the truth."""
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
 import subprocess
+import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from bench_support import REPO  # noqa: E402,F401  (the repository root, for the rows and the report)
 
@@ -452,3 +455,52 @@ def reports(rec: Recorder, t_fault: float, t_end: float) -> List[str]:
     if states:
         out.append("controller state: " + " -> ".join("%s (+%.1fs)" % (s, t - t_fault) for t, s in states[:4]))
     return out
+
+
+# --- a bench run's ROS master --------------------------------------------------------------------
+def chosen(all_rows: List[Any], keys: Optional[str], prog: str) -> Optional[List[Any]]:
+    """The rows ``--rows`` names (all without it), in ``all_rows``' order; None (said on stderr) for an
+    unknown key."""
+    if not keys:
+        return list(all_rows)
+    wanted = keys.split(",")
+    unknown = set(wanted) - {r.key for r in all_rows}
+    if unknown:
+        print("%s: error: unknown rows %s" % (prog, ", ".join(sorted(unknown))), file=sys.stderr)
+        return None
+    return [r for r in all_rows if r.key in wanted]
+
+
+def commit_line() -> str:
+    """The stack's commit, for the table's head."""
+    return subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
+                          text=True).stdout.strip()[:100]
+
+
+@contextlib.contextmanager
+def bench_master(prefix: str, node: str) -> Iterator[str]:
+    """A private roscore on a free port (logs and TOC cache in a fresh work folder, yielded) with this
+    process as the node ``node``; the master is stopped on the way out."""
+    from bench_support import free_port
+    work = tempfile.mkdtemp(prefix=prefix)
+    port = free_port()
+    os.environ["ROS_MASTER_URI"] = "http://127.0.0.1:%d" % port
+    os.environ["ROS_LOG_DIR"] = os.path.join(work, "log")
+    os.environ["CRAZYFLIE_TOC_CACHE"] = os.path.join(work, "toc")
+    os.environ.setdefault("ROS_IP", "127.0.0.1")
+    core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        import rosgraph
+        deadline = time.monotonic() + 30.0
+        while not rosgraph.is_master_online() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        import rospy
+        rospy.init_node(node, disable_signals=True)
+        yield work
+    finally:
+        os.killpg(core.pid, signal.SIGINT)
+        try:
+            core.wait(15)
+        except subprocess.TimeoutExpired:
+            os.killpg(core.pid, signal.SIGKILL)
