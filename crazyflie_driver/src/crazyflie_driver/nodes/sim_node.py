@@ -1,6 +1,6 @@
 """``crazyflie_sim_node``: the simulated world inside a ROS node, playing the motion-capture system too.
 
-It runs the world server (``sim.air.server.WorldServer``) that fake Crazyradios of other processes
+It runs the world server (``sim.world_server.WorldServer``) that fake Crazyradios of other processes
 connect to through ``CRAZYFLIE_SIM_ADDRESS`` (``~address``, default 127.0.0.1:19840), and publishes
 each vehicle's pose as the motion-capture bridges of the original stack did:
 
@@ -21,7 +21,7 @@ Crazyflie at its ``initialPosition`` on the URI the server derives from its id a
 dongle per channel), named after its tf_prefix, as the server's motion capture looks for it;
 ``dongles``
 (simulated Crazyradios, default: enough for the URIs); ``speed`` (1.0: world seconds per wall second;
-``auto``: real time, slower while the host lags; ``sim.world.pacing``); ``seed``; ``mocap``
+``auto``: real time, slower while the host lags; ``sim.room.pacing``); ``seed``; ``mocap``
 (vicon); ``mocap_rate`` (100 Hz); ``mocap_noise`` (position noise, m, standard deviation);
 ``mocap_latency`` (s); ``mocap_dropout`` (fraction of frames lost); ``world_frame`` (world);
 ``publish_clock`` (true: publish the world time on /clock every CLOCK_PERIOD_S of world time, from
@@ -33,7 +33,7 @@ motion-capture PC would) and ``vrpn_port`` (default 3883 when free, else one the
 by where the system allows it, so host nodes on a busy machine cannot starve the world; 0: off;
 ``sim.priority``).
 
-The frames come from the world's own motion-capture model (``sim.world.mocap.MocapModel``), sampled on
+The frames come from the world's own motion-capture model (``sim.room.mocap.MocapModel``), sampled on
 world time; a vehicle added to the world at run time is reported too.
 
 Faults (docs/simulation.md, "Fault injection"): ``packet_loss`` and ``ack_loss`` (fraction 0..1 of
@@ -57,9 +57,9 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.sim.air.faults import MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M
+from crazyflie_driver.sim.onboard.stabilizer import PLATFORM_CF2, PLATFORMS
 from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST, raise_priority
-from crazyflie_driver.sim.world.pacing import Pacing, PacingError, parse_pacing
-from crazyflie_driver.sim.world.stabilizer import PLATFORM_CF2, PLATFORMS
+from crazyflie_driver.sim.room.pacing import Pacing, PacingError, parse_pacing
 
 MOCAP_STYLES = ("vicon", "vrpn", "both", "none")
 CLOCK_PERIOD_S = 0.002
@@ -232,9 +232,9 @@ def dongles_needed(vehicles: Sequence[VehicleSpec], requested: Optional[int]) ->
 
 
 def mocap_model(world: Any, config: MocapConfig, seed: Optional[int] = None):
-    """The world's motion-capture model (``sim.world.mocap.MocapModel``) with the node's settings:
+    """The world's motion-capture model (``sim.room.mocap.MocapModel``) with the node's settings:
     position noise ``config.noise`` (m), no orientation noise, ``latency`` (s), ``dropout``."""
-    from crazyflie_driver.sim.world.mocap import MocapModel
+    from crazyflie_driver.sim.room.mocap import MocapModel
 
     return MocapModel(world, rate=config.rate, position_noise=config.noise, orientation_noise=0.0,
                       latency=config.latency, dropout=config.dropout, seed=seed)
@@ -398,7 +398,7 @@ class MocapPublisher:
         return body
 
     def publish(self, frames: Sequence[Any], world_time: float) -> int:
-        """frames: ``sim.world.mocap.MocapFrame`` s delivered since the last call; ``world_time`` now.
+        """frames: ``sim.room.mocap.MocapFrame`` s delivered since the last call; ``world_time`` now.
 
         vicon style stamps each frame with its capture time (ROS now minus its age in world time);
         vrpn style with the time of receipt, as vrpn_client_ros does. Returns the transforms sent.
@@ -484,7 +484,7 @@ def _start_diagnostics(world: Any, address: str, active_faults: Any = None, paci
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
     from crazyflie_driver.nodes.ros_signals import shutting_down
-    from crazyflie_driver.sim.world.world import BEHIND_FACTOR, BEHIND_WARNING_PERIOD_S
+    from crazyflie_driver.sim.room.world import BEHIND_FACTOR, BEHIND_WARNING_PERIOD_S
 
     pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
     name = "%s: simulated world (%s)" % (rospy.get_name(), address)
@@ -544,9 +544,9 @@ def main() -> None:
     from crazyflie_driver.nodes.ros_signals import init_node, shutting_down
     from crazyflie_driver.sim.air.faults import describe_result as faults_text
     from crazyflie_driver.sim.air.medium import parse_address
-    from crazyflie_driver.sim.air.server import WorldServer
-    from crazyflie_driver.sim.world.pacing import start_pacing
-    from crazyflie_driver.sim.world.world import World
+    from crazyflie_driver.sim.room.pacing import start_pacing
+    from crazyflie_driver.sim.room.world import World
+    from crazyflie_driver.sim.world_server import WorldServer
 
     init_node("crazyflie_sim")
     params = _private_params()
@@ -619,7 +619,7 @@ def main() -> None:
 
     vrpn = None
     if vrpn_on:
-        from crazyflie_driver.sim.world.mocap_vrpn import WorldVrpnServer
+        from crazyflie_driver.sim.room.mocap_vrpn import WorldVrpnServer
         try:
             vrpn = WorldVrpnServer(world, model, port=vrpn_port)
             vrpn.start()

@@ -1,4 +1,4 @@
-"""The sim node's parameters, without ROS (its mocap frames are sim.world.mocap.MocapModel's, tested with the world)."""
+"""The sim node's parameters, without ROS (its mocap frames are sim.room.mocap.MocapModel's, tested with the world)."""
 from __future__ import annotations
 
 import pytest
