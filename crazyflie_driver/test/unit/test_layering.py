@@ -9,7 +9,8 @@ Inside ``server``, swarm mode (``server.swarm``) builds on the per-Crazyflie pat
 safety, onboard commands), which never imports the swarm; every swarm module lives in that package.
 Inside ``sim``, each part sits in the package of what it plays: ``sim.onboard`` (the Crazyflie's
 flight software), ``sim.crtp`` (its radio side), ``sim.room`` (physics, sensors, battery, motion
-capture, world stepping), ``sim.air`` (dongles, media, UDP); ``sim.world_server`` composes them. The
+capture, world stepping), ``sim.air`` (dongles, media, UDP); ``sim.world_server`` and ``sim.node_config``
+compose them. The
 arrows between them are ``SIM_ARROWS`` (docs/architecture.md, "The simulator's parts").
 """
 from __future__ import annotations
@@ -120,8 +121,11 @@ SIM_ARROWS: Dict[str, Set[str]] = {
     "sim.crtp": {"sim.onboard", "sim.base"},               # the radio side hands setpoints to the flight code
     "sim.room": {"sim.onboard", "sim.base"},               # the world steps each vehicle's flight code
     "sim.air": {"sim.base"},
-    "sim.world_server": {"sim.onboard", "sim.crtp", "sim.room", "sim.air", "sim.base"},
+    "sim.root": {"sim.onboard", "sim.crtp", "sim.room", "sim.air", "sim.base"},
 }
+#: The simulator's composition roots at its top, which wire every part: the world server process and the
+#: sim node's plan (its parameters turned into a world, motion capture and faults).
+SIM_ROOTS = ("world_server", "node_config")
 
 
 def _sim_part(module: str) -> str:
@@ -129,7 +133,7 @@ def _sim_part(module: str) -> str:
     parts = module.split(".")
     if parts[2] in SIM_PARTS:
         return "sim." + parts[2]
-    return "sim.world_server" if parts[2] == "world_server" else "sim.base"
+    return "sim.root" if parts[2] in SIM_ROOTS else "sim.base"
 
 
 def test_every_sim_module_has_a_part():

@@ -36,7 +36,7 @@ from crazyflie_driver.errors import CrazyflieError
 from crazyflie_driver.msg import GenericLogData, crtpPacket
 from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.ros_clock import ros_clock
-from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
+from crazyflie_driver.nodes.ros_signals import RosLogHandler, init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.protocol.console import rosout_line
 from crazyflie_driver.server import memory_config, power_control, radio_budget
@@ -67,7 +67,7 @@ from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 from crazyflie_driver.server.param_names import param_values
 from crazyflie_driver.server.raw_packets import PACKETS_TOPIC, SEND_PACKET_SERVICE, packet_fields, raw_packet
 from crazyflie_driver.server.refusals import RefusalThrottle
-from crazyflie_driver.server.registry import CrazyflieRegistry
+from crazyflie_driver.server.registry import CrazyflieRegistry, DuplicateCrazyflie
 from crazyflie_driver.server.safety import SafetyConfig
 from crazyflie_driver.server.safety_actions import worker_onboard_commands
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
@@ -421,24 +421,6 @@ class RosCrazyflie(WorkerListener):
             threading.Thread(target=self._on_gave_up, name="remove %s" % self.config.uri, daemon=True).start()
 
 
-class RosLogHandler(logging.Handler):
-    """Sends the library's Python log records to rosout."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            text = self.format(record)
-        except Exception:
-            text = record.getMessage()
-        if record.levelno >= logging.ERROR:
-            rospy.logerr(text)
-        elif record.levelno >= logging.WARNING:
-            rospy.logwarn(text)
-        elif record.levelno >= logging.INFO:
-            rospy.loginfo(text)
-        else:
-            rospy.logdebug(text)
-
-
 def topic_switches_of(tf_prefix: str) -> Dict[str, Any]:
     """The original driver's ``enable_logging_<topic>``/``use_ros_time`` switches that ``crazyflie_add``
     left under the Crazyflie's namespace (the chapter's AddCrazyflie request has no fields for them)."""
@@ -621,12 +603,12 @@ class CrazyflieServer:
         key = self.registry.canonical_uri(config.uri)
         if not config.tf_prefix:
             rospy.logwarn("add_crazyflie: %s with an empty tf_prefix: its topics and services are global", key)
-        taken = [w for w in self.registry.workers()
-                 if w.uri == key or self.registry.canonical_uri(w.uri) == key or w.config.tf_prefix == config.tf_prefix]
-        if taken:   # refused before any publisher is made, so the served one's topics stay untouched
-            msg = "could not add %s: %s is already served as %r" % (key, taken[0].uri, taken[0].config.tf_prefix)
+        try:        # refused before any publisher is made, so the served one's topics stay untouched
+            self.registry.check_free(config)
+        except DuplicateCrazyflie as e:
+            msg = "could not add %s: %s" % (key, e)
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from None
         rospy.loginfo("adding %s as %r", key, config.tf_prefix)
         ros = worker = None
         try:

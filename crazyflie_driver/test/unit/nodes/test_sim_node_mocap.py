@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from crazyflie_driver.nodes.sim_node import StampGuard, newest_per_body, world_status
+from crazyflie_driver.sim.node_config import StampGuard, newest_per_body, world_status
 from crazyflie_driver.sim.room.mocap import MocapFrame
 
 genpy = pytest.importorskip("genpy")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.nodes.sim_node import MocapConfig, SimConfigError, mocap_model, vehicles_from_params
+from crazyflie_driver.sim.node_config import MocapConfig, SimConfigError, mocap_model, vehicles_from_params
 from crazyflie_driver.sim.room.world import World
 
 
