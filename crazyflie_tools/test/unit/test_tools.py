@@ -238,7 +238,7 @@ def test_version(sim, capsys):
     lines = capsys.readouterr().out.splitlines()
     serial = sim.backend.dongles[0].serial
     assert lines[0] == "Crazyradio 0: firmware 0.53, serial %s" % serial
-    assert lines[1] == "%s: protocol version 12, firmware 2026.04" % URI1
+    assert lines[1] == "%s: protocol version 12, firmware 2026.08" % URI1
 
 
 def test_absent_crazyflie(sim, capsys):

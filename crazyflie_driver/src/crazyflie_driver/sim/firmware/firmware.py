@@ -27,7 +27,7 @@ from crazyflie_driver.crtp.nrf_system import (
     SYS_STM_ON,
 )
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
-from crazyflie_driver.sim.firmware import ports
+from crazyflie_driver.sim.firmware import firmware_toc, ports
 from crazyflie_driver.sim.firmware import tables as T
 from crazyflie_driver.sim.firmware.decoded_values import DecodedValues, trajectory_values
 from crazyflie_driver.sim.firmware.high_level_port import ENOEXEC, high_level_port
@@ -58,8 +58,8 @@ class FirmwareProfile:
 
 
 PROFILES: Dict[str, FirmwareProfile] = {
-    T.GEN_CURRENT: FirmwareProfile(T.GEN_CURRENT, 12, "2026.04", "Crazyflie 2.0", True, 200, False, 1.0,
-                                   frozenset({0, 2, 3, 4, 5, 6, 7, 8, 9, 13, 15})),
+    T.GEN_CURRENT: FirmwareProfile(T.GEN_CURRENT, 12, firmware_toc.FIRMWARE_RELEASE, "Crazyflie 2.0", True, 200,
+                                   False, 1.0, frozenset({0, 2, 3, 4, 5, 6, 7, 8, 9, 13, 15})),
     T.GEN_2016: FirmwareProfile(T.GEN_2016, 2, "2016.02", "Crazyflie 2.0", False, 60, True, None,
                                 frozenset({0, 2, 3, 4, 5, 13, 15})),
 }
