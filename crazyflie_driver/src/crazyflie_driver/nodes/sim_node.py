@@ -11,7 +11,8 @@ each vehicle's pose as the motion-capture bridges of the original stack did:
 * ``both`` or ``none``.
 
 Private parameters: ``vehicles`` (list of ``{uri, name, x, y, z}``; ``position: [x, y, z]``,
-``yaw``, ``firmware``, ``platform`` (``cf2`` or ``brushless``: armed before its motors spin) and ``frame``
+``yaw``, ``firmware``, ``platform`` (``cf2`` or ``brushless``: armed before its motors spin), ``decks`` (e.g.
+``[bcFlow2, bcLighthouse4]``) and ``frame``
 also accepted: ``frame`` is the tf frame the vicon style publishes
 that vehicle's pose under, as a Vicon room whose body is named that way would, e.g. the
 ``frame:=crazyflie1`` of a launch file; also as a YAML string holding that list, or the path of a
@@ -57,6 +58,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.sim.air.faults import MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M
+from crazyflie_driver.sim.firmware.memory_port import DECKS
 from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST, raise_priority
 from crazyflie_driver.sim.world.pacing import Pacing, PacingError, parse_pacing
 from crazyflie_driver.sim.world.stabilizer import PLATFORM_CF2, PLATFORMS
@@ -81,6 +83,7 @@ class VehicleSpec:
     firmware: str = "current"
     frame: str = ""          # vicon style: tf child frame of its pose; "" = vicon/<name>/<name>
     platform: str = PLATFORM_CF2     # "brushless": must be armed before its motors spin
+    decks: tuple = ()                # board names (e.g. bcFlow2): one-wire memories, deck.<name> params read 1
 
 
 @dataclass(frozen=True)
@@ -146,7 +149,8 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         where = "~vehicles[%d]" % i
         if not isinstance(item, dict) or "uri" not in item:
             raise SimConfigError("%s needs at least a 'uri' (got %r)" % (where, item))
-        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform"}
+        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform",
+                                 "decks"}
         if unknown:
             raise SimConfigError("%s has unknown keys %s" % (where, ", ".join(sorted(unknown))))
         try:
@@ -173,8 +177,13 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         if platform not in PLATFORMS:
             raise SimConfigError("%s: platform must be one of %s (brushless: armed before its motors spin), got %r"
                                  % (where, ", ".join(PLATFORMS), platform))
+        decks = item.get("decks", [])
+        if not isinstance(decks, list) or any(d not in DECKS for d in decks):
+            raise SimConfigError("%s: decks must be a list of deck names out of %s, got %r"
+                                 % (where, ", ".join(sorted(DECKS)), decks))
         out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
-                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform))
+                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform,
+                               tuple(decks)))
     return out
 
 
@@ -576,7 +585,7 @@ def main() -> None:
         server = WorldServer(world, dongles=dongles, host=host, port=port, seed=None if seed is None else int(seed),
                              dongle_model=str(params.get("dongle_model", "PA")))
         for v in vehicles:
-            server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw, platform=v.platform)
+            server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw, platform=v.platform, decks=v.decks)
         for name in str(params.get("usb", "")).replace(",", " ").split():
             server.plug_usb(name)          # also on a USB cable: usb://0, usb://1, ... in this order
         server.start()

@@ -79,3 +79,12 @@ def test_vehicles_from_the_servers_swarm_file(tmp_path):
         vehicles_from_swarm_file(str(nested))
     with pytest.raises(SwarmConfigError, match="cannot be read"):
         vehicles_from_swarm_file(str(tmp_path / "missing.yaml"))
+
+
+def test_vehicles_name_their_decks_and_unknown_decks_are_refused():
+    spec = vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701",
+                                               "decks": ["bcFlow2", "bcLighthouse4"]}]})[0]
+    assert spec.decks == ("bcFlow2", "bcLighthouse4")
+    assert vehicles_from_params({"uri": "radio://0/80/2M/E7E7E7E701", "name": "cf1"})[0].decks == ()
+    with pytest.raises(SimConfigError, match="decks must be a list of deck names out of bcDWM1000"):
+        vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701", "decks": ["bcFlow3"]}]})

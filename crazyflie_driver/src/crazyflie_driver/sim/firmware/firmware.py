@@ -283,12 +283,15 @@ class SimulatedCrazyflie:
         return float(self.vehicle.read(name))
 
     def _vehicle_param_defaults(self) -> Dict[str, float]:
+        """The vehicle's values, plus ``deck.<board>`` = 1 for each deck plugged in (the deck
+        drivers' read-only "detected" flags, set at boot from the one-wire identification)."""
         fn = getattr(self.vehicle, "param_defaults", None)
+        decks = {"deck." + name: 1.0 for name in self.decks}
         try:
-            return dict(fn()) if fn is not None else {}
+            return {**(dict(fn()) if fn is not None else {}), **decks}
         except Exception:
             _log.exception("vehicle.param_defaults failed")
-            return {}
+            return decks
 
     def _write_param(self, name: str, value: float) -> None:
         self.decoded.observe("param." + name, value)
