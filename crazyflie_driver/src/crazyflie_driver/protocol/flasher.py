@@ -12,7 +12,7 @@ from typing import Callable, Optional
 
 from crazyflie_driver.crtp import bootloader as bl
 from crazyflie_driver.crtp.nrf_system import reboot_packets
-from crazyflie_driver.errors import LinkTimeout, ProtocolError
+from crazyflie_driver.errors import FirmwareImageError, LinkTimeout, ProtocolError
 
 Exchange = Callable[[bytes], Optional[bytes]]
 #: Times a request is sent again when its answer does not come (lost packet or ack).
@@ -47,14 +47,18 @@ def read_info(exchange: Exchange, target: int) -> bl.BootInfo:
     return bl.parse_info(answer, target)
 
 
-def flash(exchange: Exchange, target: int, image: bytes, reboot_first: bool = True,
+def flash(exchange: Exchange, target: int, image: bytes, reboot_first: bool = True, verify_after: bool = True,
           progress: Optional[Callable[[int, int], None]] = None) -> FlashResult:
     """Write ``image`` to ``target``'s firmware flash, verify it, boot the firmware. Raises
     FirmwareImageError before anything is written when ``image`` is not a firmware for ``target``."""
     if reboot_first:
         enter_bootloader(exchange)
     info = read_info(exchange, target)
-    bl.check_image(image, target, info)
+    try:
+        bl.check_image(image, target, info)
+    except FirmwareImageError:
+        boot_firmware(exchange, target)              # refused: leave it running its old firmware
+        raise
     page, per_buffer = info.page_size, info.page_size * info.buffer_pages
     padded = image + b"\xff" * (-len(image) % page)
     flash_page, done = info.start_page, 0
@@ -73,10 +77,28 @@ def flash(exchange: Exchange, target: int, image: bytes, reboot_first: bool = Tr
         done += len(block)
         if progress is not None:
             progress(done, len(padded))
-    verify(exchange, target, info, padded)
+    if verify_after:
+        verify(exchange, target, info, padded)
+    boot_firmware(exchange, target)
+    return FlashResult(target, info, len(image), len(padded) // page)
+
+
+def boot_firmware(exchange: Exchange, target: int) -> None:
     for packet in (bl.reset_init(target), bl.reset(target, to_firmware=True)):
         exchange(packet)
-    return FlashResult(target, info, len(image), len(padded) // page)
+
+
+def verify_only(exchange: Exchange, target: int, image: bytes) -> bl.BootInfo:
+    """Reboot into the bootloader, compare the flash with ``image`` (ProtocolError on a difference),
+    boot the firmware again."""
+    enter_bootloader(exchange)
+    info = read_info(exchange, target)
+    bl.check_image(image, target, info)
+    try:
+        verify(exchange, target, info, image + b"\xff" * (-len(image) % info.page_size))
+    finally:
+        boot_firmware(exchange, target)
+    return info
 
 
 def _data_answer_of(target: int, page: int, address: int) -> Callable[[bytes], bool]:
