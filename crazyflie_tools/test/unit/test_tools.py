@@ -17,8 +17,8 @@ from crazyflie_driver.sim.air.medium import LocalMedium
 from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
 from crazyflie_tools import (
     battery,
-    flash,
     console,
+    flash,
     get_param,
     list_log_variables,
     list_params,
