@@ -11,7 +11,8 @@ each vehicle's pose as the motion-capture bridges of the original stack did:
 * ``both`` or ``none``.
 
 Private parameters: ``vehicles`` (list of ``{uri, name, x, y, z}``; ``position: [x, y, z]``,
-``yaw``, ``firmware``, ``platform`` (``cf2`` or ``brushless``: armed before its motors spin) and ``frame``
+``yaw``, ``firmware``, ``platform`` (``cf2`` or ``brushless``: armed before its motors spin), ``decks`` (e.g.
+``[bcFlow2, bcLighthouse4]``) and ``frame``
 also accepted: ``frame`` is the tf frame the vicon style publishes
 that vehicle's pose under, as a Vicon room whose body is named that way would, e.g. the
 ``frame:=crazyflie1`` of a launch file; also as a YAML string holding that list, or the path of a
@@ -292,7 +293,7 @@ def _start_world(plan: SimPlan) -> Tuple[Any, Any]:
     server = WorldServer(world, dongles=plan.dongles, host=host, port=port, seed=plan.seed,
                          dongle_model=plan.dongle_model)
     for v in plan.vehicles:
-        server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw, platform=v.platform)
+        server.add_crazyflie(v.uri, v.name, v.position, v.firmware, v.yaw, platform=v.platform, decks=v.decks)
     for name in plan.usb:
         server.plug_usb(name)          # also on a USB cable: usb://0, usb://1, ... in this order
     server.start()

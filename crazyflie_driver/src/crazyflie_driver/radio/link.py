@@ -212,6 +212,13 @@ class RadioLink:
                     return True
             return False
 
+    def exchange_raw(self, data: bytes) -> Optional[bytes]:
+        """One raw radio payload outside CRTP and safelink (the bootloaders' packets); the ack's payload,
+        or None when no ack came."""
+        with self._send_lock:
+            ack = self._round_trip(bytes(data))
+            return bytes(ack.data) if ack.ack else None
+
     def _resync_safelink(self) -> bool:
         ack = self._round_trip(SAFELINK_ON)
         if ack.ack and ack.data == SAFELINK_ON:

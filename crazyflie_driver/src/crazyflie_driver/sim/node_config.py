@@ -13,6 +13,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.sim.air.faults import MAX_MOCAP_LATENCY_S, MAX_MOCAP_NOISE_M
+from crazyflie_driver.sim.crtp.memory_port import DECKS
 from crazyflie_driver.sim.onboard.stabilizer import PLATFORM_CF2, PLATFORMS
 from crazyflie_driver.sim.priority import DEFAULT_PRIORITY_BOOST
 from crazyflie_driver.sim.room.pacing import Pacing, parse_pacing
@@ -36,6 +37,7 @@ class VehicleSpec:
     firmware: str = "current"
     frame: str = ""          # vicon style: tf child frame of its pose; "" = vicon/<name>/<name>
     platform: str = PLATFORM_CF2     # "brushless": must be armed before its motors spin
+    decks: tuple = ()                # board names (e.g. bcFlow2): one-wire memories, deck.<name> params read 1
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,14 @@ def _frame(where: str, value: Any) -> str:
     return frame
 
 
+def _decks(where: str, decks: Any) -> tuple:
+    """A vehicle's ``decks``: a list of board names the simulated firmware knows."""
+    if not isinstance(decks, list) or any(d not in DECKS for d in decks):
+        raise SimConfigError("%s: decks must be a list of deck names out of %s, got %r"
+                             % (where, ", ".join(sorted(DECKS)), decks))
+    return tuple(decks)
+
+
 def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
     """``~vehicles`` (or ``~uri``/``~name``) checked; names must be valid ROS names, URIs unique."""
     raw = params.get("vehicles")
@@ -101,7 +111,8 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         where = "~vehicles[%d]" % i
         if not isinstance(item, dict) or "uri" not in item:
             raise SimConfigError("%s needs at least a 'uri' (got %r)" % (where, item))
-        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform"}
+        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform",
+                                 "decks"}
         if unknown:
             raise SimConfigError("%s has unknown keys %s" % (where, ", ".join(sorted(unknown))))
         try:
@@ -129,7 +140,8 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
             raise SimConfigError("%s: platform must be one of %s (brushless: armed before its motors spin), got %r"
                                  % (where, ", ".join(PLATFORMS), platform))
         out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
-                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform))
+                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform,
+                               _decks(where, item.get("decks", []))))
     return out
 
 

@@ -113,3 +113,12 @@ def test_plan_reads_the_swarm_file_through_the_loader_it_is_given():
         plan_from_params({"uri": "radio://0/80/2M", "priority_boost": "high"})
     with pytest.raises(SimConfigError, match="no vehicles"):
         plan_from_params({})
+
+
+def test_vehicles_name_their_decks_and_unknown_decks_are_refused():
+    spec = vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701",
+                                               "decks": ["bcFlow2", "bcLighthouse4"]}]})[0]
+    assert spec.decks == ("bcFlow2", "bcLighthouse4")
+    assert vehicles_from_params({"uri": "radio://0/80/2M/E7E7E7E701", "name": "cf1"})[0].decks == ()
+    with pytest.raises(SimConfigError, match="decks must be a list of deck names out of bcDWM1000"):
+        vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701", "decks": ["bcFlow3"]}]})

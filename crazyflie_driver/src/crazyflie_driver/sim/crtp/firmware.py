@@ -14,9 +14,10 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple, Union
 
+from crazyflie_driver.crtp import bootloader as bl
 from crazyflie_driver.crtp import config_block as cb
 from crazyflie_driver.crtp.nrf_system import (
     RESET_TO_FIRMWARE,
@@ -27,8 +28,9 @@ from crazyflie_driver.crtp.nrf_system import (
     SYS_STM_ON,
 )
 from crazyflie_driver.crtp.packet import MAX_PAYLOAD, CRTPPacket
-from crazyflie_driver.sim.crtp import ports
+from crazyflie_driver.sim.crtp import firmware_toc, ports
 from crazyflie_driver.sim.crtp import tables as T
+from crazyflie_driver.sim.crtp.bootloader import GEOMETRY, SimBootloader, image_version
 from crazyflie_driver.sim.crtp.decoded_values import DecodedValues, trajectory_values
 from crazyflie_driver.sim.crtp.high_level_port import ENOEXEC, high_level_port
 from crazyflie_driver.sim.crtp.link import NrfLink
@@ -58,8 +60,8 @@ class FirmwareProfile:
 
 
 PROFILES: Dict[str, FirmwareProfile] = {
-    T.GEN_CURRENT: FirmwareProfile(T.GEN_CURRENT, 12, "2026.04", "Crazyflie 2.0", True, 200, False, 1.0,
-                                   frozenset({0, 2, 3, 4, 5, 6, 7, 8, 9, 13, 15})),
+    T.GEN_CURRENT: FirmwareProfile(T.GEN_CURRENT, 12, firmware_toc.FIRMWARE_RELEASE, "Crazyflie 2.0", True, 200,
+                                   False, 1.0, frozenset({0, 2, 3, 4, 5, 6, 7, 8, 9, 13, 15})),
     T.GEN_2016: FirmwareProfile(T.GEN_2016, 2, "2016.02", "Crazyflie 2.0", False, 60, True, None,
                                 frozenset({0, 2, 3, 4, 5, 13, 15})),
 }
@@ -107,6 +109,7 @@ class SimulatedCrazyflie:
         self.radio_on = True                     # the nRF's power: off only after "all off" or the switch
         self.in_bootloader = False               # rebooted into the bootloader: no firmware answers CRTP
         self._reset_armed = False                # an nRF RESET_INIT came: the next RESET is taken
+        self.bootloader = SimBootloader()        # both chips' flash: kept across reboots
         self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
                             self.profile.rssi_in_empty_ack, self._system_command)
         self._ports: Dict[int, Callable[[int, int, bytes], None]] = {}
@@ -211,6 +214,9 @@ class SimulatedCrazyflie:
             self.radio_on = True
             self.in_bootloader = bool(bootloader)
             self._reset_armed = False
+            image = self.bootloader.stm32_image()
+            if image is not None and not bootloader:     # a flashed image runs: its version is reported
+                self.profile = replace(self.profile, firmware_version=image_version(image))
             if reset_nrf:
                 self.link.reset()
             self._boot()
@@ -283,12 +289,15 @@ class SimulatedCrazyflie:
         return float(self.vehicle.read(name))
 
     def _vehicle_param_defaults(self) -> Dict[str, float]:
+        """The vehicle's values, plus ``deck.<board>`` = 1 for each deck plugged in (the deck
+        drivers' read-only "detected" flags, set at boot from the one-wire identification)."""
         fn = getattr(self.vehicle, "param_defaults", None)
+        decks = {"deck." + name: 1.0 for name in self.decks}
         try:
-            return dict(fn()) if fn is not None else {}
+            return {**(dict(fn()) if fn is not None else {}), **decks}
         except Exception:
             _log.exception("vehicle.param_defaults failed")
-            return {}
+            return decks
 
     def _write_param(self, name: str, value: float) -> None:
         self.decoded.observe("param." + name, value)
@@ -372,6 +381,8 @@ class SimulatedCrazyflie:
             self.packet_link_active = False
             self.state.rx_unicast += 1
             try:
+                if self.in_bootloader:
+                    return self._bootloader_packet(bytes(data))
                 return self.link.handle(bytes(data), ack_requested)
             except Exception:
                 _log.exception("radio packet %s broke the simulated nRF", bytes(data).hex())
@@ -433,6 +444,28 @@ class SimulatedCrazyflie:
             handler(header, channel, raw[1:])
         except Exception:
             _log.exception("CRTP packet %s broke port %d of the simulated firmware", raw.hex(), port)
+
+    def _bootloader_packet(self, raw: bytes) -> bytes:
+        """A packet while the bootloaders run: their commands, and RESET_INIT + RESET to leave them.
+        RESET_INIT is answered with four bytes of the CPU id (the host derives the bootloader's
+        radio address from them)."""
+        answer: Optional[bytes] = None
+        armed, self._reset_armed = self._reset_armed, False
+        if len(raw) >= 3 and raw[1] == bl.TARGET_NRF51 and raw[0] & 0xF3 == 0xF3:
+            raw = bytes((bl.BOOT_HEADER,)) + raw[1:]      # the nRF's commands, whatever the sequence bits
+        if len(raw) >= 3 and raw[0] == bl.BOOT_HEADER and raw[1] in (bl.TARGET_STM32, bl.TARGET_NRF51):
+            if raw[2] == bl.CMD_RESET_INIT:
+                self._reset_armed = True
+                answer = bl.command(raw[1], bl.CMD_RESET_INIT, self.bootloader_cpu_id()[:4])
+            elif raw[2] == bl.CMD_RESET and armed and len(raw) >= 4:
+                self.reboot(bootloader=raw[3] != bl.RESET_TO_FIRMWARE)
+                return self.link.empty_ack()
+            else:
+                answer = self.bootloader.handle(raw)
+        return answer if answer is not None else self.link.empty_ack()
+
+    def bootloader_cpu_id(self) -> bytes:
+        return GEOMETRY[bl.TARGET_STM32].cpu_id
 
     def _system_command(self, command: bytes) -> None:
         """An nRF system command (the bytes after its 0xFE target), as the nRF firmware takes it: a

@@ -14,8 +14,12 @@ from typing import Iterable, List, Tuple
 
 from crazyflie_driver.errors import FirmwareTableError
 
-#: The table of firmware release 2026.08 (commit 2a18fc2), shipped beside this module.
-FIRMWARE_TOC_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "firmware_2026.08_toc.tsv")
+#: The firmware release whose tables ship beside this module (commit 2a18fc2); the simulated current
+#: firmware reports this release tag as its version, so the tables and the version never disagree.
+FIRMWARE_RELEASE = "2026.08"
+#: The table of that release, shipped beside this module.
+FIRMWARE_TOC_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data",
+                                 "firmware_%s_toc.tsv" % FIRMWARE_RELEASE)
 
 #: Source files that only other platforms link (Bolt, Flapper, Brushless); a Crazyflie 2.1 build has none.
 OTHER_PLATFORM_SOURCES = ("flapper", "brushless", "bolt")

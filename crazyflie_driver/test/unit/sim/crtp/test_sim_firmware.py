@@ -43,7 +43,7 @@ def log_id(cf, name):
 
 
 # --- console ----------------------------------------------------------------------------------
-@pytest.mark.parametrize("fw,version", [("current", "2026.04"), ("2016.02", "2016.02")])
+@pytest.mark.parametrize("fw,version", [("current", "2026.08"), ("2016.02", "2016.02")])
 def test_boot_text_is_queued_as_console_packets_before_connect(fw, version):
     cf = SimulatedCrazyflie(ADDR, FakeVehicle(), firmware=fw)
     packets = drain(cf)
@@ -68,7 +68,7 @@ def test_link_echo_source_sink_and_null():
     assert ask(cf, b"\xff") == []
 
 
-@pytest.mark.parametrize("fw,proto,version,devtype", [("current", 12, b"2026.04", b"Crazyflie 2.0"),
+@pytest.mark.parametrize("fw,proto,version,devtype", [("current", 12, b"2026.08", b"Crazyflie 2.0"),
                                                        ("2016.02", 2, b"2016.02", None)])
 def test_platform_versions(fw, proto, version, devtype):
     cf, _ = make(fw)
@@ -407,7 +407,7 @@ def test_one_downlink_per_uplink_and_reply_in_a_later_ack():
     cf, _ = make()
     assert cf.handle_radio_packet(b"\xdd\x00") == b"\xf3"            # answer not ready yet
     assert cf.handle_radio_packet(b"\xdd\x01") == b"\xd5\x00\x0c\x00\x00\x00"
-    assert cf.handle_radio_packet(b"\xff") == b"\xd1\x012026.04"
+    assert cf.handle_radio_packet(b"\xff") == b"\xd1\x012026.08"
     assert cf.handle_radio_packet(b"\xff") == b"\xf7"
 
 

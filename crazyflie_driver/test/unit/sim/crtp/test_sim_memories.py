@@ -127,3 +127,13 @@ def test_world_config_plugs_decks_and_names_the_known_ones(tmp_path):
     good.write_text("- uri: radio://0/80/2M/E7E7E7E701\n  decks: [bcFlow3]\n")
     with pytest.raises(ValueError, match="decks must be a list of deck names out of bcDWM1000"):
         load_vehicle_config(str(good))
+
+
+def test_plugged_decks_read_one_in_their_deck_params_and_the_others_zero():
+    cf = make(decks=("bcFlow2", "bcLighthouse4"))
+    assert cf.params.value("deck.bcFlow2") == 1 and cf.params.value("deck.bcLighthouse4") == 1
+    assert cf.params.value("deck.bcMultiranger") == 0
+    cf.reboot()
+    drain(cf)
+    assert cf.params.value("deck.bcFlow2") == 1
+    assert make().params.value("deck.bcFlow2") == 0
