@@ -326,16 +326,21 @@ class Bench:
             lost.append("firmware locked (%s): reboot to fly" % end["locked"])
         result["lost"] = lost
         result["setup_s"] = setup_s
-        try:
-            row.cleanup(self)
-        except Exception as e:
-            result["cleanup_error"] = str(e)
-        return result
+        return cleaned_up(row, self, result)
 
     def close(self) -> None:
         self.truth.stop()
         if self.graph is not None:
             self.graph.stop()
+
+
+def cleaned_up(row: Any, bench: Any, result: Dict[str, Any]) -> Dict[str, Any]:
+    """``result`` after the row's cleanup (a failed cleanup is noted in it, not raised)."""
+    try:
+        row.cleanup(bench)
+    except Exception as e:
+        result["cleanup_error"] = str(e)
+    return result
 
 
 def log_packets_lost(status) -> int:

@@ -20,6 +20,7 @@ from fault_table.harness import (
     SAMPLE_HZ,
     Graph,
     analyse,
+    cleaned_up,
     hover_ok,
     node_pid,
     roslaunch,
@@ -201,11 +202,7 @@ class SwarmBench:
         result = summarise(row.affected, per)
         result["reported"] = self.reported(t_fault, t_end)
         result["setup_s"] = setup_s
-        try:
-            row.cleanup(self)
-        except Exception as e:
-            result["cleanup_error"] = str(e)
-        return result
+        return cleaned_up(row, self, result)
 
     def reported(self, t_fault: float, t_end: float) -> List[str]:
         """The first warning or error line of each node after the fault."""
