@@ -440,10 +440,14 @@ class CrazyflieWorker:
 
     def send_raw(self, packet: CRTPPacket) -> None:
         """A packet built by ``raw_packets.raw_packet`` (the original's send_packet), sent once as it is;
-        CommandRejected after an emergency (nothing goes to a stopped Crazyflie but a reboot)."""
+        CommandRejected after an emergency (nothing goes to a stopped Crazyflie but a reboot) and while the
+        link does not run, as the configuration services say it."""
         if self._emergency:
             raise CommandRejected("%s: send_packet refused: emergency is active; %s"
                                   % (self.uri, power_control.REBOOT_ADVICE))
+        offline = self._offline()
+        if offline:
+            raise CommandRejected("%s: send_packet refused: %s" % (self.uri, offline))
         with self._send_lock:
             self.cf.link.send(packet)
 
