@@ -6,8 +6,9 @@ import textwrap
 
 import pytest
 
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import SwarmConfigError
-from crazyflie_driver.server.swarm.config import load_swarm_file, parse_swarm
+from crazyflie_driver.server.swarm.config import dongle_per_channel, load_swarm_file, parse_swarm
 
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "config", "swarm_example.yaml")
 
@@ -230,3 +231,10 @@ def test_a_crazyswarm2_file_fault_is_named_with_its_line(text, says):
     with pytest.raises(SwarmConfigError) as e:
         parse_swarm(text, "crazyflies.yaml")
     assert str(e.value).startswith(says), str(e.value)
+
+
+def test_dongle_per_channel_keeps_pinned_channels_and_fills_the_lowest_free_dongle():
+    pinned = parse_uri("radio://1/90/2M/E7E7E7E701")
+    links = [(None, 80), (pinned, 90), (None, 80), (None, 100), (None, 90)]
+    assert dongle_per_channel(links) == {90: 1, 80: 0, 100: 2}
+    assert dongle_per_channel([]) == {}
