@@ -41,6 +41,8 @@ BASELINK = ["baselink_broadcaster"]     # the chapter's static tf mocap frame ->
 # launch file -> (expected nodes with sim:=true gui:=false, namespaces of Crazyflies, extra args)
 EXPECTED: Dict[str, Tuple[List[str], List[str], List[str]]] = {
     "customLogBlocks.launch": (SIM + ["/crazyflie/crazyflie_add"], ["crazyflie"], []),
+    "external_position_vicon.launch": (SIM + _ns("crazyflie", ["crazyflie_add", "pose"] + BASELINK),
+                                       ["crazyflie"], []),
     "hover_vicon.launch": (SIM + _ns("crazyflie", HOVER + BASELINK), ["crazyflie"], []),
     "hover_vrpn.launch": (SIM + _ns("crazyflie", HOVER), ["crazyflie"], []),
     "teleop_vicon.launch": (SIM + _ns("crazyflie", HOVER + BASELINK), ["crazyflie"], []),
