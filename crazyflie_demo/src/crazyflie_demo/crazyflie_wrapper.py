@@ -10,12 +10,13 @@ with the server's reason, as a ServiceProxy does.
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, List, Mapping, Optional, Sequence
 
 import numpy as np
 import rospy
 from geometry_msgs.msg import Point
 
+from crazyflie_driver.protocol.trajectory import Piece, make_piece
 from crazyflie_driver.srv import (
     GoTo,
     Land,
@@ -34,6 +35,16 @@ WORLD_FRAME = "world"
 SERVICES = (("set_group_mask", SetGroupMask), ("takeoff", Takeoff), ("land", Land), ("stop", Stop),
             ("go_to", GoTo), ("upload_trajectory", UploadTrajectory), ("start_trajectory", StartTrajectory),
             ("update_params", UpdateParams))
+
+
+def trajectory_pieces(trajectory: Any) -> List[Piece]:
+    """The checked pieces of a ``uav_trajectory.Trajectory``: ours (``pieces()``) or one of HEAD's or
+    Crazyswarm's own module (``polynomials``, each with ``duration`` and ``px/py/pz/pyaw.p``), which a
+    script's directory may put first on the path."""
+    if hasattr(trajectory, "pieces"):
+        return trajectory.pieces()
+    return [make_piece(p.duration, list(p.px.p), list(p.py.p), list(p.pz.p), list(p.pyaw.p), index=i)
+            for i, p in enumerate(trajectory.polynomials)]
 
 
 def arrayToGeometryPoint(a: Sequence[float]) -> Point:  # noqa: N802 (HEAD's name)
@@ -78,7 +89,7 @@ class Crazyflie:
 
     def uploadTrajectory(self, trajectoryId: int, pieceOffset: int, trajectory: Any) -> None:  # noqa: N802,N803
         """``trajectory``: a ``uav_trajectory.Trajectory`` (its pieces are checked before sending)."""
-        self.uploadTrajectoryService(trajectoryId, pieceOffset, pieces_msg(trajectory.pieces()))
+        self.uploadTrajectoryService(trajectoryId, pieceOffset, pieces_msg(trajectory_pieces(trajectory)))
 
     def startTrajectory(self, trajectoryId: int, timescale: float = 1.0, reverse: bool = False,  # noqa: N802,N803
                         relative: bool = True, groupMask: int = 0) -> None:  # noqa: N803

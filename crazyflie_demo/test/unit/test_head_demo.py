@@ -14,6 +14,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped, TransformStamped
 
 from crazyflie_demo import external_position_node as fwd
 from crazyflie_demo import hover_demo, position_demo
+from crazyflie_demo.crazyflie_wrapper import trajectory_pieces
 from crazyflie_demo.execute_trajectory import full_state
 from crazyflie_driver.msg import FullState
 from uav_trajectory import Trajectory
@@ -136,6 +137,21 @@ def test_execute_trajectory_setpoints_come_from_the_file():
     assert (msg.acc.x, msg.acc.y, msg.acc.z) == pytest.approx(tuple(e.acc))
     q = msg.pose.orientation
     assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(float(e.yaw)) and (q.x, q.y) == (0.0, 0.0)
+
+
+def test_the_wrapper_uploads_our_trajectories_and_those_of_heads_module():
+    ours = Trajectory().loadcsv(os.path.join(PACKAGE, "trajectories", "takeoff.csv"))
+
+    class Poly:                                   # HEAD's uav_trajectory: Polynomial4D with px.p ... arrays
+        def __init__(self, piece):
+            self.duration = piece.duration
+            for axis, p in (("px", piece.px), ("py", piece.py), ("pz", piece.pz), ("pyaw", piece.pyaw)):
+                setattr(self, axis, type("P", (), {"p": p.p})())
+
+    class Heads:
+        polynomials = [Poly(p) for p in ours.polynomials]
+
+    assert trajectory_pieces(Heads()) == trajectory_pieces(ours) == ours.pieces()
 
 
 def _import_crazyflie_from(directory: str) -> subprocess.CompletedProcess:
