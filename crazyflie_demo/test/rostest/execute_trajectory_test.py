@@ -9,7 +9,6 @@ Private params: ``sim_address``; ``name`` (the world's vehicle); ``trajectory`` 
 """
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import unittest
@@ -19,9 +18,7 @@ import rostest
 from geometry_msgs.msg import PointStamped
 
 from crazyflie_driver.msg import GenericLogData
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import Track, WorldProbe, distance, wait_until  # noqa: E402
+from support.flight_support import Track, WorldProbe, distance, wait_until
 
 VIA = [(0.0, 0.0, 0.5), (0.3, 0.0, 0.5)]   # the file's holds
 END = (0.3, 0.0)

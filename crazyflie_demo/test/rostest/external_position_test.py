@@ -15,7 +15,6 @@ at 0 and would fly to the origin's neighbourhood instead).
 """
 from __future__ import annotations
 
-import os
 import sys
 import unittest
 
@@ -25,9 +24,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped
 
 from crazyflie_demo.crazyflie_wrapper import Crazyflie
 from crazyflie_driver.msg import GenericLogData
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, distance, hold_errors, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, distance, hold_errors, wait_until
 
 ESTIMATE_BOUND_M = 0.05   # onboard estimate vs truth, per axis
 REACH_BOUND_M = 0.05      # truth vs a commanded point

@@ -15,15 +15,13 @@ Crazyflie, and the test requires it unlocked when its motors stopped.
 from __future__ import annotations
 
 import math
-import os
 import sys
 import unittest
 
 import rospy
 import rostest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import Track, WorldProbe, distance, wait_until  # noqa: E402
+from support.flight_support import Track, WorldProbe, distance, wait_until
 
 FLIGHT_TIMEOUT_S = 90.0        # ROS (world) s for the whole script
 HEIGHT_BOUND_M = 0.05          # the top of the climb vs 0.4 m

@@ -156,10 +156,10 @@ def test_the_wrapper_uploads_our_trajectories_and_those_of_heads_module():
 
 def _import_crazyflie_from(directory: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9")   # nothing listens there
-    code = ("import sys; sys.path.insert(0, %r); import crazyflie; "
-            "p = crazyflie.arrayToGeometryPoint([1, 2, 3]); print(crazyflie.Crazyflie.__name__, p.x, p.y, p.z)"
-            % directory)
-    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=30)
+    code = ("import crazyflie; p = crazyflie.arrayToGeometryPoint([1, 2, 3]); "
+            "print(crazyflie.Crazyflie.__name__, p.x, p.y, p.z)")
+    return subprocess.run([sys.executable, "-c", code], cwd=directory,      # as a user runs a script from there
+                          env=env, capture_output=True, text=True, timeout=30)
 
 
 def test_import_crazyflie_next_to_the_scripts():
