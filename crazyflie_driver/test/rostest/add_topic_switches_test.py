@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """crazyflie_add's enable_logging_imu:=false: no imu topic, no imu log block on the firmware, fewer log
 packets on the radio than the same Crazyflie with imu on (both judged on the world's truth: the blocks
-the firmware runs, and the log packets it sent to the host, counted as they left in the acks)."""
+the firmware runs, and the log packets it sent to the host, counted as they left in the acks); beside
+them HEAD's raw pass-through and its console on rosout as 'CF Console:' lines."""
 from __future__ import annotations
 
 import os
@@ -12,12 +13,14 @@ import rospy
 import rostest
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
+from std_srvs.srv import Empty
 
 from crazyflie_driver.msg import crtpPacket
 from crazyflie_driver.srv import sendPacket
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import (  # noqa: E402
+    RosoutRecorder,
     TopicRecorder,
     rates_per_world_second,
     start_test_node,
@@ -45,6 +48,7 @@ class AddTopicSwitches(unittest.TestCase):
     def setUpClass(cls):
         cls.world = start_test_node("add_topic_switches_test", ["crazyflie1", "crazyflie2"])
         cls.packets = TopicRecorder("/crazyflie1/packets", crtpPacket)
+        cls.rosout = RosoutRecorder()
         cls.recorders = {"imu1": TopicRecorder("/crazyflie1/imu", Imu),
                          "imu2": TopicRecorder("/crazyflie2/imu", Imu),
                          "battery1": TopicRecorder("/crazyflie1/battery", Float32),
@@ -68,6 +72,19 @@ class AddTopicSwitches(unittest.TestCase):
         topics = {t for t, _ in rospy.get_published_topics()}
         self.assertIn("/crazyflie1/packets", topics)
         self.assertNotIn("/crazyflie2/packets", topics)
+
+    def test_console_lines_on_rosout_after_a_reboot(self):
+        """A reboot makes the firmware print its boot text again: it reaches rosout line by line as
+        HEAD's 'CF Console:' lines, with the Crazyflie's namespace (world truth: it did reboot)."""
+        reboots = self.world.crazyflie_state(OFF)["reboots"]
+        rospy.ServiceProxy("/crazyflie2/reboot", Empty)()
+        self.assertTrue(wait_until(lambda: self.rosout.find("CF Console: [crazyflie2] SYS: Self test passed!"), 20.0),
+                        self.rosout.find("CF Console"))
+        self.assertGreater(self.world.crazyflie_state(OFF)["reboots"], reboots)
+        lines = self.rosout.find("CF Console: [crazyflie2] SYS: ")
+        self.assertTrue(any(line.endswith("is up and running!") for line in lines), lines)
+        # served again before the other tests use it (its topics and send_packet wait for the link)
+        self.assertTrue(wait_until(lambda: self.rosout.find("%s: back after the reboot" % OFF), 20.0))
 
     def test_no_imu_topic_but_the_others(self):
         rates = rates_per_world_second(self.recorders, self.world, 2.0)
