@@ -5,8 +5,6 @@ the firmware runs, and the log packets it sent to the host, counted as they left
 them HEAD's raw pass-through and its console on rosout as 'CF Console:' lines."""
 from __future__ import annotations
 
-import os
-import sys
 import unittest
 
 import rospy
@@ -17,9 +15,7 @@ from std_srvs.srv import Empty
 
 from crazyflie_driver.msg import crtpPacket
 from crazyflie_driver.srv import sendPacket
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (  # noqa: E402
+from support.rostest_support import (
     RosoutRecorder,
     TopicRecorder,
     rates_per_world_second,
