@@ -99,8 +99,9 @@ class WorkerConfig:
     # s between polls when nothing is queued, with sparse pacing, polls behind the other round trips waiting
     # for the dongle (swarm mode); 0: the server's period, eager pacing
     keepalive_period: float = 0.0
-    # ms between battery samples logged for the safety monitor alone when enable_logging is off (swarm
-    # mode); 0: none, so no battery reaction without enable_logging
+    # ms between battery samples logged for the safety monitor alone when no battery topic is logged
+    # (enable_logging off, or the battery topic switched off; swarm mode); 0: none, so no battery
+    # reaction without the battery topic
     battery_watch_ms: int = 0
     # the original driver's enable_logging_packets: packets nothing in the server reads go to on_packet
     log_packets: bool = False
@@ -643,7 +644,10 @@ class CrazyflieWorker:
                 if host_periods and all(v in types for v in variables):
                     topics.append((name, host_periods[0], variables))
             plan.extend(plan_log_blocks(topics, types, share=True))
-        elif cfg.battery_watch_ms and BATTERY_TOPIC not in cfg.disabled_topics and BATTERY_VARIABLE in types:
+        # the safety monitor's battery, when no battery topic brings it (sensor topics off, or the
+        # battery topic switched off): the switch turns a topic off, not the supervision
+        if (cfg.battery_watch_ms and not any(t == BATTERY_TOPIC for t, _, _ in topics)
+                and BATTERY_VARIABLE in types):
             plan.extend(plan_log_blocks([(BATTERY_TOPIC, cfg.battery_watch_ms, (BATTERY_VARIABLE,))], types,
                                         share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]

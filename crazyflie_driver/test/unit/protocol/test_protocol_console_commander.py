@@ -132,3 +132,16 @@ def test_a_worker_hands_each_console_line_to_its_listener_and_the_server_logs_it
     assert listener.lines == ["SYS: Crazyflie 2.1 is up and running!\r", "IMU: ok"]
     assert rosout_line("cf1", listener.lines[0]) == "CF Console: [cf1] SYS: Crazyflie 2.1 is up and running!"
     assert rosout_line("cf1", "a\x1b[0mb") == "CF Console: [cf1] a\\x1b[0mb"      # no terminal escapes in the log
+
+
+def test_console_line_without_newline_is_cut_at_the_bound():
+    from crazyflie_driver.protocol.console import MAX_LINE_CHARS
+
+    cf, link, fw = make_crazyflie(12)
+    lines = []
+    cf.console.on_line(lines.append)
+    text = b"x" * (MAX_LINE_CHARS + 40)
+    link.push(*(CRTPPacket(0, 0, text[i:i + 30]) for i in range(0, len(text), 30)))
+    link.push(CRTPPacket(0, 0, b"y\n"))
+    link.drain()
+    assert lines == ["x" * MAX_LINE_CHARS, "x" * 40 + "y"]

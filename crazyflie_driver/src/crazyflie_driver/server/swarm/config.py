@@ -8,12 +8,13 @@ file, or the types in a second one)::
         channel: 80
         initialPosition: [0.0, 0.0, 0.0]    # m, world frame
         type: default
-        # optional: uri, tf_prefix, groupMask, params: {group: {name: value}}
+        # optional: uri, tf_prefix, groupMask, params: {group: {name: value}}, enable_logging_<topic>
     crazyflieTypes:
       default:
         firmwareParams: {stabilizer: {estimator: 2, controller: 1}}
         batteryVoltageWarning: 3.8
         batteryVoltageCritical: 3.7
+        # optional: enable_logging_<topic> for every Crazyflie of the type
     firmwareParams: {...}                   # optional, for every Crazyflie
 
 Crazyswarm2's ``crazyflies.yaml`` is read too::
@@ -24,11 +25,12 @@ Crazyswarm2's ``crazyflies.yaml`` is read too::
         uri: radio://0/80/2M/E7E7E7E701
         initial_position: [0.0, 0.0, 0.0]
         type: cf21
-        # optional: firmware_params, firmware_logging
+        # optional: firmware_params, firmware_logging, enable_logging_<topic>
     robot_types:
       cf21:
         battery: {voltage_warning: 3.8, voltage_critical: 3.7}
-        # optional: firmware_params; motion_capture, big_quad, firmware_logging (see notes)
+        # optional: firmware_params, enable_logging_<topic>; motion_capture, big_quad, firmware_logging
+        # (see notes)
     all:
       firmware_params: {...}                # for every Crazyflie
       # optional: firmware_logging, broadcasts (see notes)
@@ -41,6 +43,10 @@ Radios: Crazyflies without a ``uri`` go to one Crazyradio per channel, in the or
 first appear (``radio://<dongle>/<channel>/2M/E7E7E7E7<id>``); an explicit ``uri`` keeps its dongle,
 and its channel then stays on that dongle. Firmware parameters are applied swarm-wide first, then
 the type's, then the Crazyflie's own (the last value of a name wins), as Crazyswarm pushes them.
+crazyflie_ros HEAD's logging switches (``LOG_SWITCHES``: ``enable_logging_imu`` ... ``_packets``) may
+be given per type and per Crazyflie, in either format; the Crazyflie's own value wins over its
+type's, and both over crazyflie_server's parameters of the same names
+(``server.swarm.policy.worker_config``).
 Every fault raises :class:`~crazyflie_driver.errors.SwarmConfigError` naming the file, the line and
 entry, and what to change.
 """
@@ -56,6 +62,7 @@ import yaml
 
 from crazyflie_driver.crtp.uri import DATARATE_NAMES, MAX_CHANNEL, parse_uri
 from crazyflie_driver.errors import SwarmConfigError, UriError
+from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES
 
 #: Address of a Crazyflie given by id: these four bytes, then the id.
 ADDRESS_PREFIX = "E7E7E7E7"
@@ -68,16 +75,19 @@ BUILTIN_DEFAULT_PARAMS = (("stabilizer.estimator", 2),)
 DEFAULT_BATTERY_WARNING_V = 3.8
 DEFAULT_BATTERY_CRITICAL_V = 3.7
 
+#: crazyflie_ros HEAD's logging switches a type or a Crazyflie of the file may set (true or false).
+LOG_SWITCHES = tuple(n for n, _ in TOPIC_SWITCHES) + (POSE_SWITCH, PACKETS_SWITCH)
 _ENTRY_KEYS = {"id", "channel", "initialPosition", "type", "uri", "tf_prefix", "groupMask", "params",
-               "firmwareParams"}
+               "firmwareParams"} | set(LOG_SWITCHES)
 # Crazyswarm's type keys this server does not use (marker and dynamics models) are accepted, so its
 # files load; "batteryVoltateCritical" is its spelling of the critical voltage.
 _TYPE_KEYS = {"firmwareParams", "batteryVoltageWarning", "batteryVoltageCritical", "batteryVoltateCritical",
-              "bigQuad", "markerConfiguration", "dynamicsConfiguration"}
+              "bigQuad", "markerConfiguration", "dynamicsConfiguration"} | set(LOG_SWITCHES)
 _TOP_KEYS = {"crazyflies", "crazyflieTypes", "firmwareParams", "markerConfigurations", "dynamicsConfigurations"}
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 ParamList = Tuple[Tuple[str, Any], ...]     # ("group.name", value) in the order they are written
+Switches = Tuple[Tuple[str, bool], ...]     # (LOG_SWITCHES name, on) as given
 
 
 @dataclass(frozen=True)
@@ -86,6 +96,7 @@ class CrazyflieType:
     firmware_params: ParamList = ()
     battery_voltage_warning: float = DEFAULT_BATTERY_WARNING_V
     battery_voltage_critical: float = DEFAULT_BATTERY_CRITICAL_V
+    switches: Switches = ()
 
 
 @dataclass(frozen=True)
@@ -102,6 +113,7 @@ class SwarmCrazyflie:
     params: ParamList                        # swarm-wide, then type, then own; last value per name
     group_mask: int = 0                      # 0: leave the firmware's (every Crazyflie is in group 0 anyway)
     line: int = 0                            # where the entry starts in the file (0: unknown)
+    switches: Switches = ()                  # logging switches: the type's, then its own
 
     @property
     def name(self) -> str:
@@ -219,6 +231,18 @@ def _params(doc: _Doc, path: Sequence[Any], where: str, value: Any) -> ParamList
     return tuple(out)
 
 
+def _switches(doc: _Doc, path: Sequence[Any], where: str, body: Mapping[str, Any]) -> Switches:
+    """The logging switches ``body`` sets, each checked to be true or false."""
+    out = []
+    for name in LOG_SWITCHES:
+        if name in body:
+            value = body[name]
+            if not isinstance(value, bool):
+                raise doc.error(list(path) + [name], "%s.%s must be true or false, got %r" % (where, name, value))
+            out.append((name, value))
+    return tuple(out)
+
+
 def merge_params(*layers: ParamList) -> ParamList:
     """Later layers win per name; a name keeps the position of its first appearance."""
     merged: Dict[str, Any] = {}
@@ -255,7 +279,8 @@ def _types(doc: _Doc, raw: Any, path: Sequence[Any]) -> Dict[str, CrazyflieType]
             raise doc.error(here, "%s: batteryVoltageCritical %.2f V is above batteryVoltageWarning %.2f V; the "
                                   "critical level must be the lower one" % (where, critical, warning))
         types[str(name)] = CrazyflieType(str(name), _params(doc, here + ["firmwareParams"], where + ".firmwareParams",
-                                                            body.get("firmwareParams")), warning, critical)
+                                                            body.get("firmwareParams")), warning, critical,
+                                         _switches(doc, here, where, body))
     return types
 
 
@@ -324,8 +349,9 @@ def _with_default_type(types: Dict[str, CrazyflieType]) -> Dict[str, CrazyflieTy
 
 # -- Crazyswarm2's crazyflies.yaml ------------------------------------------------------------------
 _CS2_TOP_KEYS = {"fileversion", "robots", "robot_types", "all"}
-_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging"}
-_CS2_TYPE_KEYS = {"motion_capture", "big_quad", "battery", "firmware_params", "firmware_logging"}
+_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging"} | set(
+    LOG_SWITCHES)
+_CS2_TYPE_KEYS = {"motion_capture", "big_quad", "battery", "firmware_params", "firmware_logging"} | set(LOG_SWITCHES)
 _CS2_ALL_KEYS = {"firmware_params", "firmware_logging", "broadcasts"}
 
 
@@ -393,7 +419,8 @@ def _cs2_type(doc: _Doc, name: Any, body: Any, notes: List[str]) -> CrazyflieTyp
                      "capture the server streams (~mocap none turns it off for all)" % where)
     notes.extend(_logging_note(where, body.get("firmware_logging")))
     return CrazyflieType(str(name), _params(doc, here + ["firmware_params"], where + ".firmware_params",
-                                            body.get("firmware_params")), warning, critical)
+                                            body.get("firmware_params")), warning, critical,
+                         _switches(doc, here, where, body))
 
 
 def _cs2_all(doc: _Doc, raw: Any, notes: List[str]) -> ParamList:
@@ -438,6 +465,7 @@ def _cs2_robot(doc: _Doc, here: List[Any], body: Any, notes: List[str]) -> Optio
         item["initialPosition"] = body["initial_position"]
     if "firmware_params" in body:
         item["firmwareParams"] = body["firmware_params"]
+    item.update((n, body[n]) for n in LOG_SWITCHES if n in body)
     return item
 
 
@@ -463,8 +491,9 @@ def _crazyflies(doc: _Doc, entries: List[Any], types: Dict[str, CrazyflieType], 
                             % (where, uri.index, uri.channel, dongles, "is" if dongles == 1 else "are",
                                len(set(dongle_of.values()))))
         params = merge_params(swarm_params, types[e["type"]].firmware_params, e["params"])
+        switches = merge_params(types[e["type"]].switches, e["switches"])
         out.append(SwarmCrazyflie(e["id"], key, uri.index, uri.channel, e["tf_prefix"], e["position"], e["type"],
-                                  params, e["group_mask"], doc.line(*paths[i])))
+                                  params, e["group_mask"], doc.line(*paths[i]), switches))
     return tuple(out)
 
 
@@ -534,7 +563,8 @@ def _entry(doc: _Doc, i: int, item: Any, types: Dict[str, CrazyflieType],
     mask = _entry_group_mask(doc, path, where, item)
     params = _entry_params(doc, path, where, item)
     return {"index": i, "where": where, "id": ident, "uri": uri, "channel": channel, "position": position,
-            "type": kind, "tf_prefix": tf_prefix.strip("/"), "group_mask": mask, "params": params}
+            "type": kind, "tf_prefix": tf_prefix.strip("/"), "group_mask": mask, "params": params,
+            "switches": _switches(doc, path, where, item)}
 
 
 def _entry_uri(doc: _Doc, path: List[Any], where: str, item: Dict[str, Any]) -> Any:

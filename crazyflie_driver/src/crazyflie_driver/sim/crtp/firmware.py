@@ -505,7 +505,10 @@ class SimulatedCrazyflie:
             return None
         if self._tx_queued_at:
             self.state.tx_last_wait_s = self.now() - self._tx_queued_at.popleft()
-        return self._tx.popleft()
+        packet = self._tx.popleft()
+        port = packet[0] >> 4       # counted as it leaves the queue for an ack or the cable: what the host got
+        self.state.sent_by_port[port] = self.state.sent_by_port.get(port, 0) + 1
+        return packet
 
     def _clear_tx(self) -> None:
         self._tx.clear()
@@ -631,6 +634,7 @@ class SimulatedCrazyflie:
                 "setpoints": s.setpoints,
                 "last_generic_type": s.last_generic[0] if s.last_generic else None,
                 "packets_by_port": {str(k): v for k, v in s.packets_by_port.items()},
+                "sent_by_port": {str(k): v for k, v in s.sent_by_port.items()},
                 "tx_pending": len(self._tx),
                 "tx_dropped": s.tx_dropped,
                 "tx_last_wait_s": s.tx_last_wait_s,

@@ -404,11 +404,13 @@ def test_empty_ack_formats():
 
 
 def test_one_downlink_per_uplink_and_reply_in_a_later_ack():
-    cf, _ = make()
+    cf, _ = make()                                  # (its boot text already taken: port 0)
     assert cf.handle_radio_packet(b"\xdd\x00") == b"\xf3"            # answer not ready yet
     assert cf.handle_radio_packet(b"\xdd\x01") == b"\xd5\x00\x0c\x00\x00\x00"
     assert cf.handle_radio_packet(b"\xff") == b"\xd1\x012026.08"
     assert cf.handle_radio_packet(b"\xff") == b"\xf7"
+    assert cf.state.sent_by_port.get(13) == 2      # two answers left in acks; empty acks are no packets
+    assert cf.snapshot()["sent_by_port"]["13"] == 2
 
 
 def test_safelink_dedupes_uplink_and_resends_lost_ack():
