@@ -82,6 +82,16 @@ def test_platform_versions(fw, proto, version, devtype):
     assert ask(cf, b"\xdd\x09") == []
 
 
+
+def test_platform_commands_on_channel_0():
+    cf, _ = make()
+    assert ask(cf, b"\xdc\x03") == [b"\xdc"]                           # answered with no payload
+    assert one(cf, b"\xdc\x00\x01") == b"\xdc\x00\x01"                  # others echoed (continuous wave)
+    assert one(cf, b"\xdc\x09\x02\x03") == b"\xdc\x09\x02\x03"
+    old, _ = make("2016.02")                                         # continuous wave only
+    assert one(old, b"\xdc\x00\x01") == b"\xdc\x00\x01"
+    assert ask(old, b"\xdc\x01\x01") == [] and ask(old, b"\xdc\x02") == [] and ask(old, b"\xdc\x03") == []
+
 # --- parameters -------------------------------------------------------------------------------
 def chained_crc(items):
     crc = 0
@@ -431,9 +441,10 @@ def test_emergency_stop_ports():
     assert v3.estops == 0 and ask(old, b"\x9c\x0c") == []
 
 
-def test_estop_watchdog_fires_after_one_second():
+@pytest.mark.parametrize("feed", [b"\x6d\x04", b"\x9d\x04"])      # localization or supervisor port
+def test_estop_watchdog_fires_after_one_second(feed):
     cf, v = make()
-    ask(cf, b"\x6d\x04")
+    ask(cf, feed)
     v.t = 0.9
     cf.tick(v.t)
     assert v.estops == 0
