@@ -39,6 +39,14 @@ def _child(name: str, key: Any) -> str:
         return text
 
 
+def _field_names(cls: type) -> Tuple[str, ...]:
+    """The field names of dataclass ``cls``, read once per class."""
+    names = _FIELD_NAMES.get(cls)
+    if names is None:
+        names = _FIELD_NAMES[cls] = tuple(f.name for f in dataclasses.fields(cls))
+    return names
+
+
 class DecodedValues:
     """Extremes of every numeric field decoded so far (since power-on of the simulation)."""
 
@@ -63,23 +71,27 @@ class DecodedValues:
                     add(child, float(v))
                 else:
                     walk(child, v)
-        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
+        else:
+            self._walk_other(name, value)
+
+    def _walk_other(self, name: str, value: Any) -> None:
+        """The rarer shapes: other numbers (numpy scalars), subclasses of tuple and list (named
+        tuples), arrays, dicts and dataclasses; anything else (bool, None, text) is no number."""
+        if isinstance(value, numbers.Real) and not isinstance(value, bool):
             self._add(name, float(value))
         elif isinstance(value, (tuple, list)):
-            for i, v in enumerate(value):
-                self._walk(_child(name, i), v)
+            self._walk_items(name, enumerate(value))
         elif isinstance(value, np.ndarray):
             for i, v in enumerate(value.ravel().tolist()):
                 self._add(_child(name, i), float(v))
         elif isinstance(value, dict):
-            for k, v in value.items():
-                self._walk(_child(name, k), v)
+            self._walk_items(name, value.items())
         elif dataclasses.is_dataclass(value) and not isinstance(value, type):
-            names = _FIELD_NAMES.get(type(value))
-            if names is None:
-                names = _FIELD_NAMES[type(value)] = tuple(f.name for f in dataclasses.fields(value))
-            for f in names:
-                self._walk(_child(name, f), getattr(value, f))
+            self._walk_items(name, ((f, getattr(value, f)) for f in _field_names(type(value))))
+
+    def _walk_items(self, name: str, items: Iterable[Tuple[Any, Any]]) -> None:
+        for key, v in items:
+            self._walk(_child(name, key), v)
 
     def _add(self, name: str, v: float) -> None:
         entry = self._fields.get(name)

@@ -1,7 +1,11 @@
 """The simulated firmware's record of what it decoded: extremes per field, non-finite values counted."""
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import NamedTuple
+
+import numpy as np
 
 from crazyflie_driver.protocol.trajectory import make_piece
 from crazyflie_driver.sim.crtp.decoded_values import DecodedValues
@@ -17,6 +21,33 @@ def test_extremes_and_non_finite_values_per_field():
     assert s["a.1.1"] == {"count": 2, "non_finite": 1, "min": 1.0, "max": 1.0}
     assert s["a.2.k"]["non_finite"] == 1 and s["a.2.k"]["min"] == 0.5
     assert set(s) == {"a.0", "a.1.0", "a.1.1", "a.2.k"}      # booleans, None and text are not numbers here
+
+
+class _Pair(NamedTuple):
+    x: float
+    y: float
+
+
+@dataclasses.dataclass
+class _Piece:
+    duration: float
+    coefficients: np.ndarray
+    label: str = "piece"
+
+
+def test_numpy_numbers_named_tuples_arrays_and_dataclasses_are_walked_by_name():
+    d = DecodedValues()
+    d.observe("n", np.float32(2.5))
+    d.observe("p", _Pair(1.0, np.inf))
+    d.observe("piece", _Piece(1.5, np.array([[0.0, -1.0], [math.nan, 4.0]])))
+    d.observe("piece", _Piece(0.5, np.zeros((2, 2))))
+    s = d.summary()
+    assert s["n"] == {"count": 1, "non_finite": 0, "min": 2.5, "max": 2.5}
+    assert s["p.0"]["max"] == 1.0 and s["p.1"] == {"count": 1, "non_finite": 1, "min": None, "max": None}
+    assert s["piece.duration"] == {"count": 2, "non_finite": 0, "min": 0.5, "max": 1.5}
+    assert [s["piece.coefficients.%d" % i]["min"] for i in range(4)] == [0.0, -1.0, 0.0, 0.0]
+    assert s["piece.coefficients.2"]["non_finite"] == 1
+    assert not any(name.startswith("piece.label") for name in s)       # text is no number
 
 
 def test_the_snapshot_shows_what_reached_the_vehicle():
