@@ -136,17 +136,7 @@ class OnboardFlight:
         yaw = start.yaw if args.get("use_current_yaw") else float(args.get("yaw", 0.0))
         duration = float(args.get("duration", 0.0))
         if command in ("takeoff", "land"):
-            height = float(args["height"])
-            velocity = args.get("velocity")
-            if args.get("relative"):
-                height = start.pos[2] + height if command == "takeoff" else start.pos[2] - height
-            if velocity is not None:
-                default = hl.takeoff_velocity[i] if command == "takeoff" else hl.landing_velocity[i]
-                v = float(velocity) if float(velocity) > 0 else default
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    duration = float(np.float64(abs(height - start.pos[2])) / v)
-            fn = hl.takeoff if command == "takeoff" else hl.land
-            return fn(i, start, height, yaw, duration, now)
+            return self._vertical(i, command, args, start, yaw, duration, now)
         if command == "go_to":
             return hl.go_to(i, start, args["goal"], float(args["yaw"]), duration, bool(args.get("relative")),
                             bool(args.get("linear")), now)
@@ -159,6 +149,24 @@ class OnboardFlight:
                                        bool(args.get("reversed")), bool(args.get("relative")),
                                        bool(args.get("relative_yaw")), now)
         raise ValueError("unknown high-level command %r" % (command,))
+
+    def _vertical(self, i: int, command: str, args: Dict, start: Evaluation, yaw: float, duration: float,
+                  now: float) -> int:
+        """Takeoff or land (v1 or v2): the goal height, relative to the start where asked; a velocity
+        (v2 with velocity, <= 0: the parameter's default) gives the duration instead."""
+        hl = self.hl
+        takeoff = command == "takeoff"
+        height = float(args["height"])
+        if args.get("relative"):
+            height = start.pos[2] + height if takeoff else start.pos[2] - height
+        velocity = args.get("velocity")
+        if velocity is not None:
+            default = hl.takeoff_velocity[i] if takeoff else hl.landing_velocity[i]
+            v = float(velocity) if float(velocity) > 0 else default
+            with np.errstate(divide="ignore", invalid="ignore"):
+                duration = float(np.float64(abs(height - start.pos[2])) / v)
+        fn = hl.takeoff if takeoff else hl.land
+        return fn(i, start, height, yaw, duration, now)
 
     def _high_level_tick(self, now: float, stab) -> bool:
         """The planners' 100 Hz tick: each evaluates its plan (also while a low-level setpoint holds the
