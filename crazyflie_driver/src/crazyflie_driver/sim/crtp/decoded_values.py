@@ -45,6 +45,8 @@ class DecodedValues:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._fields: Dict[str, List[float]] = {}    # name -> [count, non-finite, min, max]
+        # (name, length) -> (the entries of its fields, their names), for tuples of plain numbers
+        self._rows: Dict[Tuple[str, int], Tuple[Tuple[List[float], ...], Tuple[str, ...]]] = {}
 
     def observe(self, name: str, value: Any) -> None:
         """Record ``value`` (a number, or sequences / arrays / dicts / dataclasses of them) under ``name``."""
@@ -55,7 +57,36 @@ class DecodedValues:
                 self._walk(name, value)
 
     def _tuple(self, name: str, value: tuple) -> None:
-        """``_walk`` of a tuple, with ``_add`` written out for its plain numbers."""
+        """``_walk`` of a tuple, with ``_add`` written out for its plain numbers.
+
+        Once a tuple of only plain numbers came under ``name``, its fields' entries are kept in a row
+        (the same lists as in ``_fields``), so later tuples of that length skip the lookups by name;
+        an element that is not a plain number is walked under its name as always."""
+        row = self._rows.get((name, len(value)))
+        if row is None:
+            self._tuple_by_name(name, value)
+            if all(type(v) is float or type(v) is int for v in value):
+                names = _children(name, len(value))
+                self._rows[(name, len(value))] = (tuple(self._fields[child] for child in names), names)
+            return
+        entries, names = row
+        for entry, child, v in zip(entries, names, value):
+            kind = type(v)
+            if kind is int:
+                v = float(v)
+            elif kind is not float:
+                self._walk(child, v)
+                continue
+            entry[0] += 1
+            if v - v != 0.0:            # NaN or infinite
+                entry[1] += 1
+            else:
+                if v < entry[2]:
+                    entry[2] = v
+                if v > entry[3]:
+                    entry[3] = v
+
+    def _tuple_by_name(self, name: str, value: tuple) -> None:
         fields = self._fields
         for child, v in zip(_children(name, len(value)), value):
             kind = type(v)

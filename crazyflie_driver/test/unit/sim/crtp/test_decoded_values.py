@@ -19,6 +19,20 @@ def test_extremes_and_non_finite_values_per_field():
     assert set(s) == {"a.0", "a.1.0", "a.1.1", "a.2.k"}      # booleans, None and text are not numbers here
 
 
+def test_tuples_of_numbers_are_recorded_as_walking_them_field_by_field():
+    """The port handlers' argument tuples take a shortcut (a row of entries once a tuple of only numbers
+    came under a name); what it records equals walking every value."""
+    values = [("rpyt", (1.0, -2.0, 3.0, 40000)), ("rpyt", (1.5, math.nan, -math.inf, 0)),
+              ("rpyt", (0.5, (7.0, 8.0), True, 2)), ("rpyt", (9.0, 1.0)), ("rpyt", (2.0, -9.0, 1e30, 60000)),
+              ("mixed", ([1.0], 2.0)), ("mixed", (3.0, 4.0)), ("mixed", (5.0, [6.0]))]
+    shortcut, walked = DecodedValues(), DecodedValues()
+    for name, value in values:
+        shortcut.observe(name, value)
+        walked._walk(name, value)
+    assert shortcut.summary() == walked.summary()
+    assert shortcut.summary()["rpyt.3"] == {"count": 4, "non_finite": 0, "min": 0.0, "max": 60000.0}
+
+
 def test_the_snapshot_shows_what_reached_the_vehicle():
     rig = RadioRig()
     cf = rig.connect()
