@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import array
 import errno
-from typing import List, NamedTuple, Optional
+from typing import Any, List, NamedTuple, Optional
 
 import usb.core
 import usb.util
@@ -97,6 +97,39 @@ def parse_inline_reply(reply: bytes, arc: int) -> RadioAck:
     return RadioAck(True, bool(status & 2), status >> 4, bytes(reply[2:reply[0]]))
 
 
+class _DeviceBulk:
+    """Bulk transfers through pyusb's public ``Device.write``/``read``, shaped as a backend's
+    ``bulk_write``/``bulk_read`` (what ``bulk_io`` falls back to)."""
+
+    __slots__ = ("_dev",)
+
+    def __init__(self, dev) -> None:
+        self._dev = dev
+
+    def bulk_write(self, handle: Any, ep: int, intf: int, data, timeout: int) -> int:
+        return self._dev.write(ep, data, timeout)
+
+    def bulk_read(self, handle: Any, ep: int, intf: int, buff, timeout: int) -> int:
+        return self._dev.read(ep, buff, timeout)
+
+
+def bulk_io(dev) -> tuple:
+    """``(backend, handle)`` for the bulk transfers of a configured pyusb device whose interface 0 is
+    claimed: ``backend.bulk_write(handle, ep, 0, array, timeout_ms)`` and ``bulk_read`` likewise.
+
+    pyusb's ``Device.write``/``read`` look the interface and endpoint up again, re-check the claim and
+    build their dispatch table on every call (about 3 us of host CPU per packet, a fifth of a
+    setpoint's cost on the fake dongle) and then make exactly this backend call on the device's open
+    handle (pyusb 1.0 to 1.2). Where pyusb keeps the handle elsewhere, the public calls.
+    """
+    ctx = getattr(dev, "_ctx", None)
+    backend, handle = getattr(ctx, "backend", None), getattr(ctx, "handle", None)
+    if handle is None or not callable(getattr(backend, "bulk_write", None)) \
+            or not callable(getattr(backend, "bulk_read", None)):
+        return _DeviceBulk(dev), None
+    return backend, handle
+
+
 def _find(backend) -> list:
     try:
         return list(usb.core.find(idVendor=VENDOR_ID, idProduct=PRODUCT_ID, find_all=True,
@@ -181,6 +214,7 @@ class Crazyradio:
             if exc.errno == errno.EBUSY:
                 raise RadioInUse(_IN_USE % (index, exc.strerror or exc)) from exc
             raise self._usb_error(exc, "opening") from exc
+        self._bulk, self._handle = bulk_io(self._dev)
         # Known state whatever the last user left behind (the order cflib uses, ``cflib/drivers/crazyradio.py``).
         self.set_data_rate(DR_2MPS)
         self.set_channel(2)
@@ -327,19 +361,20 @@ class Crazyradio:
     def send_inline(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
         """One acked radio packet to (channel, datarate, address) in inline mode: no control transfer,
         whatever the previous packet's settings (one SET_INLINE_MODE when the mode was off)."""
-        dev = self._dev
-        if dev is None:
+        if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         if not 0 < len(data) <= MAX_RADIO_PACKET:
             raise ValueError("a radio packet has 1-32 bytes, got %d" % len(data))
         if not self._inline:
             self.set_inline_mode(True)
+        bulk, handle, timeout = self._bulk, self._handle, self.usb_timeout_ms
         try:
-            dev.write(_EP_OUT, inline_frame(channel, datarate, address, data), self.usb_timeout_ms)
+            bulk.bulk_write(handle, _EP_OUT, 0, array.array("B", inline_frame(channel, datarate, address, data)),
+                            timeout)
             # The firmware keeps the packet's settings (and acks on) once it has taken the OUT.
             self._channel, self._datarate, self._address, self.ack_enabled = channel, datarate, address, True
             buf = self._buffer
-            n = dev.read(_EP_IN, buf, self.usb_timeout_ms)
+            n = bulk.bulk_read(handle, _EP_IN, 0, buf, timeout)
         except usb.core.USBTimeoutError:
             return RadioAck(False, False, self.arc, b"")
         except usb.core.USBError as exc:
@@ -348,17 +383,17 @@ class Crazyradio:
 
     def send_packet(self, data: bytes) -> RadioAck:
         """One radio packet (1-32 bytes) and its ack. A USB timeout counts as an unacked packet."""
-        dev = self._dev
-        if dev is None:
+        if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         if not 0 < len(data) <= 32:
             raise ValueError("a radio packet has 1-32 bytes, got %d" % len(data))
+        bulk, handle, timeout = self._bulk, self._handle, self.usb_timeout_ms
         try:
-            dev.write(_EP_OUT, data, self.usb_timeout_ms)
+            bulk.bulk_write(handle, _EP_OUT, 0, array.array("B", data), timeout)
             if not self.ack_enabled:
                 return _NO_ACK
             buf = self._buffer
-            n = dev.read(_EP_IN, buf, self.usb_timeout_ms)
+            n = bulk.bulk_read(handle, _EP_IN, 0, buf, timeout)
         except usb.core.USBTimeoutError:
             return RadioAck(False, False, self.arc, b"")
         except usb.core.USBError as exc:
@@ -377,8 +412,7 @@ class Crazyradio:
         """One no-ack transfer (acks are switched off first if they are on): one packet of 1-32 bytes,
         or, where ``two_per_transfer``, two packets of the same length back to back. Nothing comes
         back; False when the USB write timed out."""
-        dev = self._dev
-        if dev is None:
+        if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         n = len(data)
         if not (0 < n <= MAX_RADIO_PACKET or (self.two_per_transfer and n <= 2 * MAX_RADIO_PACKET and n % 2 == 0)):
@@ -387,7 +421,7 @@ class Crazyradio:
         if self.ack_enabled:
             self.set_ack_enable(False)
         try:
-            dev.write(_EP_OUT, data, self.usb_timeout_ms)
+            self._bulk.bulk_write(self._handle, _EP_OUT, 0, array.array("B", data), self.usb_timeout_ms)
         except usb.core.USBTimeoutError:
             return False
         except usb.core.USBError as exc:

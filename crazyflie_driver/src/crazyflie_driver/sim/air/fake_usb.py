@@ -354,8 +354,10 @@ class FakeUsbBackend(usb.backend.IBackend):
                 raise no_device()
             d.reply = None
             d.bulk_in += 1
-            n = min(len(reply), len(buff))
-            buff[:n] = array.array("B", reply[:n])
+            n = len(reply)
+            if n > len(buff):
+                n, reply = len(buff), reply[:len(buff)]
+            buff[:n] = array.array("B", reply)
             return n
 
     def _cable_write(self, cf: FakeCableCrazyflie, ep: int, data) -> int:

@@ -110,7 +110,7 @@ class SimulatedCrazyflie:
         self.in_bootloader = False               # rebooted into the bootloader: no firmware answers CRTP
         self._reset_armed = False                # an nRF RESET_INIT came: the next RESET is taken
         self.bootloader = SimBootloader()        # both chips' flash: kept across reboots
-        self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
+        self.link = NrfLink(self._dispatch, self._pop_locked, self._rssi_positive,
                             self.profile.rssi_in_empty_ack, self._system_command)
         self._ports: Dict[int, Callable[[int, int, bytes], None]] = {}
         self.decoded = DecodedValues()           # extremes of every value handed to the vehicle (tests read it)
@@ -426,9 +426,6 @@ class SimulatedCrazyflie:
                 fn(tuple(float(v) for v in position), tuple(float(v) for v in quaternion))
             except Exception:
                 _log.exception("vehicle.external_measurement failed")
-
-    def _deliver_from_radio(self, raw: bytes) -> None:
-        self._dispatch(raw)
 
     def _dispatch(self, raw: bytes) -> None:
         if not raw or len(raw) > MAX_PAYLOAD + 1 or self.state.halted or not self.state.powered:
