@@ -103,6 +103,14 @@ class BroadcastLink:
     def is_open(self) -> bool:
         return self._shared is not None
 
+    @property
+    def sends_inline(self) -> bool:
+        """True when its dongle is a Crazyradio 2.0 with inline mode: the unicast links on it send inline,
+        so its bursts go inline too and cost no control transfer (the radio budget plans with that)."""
+        shared = self._shared
+        radio = shared.radio if shared is not None else None
+        return bool(radio is not None and radio.inline_capable)
+
     def open(self) -> None:
         """Take the dongle (opened if no other link uses it). Idempotent."""
         with self._lock:
