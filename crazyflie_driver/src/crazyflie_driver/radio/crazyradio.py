@@ -35,6 +35,12 @@ DEFAULT_ADDRESS = b"\xe7\xe7\xe7\xe7\xe7"
 #: Crazyradio PA firmware from which a bulk OUT of 33-64 bytes with acks off goes out as two
 #: radio packets of half its length each (the "99.55" image; 0.53 drops the bytes past 32).
 TWO_PER_TRANSFER_FROM = 99.55
+#: Crazyradio 2.0 firmware versions (all of them: releases from 1.0 on, PA versions being 0.x and
+#: 99.x) whose legacy path splits an unacked OUT of more than 32 bytes the same way.
+CRAZYRADIO_2_FROM = 1.0
+#: The 2.0 waits for more data after an OUT of exactly 64 bytes (its endpoint size), so a pair there
+#: stays below it: two packets of at most 31 bytes.
+CRAZYRADIO_2_MAX_PAIR = 63
 MAX_RADIO_PACKET = 32
 #: Crazyradio 2.0 firmware from which SET_INLINE_MODE exists: each bulk OUT then carries its own
 #: rate, ack flag, channel and address (docs/protocol.md, "Inline mode"). PA firmware versions are
@@ -358,9 +364,11 @@ class Crazyradio:
         self._inline = bool(on)
 
     # -- packets ---------------------------------------------------------------------------------
-    def send_inline(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
-        """One acked radio packet to (channel, datarate, address) in inline mode: no control transfer,
-        whatever the previous packet's settings (one SET_INLINE_MODE when the mode was off)."""
+    def send_inline(self, channel: int, datarate: int, address: bytes, data: bytes, ack: bool = True) -> RadioAck:
+        """One radio packet to (channel, datarate, address) in inline mode: no control transfer,
+        whatever the previous packet's settings (one SET_INLINE_MODE when the mode was off). With
+        ``ack`` false (a broadcast) the radio sends it once without waiting for an ack; the firmware
+        still answers each OUT, so the reply is read (and says "not acked")."""
         if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         if not 0 < len(data) <= MAX_RADIO_PACKET:
@@ -369,10 +377,10 @@ class Crazyradio:
             self.set_inline_mode(True)
         bulk, handle, timeout = self._bulk, self._handle, self.usb_timeout_ms
         try:
-            bulk.bulk_write(handle, _EP_OUT, 0, array.array("B", inline_frame(channel, datarate, address, data)),
+            bulk.bulk_write(handle, _EP_OUT, 0, array.array("B", inline_frame(channel, datarate, address, data, ack)),
                             timeout)
-            # The firmware keeps the packet's settings (and acks on) once it has taken the OUT.
-            self._channel, self._datarate, self._address, self.ack_enabled = channel, datarate, address, True
+            # The firmware keeps the packet's settings (and its ack flag) once it has taken the OUT.
+            self._channel, self._datarate, self._address, self.ack_enabled = channel, datarate, address, ack
             buf = self._buffer
             n = bulk.bulk_read(handle, _EP_IN, 0, buf, timeout)
         except usb.core.USBTimeoutError:
@@ -404,9 +412,25 @@ class Crazyradio:
         return RadioAck(False, False, self.arc, b"")
 
     @property
+    def is_crazyradio_2(self) -> bool:
+        return CRAZYRADIO_2_FROM <= self.version < INLINE_MODE_BELOW
+
+    @property
     def two_per_transfer(self) -> bool:
         """True when one no-ack transfer may carry two packets of the same length."""
-        return self.version >= TWO_PER_TRANSFER_FROM
+        return self.version >= TWO_PER_TRANSFER_FROM or self.is_crazyradio_2
+
+    @property
+    def max_pair_bytes(self) -> int:
+        """Longest no-ack transfer of two packets (0: the firmware sends one packet per transfer)."""
+        if not self.two_per_transfer:
+            return 0
+        return CRAZYRADIO_2_MAX_PAIR if self.is_crazyradio_2 else 2 * MAX_RADIO_PACKET
+
+    @property
+    def in_inline_mode(self) -> bool:
+        """True while the firmware is in inline mode (a unicast packet went last, inline)."""
+        return self._inline
 
     def send_no_ack(self, data: bytes) -> bool:
         """One no-ack transfer (acks are switched off first if they are on): one packet of 1-32 bytes,
@@ -415,7 +439,7 @@ class Crazyradio:
         if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         n = len(data)
-        if not (0 < n <= MAX_RADIO_PACKET or (self.two_per_transfer and n <= 2 * MAX_RADIO_PACKET and n % 2 == 0)):
+        if not (0 < n <= MAX_RADIO_PACKET or (n <= self.max_pair_bytes and n % 2 == 0)):
             raise ValueError("a no-ack transfer has 1-32 bytes%s, got %d" % (
                 " or two packets of equal length" if self.two_per_transfer else "", n))
         if self.ack_enabled:

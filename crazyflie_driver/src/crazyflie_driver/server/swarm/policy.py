@@ -410,10 +410,13 @@ class SwarmPolicy:
     # -- motion capture ---------------------------------------------------------------------------
     def mocap_plan(self) -> List[radio_budget.BroadcastDemand]:
         """Each radio's motion-capture bursts at the rate its budget allows beside its Crazyflies' unicast
-        needs and the reserve for requests (``radio_budget.mocap_rate_hz``)."""
+        needs and the reserve for requests (``radio_budget.mocap_rate_hz``); a Crazyradio 2.0 with inline
+        mode is planned without control transfers."""
         demands = [radio_budget.CrazyflieDemand(m.name, parse_uri(m.uri), 0.0, 0.0, m.worker.log_packet_rate)
                    for m in self.members]
-        return radio_budget.mocap_plan(demands, self.options.mocap_rate, not self.options.position_only)
+        links = self.broadcaster.links if self.broadcaster is not None else {}
+        inline = {key[0] for key, link in links.items() if link.sends_inline}
+        return radio_budget.mocap_plan(demands, self.options.mocap_rate, not self.options.position_only, inline)
 
     def start_stream(self) -> Optional[MocapStream]:
         """The pose stream to the members' estimators, planned on the radio budget (None without motion

@@ -30,7 +30,7 @@ from crazyflie_driver.radio.crazyradio import (
     SET_RADIO_POWER,
 )
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
-from crazyflie_driver.sim.air.usb_descriptors import PA_9955, PA_MODELS, DongleModel
+from crazyflie_driver.sim.air.usb_descriptors import PA_MODELS, DongleModel
 
 BOOTLOADER_PRODUCT_ID = 0x0101
 # Requests the host driver does not use
@@ -252,20 +252,7 @@ class DongleFirmware:
             d.reply_ready_at = start + self.timing.bulk_round_trip_s
             return
         if not d.ack_enabled:
-            # No IN reply; the dongle still needs the air time of each packet before the next OUT.
-            # The 99.55 firmware sends a longer OUT as two packets of half its length.
-            half = len(data) // 2
-            packets = [data[:half].tobytes(), data[half:2 * half].tobytes()] \
-                if d.model is PA_9955 and len(data) > MAX_RADIO_PAYLOAD else [packet]
-            busy = 0.0
-            for one in packets:
-                reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, one, False, d.arc)
-                if reply.unplugged:
-                    d.pulled_out()
-                    raise no_device()
-                busy += self.timing.bulk_round_trip_s + reply.latency_s
-            if busy > 0:
-                self.clock.sleep(busy)
+            self.send_no_ack(d, data, packet)
             return
         reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, packet,
                                      d.ack_enabled, d.arc)
@@ -281,6 +268,26 @@ class DongleFirmware:
         else:
             d.reply = b"\x00"
         d.reply_ready_at = start + self.air_time(d, reply)
+
+    def send_no_ack(self, d: FakeDongle, data, packet: bytes) -> None:
+        """A bulk OUT with acks off on the legacy path: no IN reply, no ack wait. The firmware takes the
+        next OUT while its radio sends (the PA re-arms its OUT endpoint before sending, the 2.0 queues
+        OUTs), so each radio packet holds the dongle for its air time. A PA with the 99.55 image and
+        every 2.0 send an OUT longer than 32 bytes as two packets of half its length each."""
+        if d.model.splits_long_no_ack and len(data) > MAX_RADIO_PAYLOAD:
+            half = len(data) // 2
+            packets = [data[:half].tobytes(), data[half:2 * half].tobytes()]
+        else:
+            packets = [packet]
+        busy = 0.0
+        for one in packets:
+            reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, one, False, d.arc)
+            if reply.unplugged:
+                d.pulled_out()
+                raise no_device()
+            busy += self.timing.no_ack_packet_s + reply.latency_s
+        if busy > 0:
+            self.clock.sleep(busy)
 
     def send_inline(self, d: FakeDongle, data, start: float) -> None:
         """One bulk OUT in the 2.0's inline mode: an 8-byte header [total length, rate | ack << 4,
@@ -313,7 +320,7 @@ class DongleFirmware:
             status = (d.arc & 0x0F) << 4    # the 2.0 reports the retries it spent on a lost packet
         rssi = (b"\x28" if reply.power_detector else b"\x50") if head == 3 else b""
         d.reply = bytes((head + len(payload), status)) + rssi + payload
-        busy = self.air_time(d, reply) if d.ack_enabled else self.timing.bulk_round_trip_s + reply.latency_s
+        busy = self.air_time(d, reply) if d.ack_enabled else self.timing.inline_no_ack_s + reply.latency_s
         d.reply_ready_at = start + busy
 
 
