@@ -13,7 +13,7 @@ import math
 import statistics
 import threading
 import time
-from typing import Any, Callable, Iterable, List, Optional
+from typing import Any, Callable, Dict, Iterable, List, Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -28,7 +28,13 @@ from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.server import radio_budget
 from crazyflie_driver.server.swarm.commands import SwarmMember
 from crazyflie_driver.server.swarm.config import LOG_SWITCHES, load_swarm_file
-from crazyflie_driver.server.swarm.options import options_from_params
+from crazyflie_driver.server.swarm.options import (
+    GENERIC_LOG_PERIODS,
+    GENERIC_LOG_TOPICS,
+    generic_log_note,
+    generic_log_variables_key,
+    options_from_params,
+)
 from crazyflie_driver.server.swarm.policy import REBOOT_ALL_SERVICE, SwarmPolicy, refusal_text
 from crazyflie_driver.server.worker import WorkerConfig
 from crazyflie_driver.srv import (
@@ -241,6 +247,20 @@ class RosSwarm:
                 pass
 
 
+def generic_log_params() -> Dict[str, Any]:
+    """Crazyswarm's generic log topic parameters of this node, as they are set (checked by the options)."""
+    out: Dict[str, Any] = {}
+    for key in (GENERIC_LOG_TOPICS, GENERIC_LOG_PERIODS):
+        if rospy.has_param("~" + key):
+            out[key] = rospy.get_param("~" + key)
+    topics = out.get(GENERIC_LOG_TOPICS)
+    for topic in topics if isinstance(topics, list) else []:
+        key = generic_log_variables_key(str(topic))
+        if rospy.has_param("~" + key):
+            out[key] = rospy.get_param("~" + key)
+    return out
+
+
 def start_swarm(server) -> Optional[RosSwarm]:
     """Swarm mode when ``~swarm_file`` is set: checked options and file (a fault ends the node with its
     message), then everything else in a background thread."""
@@ -252,7 +272,11 @@ def start_swarm(server) -> Optional[RosSwarm]:
               + LOG_SWITCHES if rospy.has_param("~" + k)}
     if not params.get("swarm_file"):
         return None
+    params.update(generic_log_params())
     options = options_from_params(params)
+    note = generic_log_note(params, options.enable_logging)
+    if note:
+        rospy.logwarn("swarm: %s", note)
     load_swarm_file(options.swarm_file, options.swarm_types_file or None)     # file faults first, fast
     dongles = count_dongles(options.dongle_wait)
     config = load_swarm_file(options.swarm_file, options.swarm_types_file or None, dongles=dongles)

@@ -20,7 +20,7 @@ from crazyflie_driver.clock import Clock
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import CommandRejected, CommandValueError, CrazyflieError
 from crazyflie_driver.server import radio_budget
-from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES
+from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES, LogBlockSpec
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.param_names import Lookup
 from crazyflie_driver.server.swarm import estimator_placement
@@ -112,10 +112,28 @@ def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int
     switches.update(cf.switches)
     blocks = (pose_block(pose_period_ms),) if pose_period_ms and switches.get(POSE_SWITCH, True) else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
-                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S,
+                        enable_parameters=False, log_blocks=blocks + custom_log_blocks(cf, options),
+                        keepalive_period=SWARM_KEEPALIVE_S,
                         battery_watch_ms=BATTERY_WATCH_MS,
                         disabled_topics=frozenset(t for n, t in TOPIC_SWITCHES if not switches.get(n, True)),
                         log_packets=switches.get(PACKETS_SWITCH, False))
+
+
+def custom_log_blocks(cf: SwarmCrazyflie, options: SwarmOptions) -> Tuple[LogBlockSpec, ...]:
+    """The Crazyflie's custom log topics: the server's generic ones (Crazyswarm's parameters), each replaced
+    by a topic of the same name from the swarm file (Crazyswarm2's firmware_logging), then the file's others."""
+    own = {b.topic_name for b in cf.log_blocks}
+    return tuple(b for b in options.log_blocks if b.topic_name not in own) + cf.log_blocks
+
+
+def log_topics_hint(cf: SwarmCrazyflie, options: SwarmOptions) -> str:
+    """Where a Crazyflie's custom log topics come from, for the message of a Crazyflie that was not added."""
+    blocks = custom_log_blocks(cf, options)
+    if not blocks:
+        return ""
+    return ("; its custom log topics %s come from ~genericLogTopics and the swarm file's firmware_logging: each "
+            "variable must be in its log TOC and each topic's values fit one log block"
+            % ", ".join(b.topic_name for b in blocks))
 
 
 def initial_position_params(position: Sequence[float]) -> Dict[str, Any]:
@@ -224,10 +242,12 @@ class SwarmPolicy:
 
     def add(self, cf: SwarmCrazyflie) -> Tuple[Optional[SwarmMember], Optional[str]]:
         """Connect one Crazyflie and configure it: (member, None) or (None, reason)."""
+        if cf.log_error:
+            return None, "not connected: %s" % cf.log_error       # its topics would be missing: fix the file
         try:
             member = self.server.add(worker_config(cf, self.options, self.pose_periods.get(cf.tf_prefix, 0)))
         except (CrazyflieError, ValueError) as e:
-            return None, str(e)
+            return None, str(e) + log_topics_hint(cf, self.options)
         params = dict(cf.params)
         if self.options.mocap == "none":
             # no motion capture to take the first fix from: the file's initial position

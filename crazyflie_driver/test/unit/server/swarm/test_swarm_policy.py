@@ -393,3 +393,53 @@ def test_swarm_workers_log_their_battery_for_the_safety_monitor_with_the_sensor_
     from crazyflie_driver.server.swarm.policy import BATTERY_WATCH_MS, worker_config
     wc = worker_config(config.crazyflies[0], SwarmOptions(swarm_file=EXAMPLE))
     assert wc.enable_logging is False and wc.battery_watch_ms == BATTERY_WATCH_MS > 0
+
+
+CS2_LOGS = """\
+robots:
+  cf1: {uri: "radio://0/80/2M/E7E7E7E701"}
+  cf2:
+    uri: radio://0/80/2M/E7E7E7E702
+    firmware_logging: {custom_topics: {zlog: {frequency: 500}}}
+  cf3:
+    uri: radio://0/80/2M/E7E7E7E703
+    firmware_logging: {custom_topics: {log1: {frequency: 20, vars: [stateEstimate.z]}}}
+all:
+  firmware_logging:
+    enabled: true
+    custom_topics: {zlog: {frequency: 10, vars: [stateEstimate.z]}}
+"""
+
+
+def test_custom_log_topics_reach_each_worker_and_a_crazyflie_with_a_bad_one_stays_on_the_ground():
+    from crazyflie_driver.server.log_plan import LogBlockSpec
+    from crazyflie_driver.server.swarm.config import parse_swarm
+    config = parse_swarm(CS2_LOGS, "crazyflies.yaml")
+    seen: Dict[str, Any] = {}
+    port = Port()
+    add = port.add
+    port.add = lambda cfg: seen.setdefault(cfg.tf_prefix, cfg) and add(cfg)     # type: ignore[method-assign]
+    generic = (LogBlockSpec("log1", 100, ("pm.vbat",)), LogBlockSpec("acc", 10, ("acc.z",)))
+    options = SwarmOptions(swarm_file="crazyflies.yaml", emergency_watchdog=False, enable_logging=True,
+                           pose_period_ms=0, log_blocks=generic)
+    p = SwarmPolicy(port, options, config, spawn=lambda target, name: None)
+    assert p.start() is True
+    assert [m.name for m in p.members] == ["cf1", "cf3"]        # cf2's fault keeps it (only it) on the ground
+    assert "cf2" not in seen                                    # never connected
+    assert p.failed["cf2"].startswith("not connected: crazyflies.yaml:5: robots.cf2.firmware_logging.custom_topics"
+                                      ".zlog.frequency: the Crazyflie's log timer cannot do 500 Hz")
+    z = LogBlockSpec("zlog", 100, ("stateEstimate.z",))
+    assert seen["cf1"].log_blocks == generic + (z,)
+    # a topic of the file replaces the server's generic topic of the same name
+    assert seen["cf3"].log_blocks == (generic[1], z, LogBlockSpec("log1", 50, ("stateEstimate.z",)))
+
+
+def test_a_crazyflie_the_server_refuses_names_where_its_custom_topics_come_from():
+    from crazyflie_driver.server.swarm.config import parse_swarm
+    config = parse_swarm(CS2_LOGS, "crazyflies.yaml")
+    p = SwarmPolicy(Port(refuse={"cf1"}), SwarmOptions(swarm_file="crazyflies.yaml", emergency_watchdog=False),
+                    config, spawn=lambda target, name: None)
+    p.start()
+    assert p.failed["cf1"] == ("could not add radio://0/80/2M/E7E7E7E701: no answer; its custom log topics zlog come "
+                               "from ~genericLogTopics and the swarm file's firmware_logging: each variable must be "
+                               "in its log TOC and each topic's values fit one log block")
