@@ -21,7 +21,7 @@ from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver import usb_choice
 from crazyflie_driver.clock import WALL, Clock
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CrazyflieError, LogConfigError, UnknownName
 from crazyflie_driver.nodes import swarm_mocap_sources
 from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
 from crazyflie_driver.radio.crazyradio import list_radios
@@ -99,6 +99,8 @@ class ServerPort:
         try:
             ros = self._server.add(config)
         except rospy.ServiceException as e:
+            if isinstance(e.__cause__, (UnknownName, LogConfigError)):     # its log blocks, per its log TOC
+                raise LogConfigError(str(e)) from e
             raise CrazyflieError(str(e)) from e
         return SwarmMember(config.tf_prefix, str(ros.config.uri), ros.worker, ros.onboard_commands)
 

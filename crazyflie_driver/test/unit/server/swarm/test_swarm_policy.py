@@ -17,6 +17,7 @@ from crazyflie_driver.errors import (
     EmergencyActive,
     FlightRefused,
     LinkLost,
+    LogConfigError,
 )
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
@@ -404,6 +405,9 @@ robots:
   cf3:
     uri: radio://0/80/2M/E7E7E7E703
     firmware_logging: {custom_topics: {log1: {frequency: 20, vars: [stateEstimate.z]}}}
+  cf4:
+    uri: radio://0/80/2M/E7E7E7E704
+    firmware_logging: {custom_topics: {bad: {frequency: 20, vars: [nosuch.x]}}}
 all:
   firmware_logging:
     enabled: true
@@ -411,35 +415,58 @@ all:
 """
 
 
-def test_custom_log_topics_reach_each_worker_and_a_crazyflie_with_a_bad_one_stays_on_the_ground():
-    from crazyflie_driver.server.log_plan import LogBlockSpec
+class LogTocPort(Port):
+    """A server whose Crazyflies lack every log variable of group ``nosuch``; ``seen``: each add's config."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: List[Any] = []
+
+    def add(self, config) -> SwarmMember:
+        self.seen.append(config)
+        if any(v.startswith("nosuch.") for b in config.log_blocks for v in b.variables):
+            raise LogConfigError("could not add %s: log topic 'bad': unknown log variable(s) nosuch.x" % config.uri)
+        return super().add(config)
+
+
+def started(port: Port, **options) -> SwarmPolicy:
     from crazyflie_driver.server.swarm.config import parse_swarm
-    config = parse_swarm(CS2_LOGS, "crazyflies.yaml")
-    seen: Dict[str, Any] = {}
-    port = Port()
-    add = port.add
-    port.add = lambda cfg: seen.setdefault(cfg.tf_prefix, cfg) and add(cfg)     # type: ignore[method-assign]
-    generic = (LogBlockSpec("log1", 100, ("pm.vbat",)), LogBlockSpec("acc", 10, ("acc.z",)))
-    options = SwarmOptions(swarm_file="crazyflies.yaml", emergency_watchdog=False, enable_logging=True,
-                           pose_period_ms=0, log_blocks=generic)
-    p = SwarmPolicy(port, options, config, spawn=lambda target, name: None)
+    options = dict(dict(swarm_file="crazyflies.yaml", emergency_watchdog=False, pose_period_ms=0), **options)
+    p = SwarmPolicy(port, SwarmOptions(**options), parse_swarm(CS2_LOGS, "crazyflies.yaml"),
+                    spawn=lambda target, name: None)
     assert p.start() is True
-    assert [m.name for m in p.members] == ["cf1", "cf3"]        # cf2's fault keeps it (only it) on the ground
-    assert "cf2" not in seen                                    # never connected
-    assert p.failed["cf2"].startswith("not connected: crazyflies.yaml:5: robots.cf2.firmware_logging.custom_topics"
-                                      ".zlog.frequency: the Crazyflie's log timer cannot do 500 Hz")
+    return p
+
+
+def test_custom_log_topics_reach_each_worker_the_files_over_the_parameters_of_the_same_name():
+    from crazyflie_driver.server.log_plan import LogBlockSpec
+    generic = (LogBlockSpec("log1", 100, ("pm.vbat",)), LogBlockSpec("acc", 10, ("acc.z",)))
+    port = LogTocPort()
+    p = started(port, enable_logging=True, log_blocks=generic)
+    seen = {c.tf_prefix: c.log_blocks for c in port.seen}
     z = LogBlockSpec("zlog", 100, ("stateEstimate.z",))
-    assert seen["cf1"].log_blocks == generic + (z,)
-    # a topic of the file replaces the server's generic topic of the same name
-    assert seen["cf3"].log_blocks == (generic[1], z, LogBlockSpec("log1", 50, ("stateEstimate.z",)))
+    assert seen["cf1"] == generic + (z,)
+    assert seen["cf3"] == (generic[1], z, LogBlockSpec("log1", 50, ("stateEstimate.z",)))
+    assert sorted(p.log_topic_faults) == ["cf2", "cf4"]
+    assert p.log_topic_faults["cf2"] == p.config.crazyflies[1].log_error
 
 
-def test_a_crazyflie_the_server_refuses_names_where_its_custom_topics_come_from():
-    from crazyflie_driver.server.swarm.config import parse_swarm
-    config = parse_swarm(CS2_LOGS, "crazyflies.yaml")
-    p = SwarmPolicy(Port(refuse={"cf1"}), SwarmOptions(swarm_file="crazyflies.yaml", emergency_watchdog=False),
-                    config, spawn=lambda target, name: None)
-    p.start()
-    assert p.failed["cf1"] == ("could not add radio://0/80/2M/E7E7E7E701: no answer; its custom log topics zlog come "
-                               "from ~genericLogTopics and the swarm file's firmware_logging: each variable must be "
-                               "in its log TOC and each topic's values fit one log block")
+def test_a_crazyflie_whose_custom_topics_cannot_be_served_is_connected_without_them_never_left_unsupervised():
+    port = LogTocPort()
+    p = started(port)
+    # cf2: a fault in the file; cf4: a variable its firmware lacks. Both fly with the swarm, without custom topics.
+    assert [m.name for m in p.members] == ["cf1", "cf2", "cf3", "cf4"] and p.failed == {}
+    assert [(c.tf_prefix, [b.topic_name for b in c.log_blocks]) for c in port.seen] == [
+        ("cf1", ["zlog"]), ("cf2", []), ("cf3", ["zlog", "log1"]), ("cf4", ["zlog", "bad"]), ("cf4", [])]
+    assert p.log_topic_faults["cf2"].startswith("crazyflies.yaml:5: robots.cf2.firmware_logging.custom_topics"
+                                                ".zlog.frequency: the Crazyflie's log timer cannot do 500 Hz")
+    assert p.log_topic_faults["cf4"] == ("could not add radio://0/80/2M/E7E7E7E704: log topic 'bad': unknown log "
+                                         "variable(s) nosuch.x")
+
+
+def test_a_crazyflie_refused_for_its_link_is_not_tried_again():
+    port = LogTocPort()
+    port.refuse = {"cf1"}
+    p = started(port)
+    assert p.failed == {"cf1": "could not add radio://0/80/2M/E7E7E7E701: no answer"}
+    assert [c.tf_prefix for c in port.seen].count("cf1") == 1
