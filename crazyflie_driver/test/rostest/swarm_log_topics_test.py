@@ -22,6 +22,7 @@ from typing import Any, List
 import rospy
 import rostest
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rosgraph_msgs.msg import Log
 
 from crazyflie_driver.msg import GenericLogData
@@ -52,6 +53,7 @@ class SwarmLogTopics(unittest.TestCase):
             cls.vehicles = {v["name"]: v for v in yaml.safe_load(f)["vehicles"]}
         cls.world = world(rospy.get_param("~sim_address"))
         cls.rosout = RosoutRecorder()
+        cls.diagnostics = TopicRecorder("/diagnostics", DiagnosticArray)
         cls.rec = {(cf, topic): TopicRecorder("/%s/%s" % (cf, topic), GenericLogData)
                    for cf in ("cf1", "cf2", "cf3") for topic in ("zlog", "vbat", "bad")}
         rospy.wait_for_service("/takeoff", 90.0)
@@ -66,6 +68,16 @@ class SwarmLogTopics(unittest.TestCase):
         self.assertTrue(refused, "no error about cf3's custom log topics on rosout")
         self.assertIn("nosuch.variable", refused[0])
         print("LOG refusal: %s" % refused[0])
+
+        name = "crazyflie_server swarm: cf3"
+
+        def cf3_status():
+            arr = self.diagnostics.latest_where(lambda a: any(s.name == name for s in a.status))
+            return next((s for s in arr.status if s.name == name), None) if arr else None
+        status = wait_until(cf3_status, 10.0)
+        self.assertIsNotNone(status, "cf3 is not on /diagnostics")
+        self.assertGreaterEqual(status.level, DiagnosticStatus.WARN, status)
+        self.assertIn("no custom log topics", status.message)
         self.assertEqual(sum(self.rec[("cf3", t)].count() for t in ("zlog", "vbat", "bad")), 0)
         self.assertEqual(self.rec[("cf1", "bad")].count() + self.rec[("cf2", "bad")].count(), 0)
 

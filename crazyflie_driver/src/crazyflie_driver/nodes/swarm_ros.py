@@ -207,6 +207,7 @@ class RosSwarm:
                                       KeyValue("poses refused", str(p.stream.refused.get(m.name, 0)))]
                     if state != "ok" and p.stream.last_refusal.get(m.name):
                         status.message += "; last pose refused: %s" % p.stream.last_refusal[m.name]
+                note_log_topic_fault(status, p.log_topic_faults.get(m.name))
                 arr.status.append(status)
             for name, error in p.failed.items():
                 arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, name="crazyflie_server swarm: %s"
@@ -247,6 +248,13 @@ class RosSwarm:
                 s.stop()
             except Exception:
                 pass
+
+
+def note_log_topic_fault(status: DiagnosticStatus, fault: Optional[str]) -> None:
+    """A Crazyflie flying without its custom log topics is a warning at least, with the reason."""
+    if fault:
+        status.level = max(status.level, DiagnosticStatus.WARN)
+        status.message += "; no custom log topics: %s" % fault
 
 
 def generic_log_params() -> Dict[str, Any]:
