@@ -58,7 +58,7 @@ import math
 import numbers
 import re
 from dataclasses import dataclass, field, replace
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import AbstractSet, Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import yaml
 
@@ -191,6 +191,10 @@ class _Doc:
 
     def error(self, path: Sequence[Any], what: str) -> SwarmConfigError:
         return SwarmConfigError("%s:%d: %s" % (self.source, self.line(*path), what))
+
+    def mapping(self, path: Sequence[Any], where: str, value: Any, known: AbstractSet[str]) -> Dict[str, Any]:
+        """``value`` (at ``path``, called ``where``) as a mapping whose keys are all in ``known`` (None: empty)."""
+        return _mapping(self, path, where, value, known)
 
 
 def _read(path: str) -> str:
@@ -360,7 +364,7 @@ _CS2_TYPE_KEYS = {"motion_capture", "big_quad", "battery", "firmware_params", "f
 _CS2_ALL_KEYS = {"firmware_params", "firmware_logging", "broadcasts"}
 
 
-def _mapping(doc: _Doc, path: Sequence[Any], where: str, value: Any, known: set) -> Dict[str, Any]:
+def _mapping(doc: _Doc, path: Sequence[Any], where: str, value: Any, known: AbstractSet[str]) -> Dict[str, Any]:
     """``value`` as a mapping whose keys are all in ``known`` (None: empty)."""
     value = {} if value is None else value
     if not isinstance(value, dict):

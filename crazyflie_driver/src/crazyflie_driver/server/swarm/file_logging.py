@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import AbstractSet, Any, Dict, List, Optional, Protocol, Sequence, Tuple
 
 from crazyflie_driver.crtp.firmware_limits import LOG_PERIOD_MAX_MS, LOG_PERIOD_MIN_MS, LOG_PERIOD_UNIT_MS
 from crazyflie_driver.errors import SwarmConfigError
@@ -39,21 +39,19 @@ Layer = Dict[Tuple[str, ...], Tuple[Any, List[Any], str]]
 Level = Tuple[List[Any], str, Any]
 
 
-def _mapping(doc: Any, path: List[Any], where: str, value: Any, known: frozenset) -> Dict[Any, Any]:
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise doc.error(path, "%s must be a mapping, got %r" % (where, value))
-    unknown = sorted(str(k) for k in value if k not in known)
-    if unknown:
-        raise doc.error(path + [unknown[0]], "%s: unknown key(s) %s; known: %s"
-                        % (where, ", ".join(unknown), ", ".join(sorted(known))))
-    return value
+class SwarmDoc(Protocol):
+    """The swarm file being read (``config._Doc``): errors that name its line, checked mappings."""
+
+    def error(self, path: Sequence[Any], what: str) -> SwarmConfigError:
+        ...
+
+    def mapping(self, path: Sequence[Any], where: str, value: Any, known: AbstractSet[str]) -> Dict[str, Any]:
+        ...
 
 
-def logging_layer(doc: Any, path: List[Any], where: str, raw: Any) -> Layer:
+def logging_layer(doc: SwarmDoc, path: List[Any], where: str, raw: Any) -> Layer:
     """One level's ``firmware_logging`` as flat keys; SwarmConfigError naming a key of the wrong shape."""
-    body = _mapping(doc, path, where, raw, LOGGING_KEYS)
+    body = doc.mapping(path, where, raw, LOGGING_KEYS)
     layer: Layer = {}
     if "enabled" in body:
         if not isinstance(body["enabled"], bool):
@@ -68,21 +66,21 @@ def logging_layer(doc: Any, path: List[Any], where: str, raw: Any) -> Layer:
     for name, spec in (topics or {}).items():
         here = topics_path + [name]
         label = "%s.custom_topics.%s" % (where, name)
-        for key, value in _mapping(doc, here, label, spec, TOPIC_KEYS).items():
+        for key, value in doc.mapping(here, label, spec, TOPIC_KEYS).items():
             layer[("custom_topics", str(name), key)] = (value, here + [key], "%s.%s" % (label, key))
     return layer
 
 
 def default_topics_note(where: str, raw: Any) -> Optional[str]:
     """What a level's ``default_topics`` asks that is served from elsewhere here, or None."""
-    if isinstance(raw, dict) and raw.get("enabled") and raw.get("default_topics"):
+    if isinstance(raw, dict) and raw.get("default_topics"):
         return ("%s.firmware_logging.default_topics: Crazyswarm2's fixed log topics (%s) come from the server's "
                 "parameters in swarm mode (~pose_period_ms, ~enable_logging); custom_topics are served"
                 % (where, ", ".join(map(str, raw["default_topics"]))))
     return None
 
 
-def _period_ms(doc: Any, field: Tuple[Any, List[Any], str], notes: List[str]) -> int:
+def _period_ms(doc: SwarmDoc, field: Tuple[Any, List[Any], str], notes: List[str]) -> int:
     """The log period of a ``frequency`` [Hz]: whole milliseconds within what the firmware's timer does."""
     value, path, where = field
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)) \
@@ -102,7 +100,7 @@ def _period_ms(doc: Any, field: Tuple[Any, List[Any], str], notes: List[str]) ->
     return period
 
 
-def _variables(doc: Any, field: Tuple[Any, List[Any], str]) -> Tuple[str, ...]:
+def _variables(doc: SwarmDoc, field: Tuple[Any, List[Any], str]) -> Tuple[str, ...]:
     value, path, where = field
     if not isinstance(value, (list, tuple)) or not value or not all(isinstance(v, str) for v in value):
         raise doc.error(path, "%s must be a non-empty list of log variables [group.name, ...], got %r"
@@ -110,7 +108,7 @@ def _variables(doc: Any, field: Tuple[Any, List[Any], str]) -> Tuple[str, ...]:
     return tuple(v.strip() for v in value)
 
 
-def _topic(doc: Any, name: str, merged: Layer, levels: Sequence[Level], notes: List[str]) -> LogBlockSpec:
+def _topic(doc: SwarmDoc, name: str, merged: Layer, levels: Sequence[Level], notes: List[str]) -> LogBlockSpec:
     """One merged custom topic as a log block; SwarmConfigError naming the field at fault."""
     frequency = merged.get(("custom_topics", name, "frequency"))
     variables = merged.get(("custom_topics", name, "vars"))
@@ -127,7 +125,7 @@ def _topic(doc: Any, name: str, merged: Layer, levels: Sequence[Level], notes: L
     return block
 
 
-def _blocks(doc: Any, merged: Layer, levels: Sequence[Level], notes: List[str]) -> Tuple[LogBlockSpec, ...]:
+def _blocks(doc: SwarmDoc, merged: Layer, levels: Sequence[Level], notes: List[str]) -> Tuple[LogBlockSpec, ...]:
     """Every custom topic of the merged levels, in the order they first appear."""
     names: List[str] = []
     for key in merged:
@@ -136,7 +134,8 @@ def _blocks(doc: Any, merged: Layer, levels: Sequence[Level], notes: List[str]) 
     return tuple(_topic(doc, name, merged, levels, notes) for name in names)
 
 
-def crazyflie_log_topics(doc: Any, levels: Sequence[Level], notes: List[str]) -> Tuple[Tuple[LogBlockSpec, ...], str]:
+def crazyflie_log_topics(doc: SwarmDoc, levels: Sequence[Level],
+                         notes: List[str]) -> Tuple[Tuple[LogBlockSpec, ...], str]:
     """One Crazyflie's custom log topics from its levels (``all``, its type, itself; least specific first):
     (blocks, "") or ((), the first fault, naming the file, line and key). ``notes`` gets what is served
     differently from what was asked (a frequency rounded to whole milliseconds)."""
