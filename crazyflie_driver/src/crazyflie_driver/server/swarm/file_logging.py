@@ -145,6 +145,11 @@ def crazyflie_log_topics(doc: SwarmDoc, levels: Sequence[Level],
             merged.update(logging_layer(doc, path, where + ".firmware_logging", raw))
         enabled = merged.get(("enabled",))
         if enabled is None or not enabled[0]:
+            names = sorted({k[1] for k in merged if k[0] == "custom_topics"})
+            if names:
+                notes.append("firmware_logging.custom_topics %s given but firmware_logging.enabled is %s: not "
+                             "published, as in Crazyswarm2 (set enabled: true under all, the type or the robot)"
+                             % (", ".join(names), "false" if enabled else "not given"))
             return (), ""
         blocks = _blocks(doc, merged, levels, notes)
         try:

@@ -62,7 +62,8 @@ def test_levels_merge_key_by_key_robot_over_type_over_all():
         "cf3": (LogBlockSpec("zlog", 100, ("stateEstimate.z",)),),
     }
     assert all(cf.log_error == "" for cf in c.crazyflies)
-    assert c.notes == ()
+    assert c.notes == ("firmware_logging.custom_topics vbat, zlog given but firmware_logging.enabled is false: not "
+                       "published, as in Crazyswarm2 (set enabled: true under all, the type or the robot)",)
 
 
 def test_no_firmware_logging_or_not_enabled_means_no_custom_topics():
@@ -73,6 +74,8 @@ def test_no_firmware_logging_or_not_enabled_means_no_custom_topics():
     c = parse(no_switch)
     assert blocks(c)["cf1"] == blocks(c)["cf3"] == ()
     assert [b.topic_name for b in blocks(c)["cf2"]] == ["a", "zlog"]
+    assert c.notes == ("firmware_logging.custom_topics a given but firmware_logging.enabled is not given: not "
+                       "published, as in Crazyswarm2 (set enabled: true under all, the type or the robot)",)
 
 
 @pytest.mark.parametrize("hz, period", [(100, 10), (10, 100), (0.5, 2000), (1000 / 2550, 2550), (8, 125)])
