@@ -210,7 +210,7 @@ def test_a_crazyswarm2_file_gives_the_same_swarm_its_names_and_layers_and_says_w
                       "ring.effect": 7}                     # all, then the type, then the robot's own
     t = config.type_of(config.crazyflies[0])
     assert (t.battery_voltage_warning, t.battery_voltage_critical) == (3.9, 3.6)
-    assert [n.split(":")[0] for n in config.notes] == ["all.firmware_logging", "all.broadcasts"]
+    assert [n.split(":")[0] for n in config.notes] == ["all.firmware_logging.default_topics", "all.broadcasts"]
 
 
 @pytest.mark.parametrize("text, says", [
