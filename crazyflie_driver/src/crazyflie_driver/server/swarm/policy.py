@@ -30,6 +30,14 @@ from crazyflie_driver.server.swarm.config import SwarmConfig, SwarmCrazyflie
 from crazyflie_driver.server.swarm.heartbeat import Heartbeat
 from crazyflie_driver.server.swarm.mocap_stream import MocapStream
 from crazyflie_driver.server.swarm.options import SwarmOptions
+from crazyflie_driver.server.swarm.unsupervised import (
+    LeftOut,
+    hearing_broadcasts,
+    lock_on_ground,
+    locked_text,
+    unanswered_text,
+    unicast,
+)
 from crazyflie_driver.server.swarm.watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
 
@@ -200,6 +208,7 @@ class SwarmPolicy:
         self.recovering = False                  # reboot_all is waiting for the Crazyflies to come back
         self.placement = estimator_placement.EstimatorPlacement(self.clock)
         self.pose_periods: Dict[str, int] = {}
+        self.locked: Dict[str, str] = {}        # name -> URI: left out, motors locked on the ground
         self.log_topic_faults: Dict[str, str] = {}           # name -> why it flies without its custom log topics
         self._placement_attempts: Dict[str, int] = {}      # failed initial-position writes, per Crazyflie
         self._first_fixes: Optional[ThreadPoolExecutor] = None
@@ -231,6 +240,7 @@ class SwarmPolicy:
         if not self.members:
             LOG.error("swarm: no Crazyflie of %s could be added; no swarm services", self.config.source)
             return False
+        self.lock_left_out()
         version = min(m.worker.cf.protocol_version for m in self.members)
         self.broadcaster = SwarmBroadcaster([m.uri for m in self.members], version, self.server.radio_manager(),
                                             repeats=self.options.broadcast_repeats,
@@ -285,6 +295,24 @@ class SwarmPolicy:
             self.log_topic_faults[cf.tf_prefix] = str(e)
             LOG.error(custom_topics_dropped(cf, self.options, str(e)))
         return self.server.add(worker_config(cf, self.options, period, custom_topics=False))
+
+    def lock_left_out(self) -> None:
+        """Before the first broadcast: lock the motors of each Crazyflie of the file that was not added but
+        listens on a channel the swarm broadcasts on (``unsupervised``); name the ones that do not answer."""
+        left_out = [LeftOut(cf.tf_prefix, cf.uri, self.failed[cf.tf_prefix]) for cf in self.config.crazyflies
+                    if cf.tf_prefix in self.failed]
+        for cf in hearing_broadcasts(left_out, [m.uri for m in self.members]):
+            try:
+                with unicast(cf.uri, self.server.radio_manager()) as send:
+                    acked = lock_on_ground(send)
+            except CrazyflieError as e:
+                LOG.error(unanswered_text(cf, str(e)))
+                continue
+            if acked:
+                self.locked[cf.name] = cf.uri
+                LOG.error(locked_text(cf))
+            else:
+                LOG.error(unanswered_text(cf, "not acknowledged"))
 
     def live_members(self) -> List[SwarmMember]:
         """The members whose worker the server still serves (one that gave up is left out)."""
