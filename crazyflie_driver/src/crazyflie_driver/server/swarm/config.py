@@ -357,9 +357,11 @@ def _with_default_type(types: Dict[str, CrazyflieType]) -> Dict[str, CrazyflieTy
 
 
 # -- Crazyswarm2's crazyflies.yaml ------------------------------------------------------------------
-_CS2_TOP_KEYS = {"fileversion", "robots", "robot_types", "all"}
-_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging"} | set(
-    LOG_SWITCHES)
+# Keys of Crazyswarm2's own example files that change nothing here: a robot's ``role`` (a label for the
+# user's scripts) and a top-level ``relative: false``; ``relative: true`` is refused (not supported).
+_CS2_TOP_KEYS = {"fileversion", "robots", "robot_types", "all", "relative"}
+_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging",
+                   "role"} | set(LOG_SWITCHES)
 _CS2_TYPE_KEYS = {"motion_capture", "big_quad", "battery", "firmware_params", "firmware_logging"} | set(LOG_SWITCHES)
 _CS2_ALL_KEYS = {"firmware_params", "firmware_logging", "broadcasts"}
 
@@ -385,6 +387,9 @@ def _parse_crazyswarm2(doc: _Doc, data: Dict[str, Any], dongles: Optional[int]) 
     """A Crazyswarm2 file, read into the same swarm as a Crazyswarm 1 file (the robot's name is its
     tf_prefix; a robot with ``enabled: false`` is left out; ``enabled`` missing counts as true)."""
     _mapping(doc, [], "a Crazyswarm2 swarm file", data, _CS2_TOP_KEYS)
+    if data.get("relative", False) is not False:
+        raise doc.error(["relative"], "relative: %r is not supported: remove it or set it to false (positions "
+                        "are in the world frame)" % (data["relative"],))
     notes: List[str] = []
     types = _cs2_types(doc, data.get("robot_types") or {}, notes)
     swarm_params = _cs2_all(doc, data.get("all"), notes)
