@@ -13,7 +13,8 @@ The levels merge key by key, the robot's over its type's over ``all``'s (Crazysw
 ``crazyflie_server.cpp`` reads them that way): ``enabled`` is the most specific one given (false when
 none is), a custom topic is the union over the levels, and a robot may change one field of a topic
 ``all`` defines (its ``frequency`` alone, say). Checks that need no Crazyflie are made here, per
-Crazyflie: a fault leaves that Crazyflie out of the swarm with the message, the others fly. Whether a
+Crazyflie: a fault is kept with that Crazyflie, which then connects without its custom topics (the
+policy logs why; left out it would still hear the broadcasts), and the others keep theirs. Whether a
 variable is in the Crazyflie's log TOC is checked when it connects (``server.log_plan``).
 """
 from __future__ import annotations
