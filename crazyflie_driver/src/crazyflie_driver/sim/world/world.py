@@ -412,6 +412,13 @@ class World:
                 except Exception:
                     _log.exception("world tick listener %r failed", entry[0])
 
+    def _imu_means(self, rows: np.ndarray, specific_force: np.ndarray, omega: np.ndarray,
+                   window_s: float) -> Tuple[np.ndarray, np.ndarray]:
+        """The onboard Kalman filter's IMU readings of ``rows`` (mean over ``window_s``)."""
+        b = self.bodies
+        fraction = (b.thrust[rows] @ _ONES4) * b.inv_mass[rows, 0] / b.gravity[rows]
+        return _sensors.imu_means(self.sensors, rows, specific_force, omega, fraction, window_s, self.rng)
+
     def _tick(self) -> None:
         """One firmware tick of every vehicle: a fixed pipeline of whole-fleet numpy stages.
 
@@ -426,7 +433,7 @@ class World:
         if len(self._order):
             b = self.bodies
             onboard = self.onboard
-            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl):
+            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl, self._imu_means):
                 onboard.dirty = True
             if k % CONTROL_TICKS == 0:
                 thrust_fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
