@@ -201,7 +201,11 @@ def add_process_noise(k: KalmanStates, rows: np.ndarray, now_ms: float) -> None:
                     (gyro_rp * dt + att) ** 2, (gyro_rp * dt + att) ** 2, (gyro_yaw * dt + att) ** 2], axis=1)
     P = k.P[rows]
     idx = np.arange(STATE_DIM)
-    P[:, idx, idx] += inc * loops[:, None]
+    # loop by loop the firmware raises the diagonal to the floor after the first increment only
+    # (the increments are >= 0), so n loops at once are exactly: floor(d + inc) + (n - 1)·inc
+    n = loops[:, None]
+    diag = np.maximum(P[:, idx, idx] + inc, MIN_COVARIANCE) + (n - 1.0) * inc
+    P[:, idx, idx] = np.where(n > 0, diag, P[:, idx, idx])
     k.P[rows] = bound(P)
     k.noise_ms[rows] = np.maximum(k.noise_ms[rows], now_ms)
 
