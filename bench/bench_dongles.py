@@ -39,7 +39,7 @@ from crazyflie_driver.radio.link import RadioLink  # noqa: E402
 from crazyflie_driver.radio.shared_radio import RadioManager  # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
 from crazyflie_driver.sim.air.medium import LocalMedium  # noqa: E402
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie  # noqa: E402
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie  # noqa: E402
 
 SETPOINT = bytes([0x30]) + struct.pack("<fffH", 0.0, 0.0, 0.0, 0)   # port 3 ch 0 RPYT, thrust 0
 ECHO_PORT = 15

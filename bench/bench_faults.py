@@ -32,10 +32,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
-import subprocess
 import sys
-import tempfile
 import time
 from typing import Any, Dict, List, Tuple
 
@@ -44,6 +41,7 @@ try:
 except ImportError:
     sys.exit("bench_faults: the catkin workspace is not on the path: source tools/env.sh first")
 
+from fault_table import harness  # noqa: E402
 from fault_table.harness import Bench, Row  # noqa: E402
 from fault_table.report import RUN_FIRST, table, write  # noqa: E402
 from fault_table.rows import rows  # noqa: E402
@@ -58,58 +56,34 @@ def main() -> int:
     ap.add_argument("--readme", action="store_true",
                     help="also put the short table into README.md (between its fault-table markers)")
     args = ap.parse_args()
-    chosen = rows()
-    if args.rows:
-        keys = args.rows.split(",")
-        unknown = set(keys) - {r.key for r in chosen}
-        if unknown:
-            print("bench_faults: error: unknown rows %s" % ", ".join(sorted(unknown)), file=sys.stderr)
-            return 1
-        chosen = [r for r in chosen if r.key in keys]
-    work = tempfile.mkdtemp(prefix="cf_faults_")
-    port = bs.free_port()
-    os.environ["ROS_MASTER_URI"] = "http://127.0.0.1:%d" % port
-    os.environ["ROS_LOG_DIR"] = os.path.join(work, "log")
-    os.environ["CRAZYFLIE_TOC_CACHE"] = os.path.join(work, "toc")
-    os.environ.setdefault("ROS_IP", "127.0.0.1")
-    core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-    commit = subprocess.run(["git", "-C", bs.REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
-                            text=True).stdout.strip()[:100]
+    chosen = harness.chosen(rows(), args.rows, "bench_faults")
+    if chosen is None:
+        return 1
+    commit = harness.commit_line()
     t_start = time.monotonic()
     results: List[Tuple[Row, Dict[str, Any]]] = []
     bench = None
-    try:
-        import rosgraph
-        deadline = time.monotonic() + 30.0
-        while not rosgraph.is_master_online() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        import rospy
-        rospy.init_node("bench_faults", disable_signals=True)
-        bench = Bench(work)
-        order = sorted(chosen, key=lambda r: (r.path != "chapter", r.key not in RUN_FIRST,
-                                              RUN_FIRST.index(r.key) if r.key in RUN_FIRST else 0))
-        for row in order:
-            print("%s (%s path) ..." % (row.title, row.path), flush=True)
-            try:
-                r = bench.run(row)
-            except Exception as e:
-                r = {"error": "%s: %s" % (type(e).__name__, e)}
-                if bench.graph is not None:
-                    bench.graph.stop()
-                    bench.graph = None
-            results.append((row, r))
-            print("\n".join(table([(row, r)])), flush=True)
-            if args.out != "-":                  # what is measured so far, should the run be cut short
-                write(args, results, commit, time.monotonic() - t_start, partial=True)
-    finally:
-        if bench is not None:
-            bench.close()
-        os.killpg(core.pid, signal.SIGINT)
+    with harness.bench_master("cf_faults_", "bench_faults") as work:
         try:
-            core.wait(15)
-        except subprocess.TimeoutExpired:
-            os.killpg(core.pid, signal.SIGKILL)
+            bench = Bench(work)
+            order = sorted(chosen, key=lambda r: (r.path != "chapter", r.key not in RUN_FIRST,
+                                                  RUN_FIRST.index(r.key) if r.key in RUN_FIRST else 0))
+            for row in order:
+                print("%s (%s path) ..." % (row.title, row.path), flush=True)
+                try:
+                    r = bench.run(row)
+                except Exception as e:
+                    r = {"error": "%s: %s" % (type(e).__name__, e)}
+                    if bench.graph is not None:
+                        bench.graph.stop()
+                        bench.graph = None
+                results.append((row, r))
+                print("\n".join(table([(row, r)])), flush=True)
+                if args.out != "-":                  # what is measured so far, should the run be cut short
+                    write(args, results, commit, time.monotonic() - t_start, partial=True)
+        finally:
+            if bench is not None:
+                bench.close()
     write(args, results, commit, time.monotonic() - t_start, partial=False)
     return 0 if all("error" not in r for _, r in results) else 1
 

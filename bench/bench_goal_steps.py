@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Goal changes with the chapter's gains: the original controller, the previous defaults and the fixed one.
 
-Flies crazyflie_controller's PositionController against the simulated world (sim.world, fast mode,
+Flies crazyflie_controller's PositionController against the simulated world (sim.room, fast mode,
 in process, no ROS; see crazyflie_controller/test/controller_support/world_flight.py): cmd_vel → crazyflie_server's RPYT
 mapping → Vehicle.set_rpyt; pose from a 100 Hz motion-capture model with 10 ms latency and
 0.5 mm noise; controller at 50 Hz; 32 g Crazyflie. Each variant takes off to (0, 0, 0.5), hovers,
@@ -137,16 +137,16 @@ def main() -> int:
                     help="results file ('' to only print)")
     args = ap.parse_args()
     try:
-        import crazyflie_driver.sim.world.world  # noqa: F401
+        import crazyflie_driver.sim.room.world  # noqa: F401
     except ImportError as e:
-        print("sim.world is not available (%s): benchmark pending" % e)
+        print("sim.room is not available (%s): benchmark pending" % e)
         return 1
     import ast
     extra = {}
     for item in args.set:
         name, _, value = item.partition("=")
         extra[name.strip()] = ast.literal_eval(value.strip())
-    lines = ["goal changes, chapter gains, 32 g, sim.world fast mode, mocap 100 Hz / 10 ms / 0.5 mm, controller 50 Hz"
+    lines = ["goal changes, chapter gains, 32 g, sim.room fast mode, mocap 100 Hz / 10 ms / 0.5 mm, controller 50 Hz"
              + (" (overrides %s)" % extra if extra else ""),
              "%-10s | %7s %6s %7s %6s | %6s %6s %7s %6s | %-25s %7s %6s" % (
                  "variant", "up-over", "settle", "dn-undr", "settle", "sag", "|dz|", "x-over", "settle",

@@ -26,11 +26,11 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie  # noqa: E402
-from crazyflie_driver.sim.firmware.setpoint_decode import decode_setpoint  # noqa: E402
-from crazyflie_driver.sim.world.mocap import MocapModel  # noqa: E402
-from crazyflie_driver.sim.world.planner import Evaluation, Plan, evaluate, figure_eight, online_piece  # noqa: E402
-from crazyflie_driver.sim.world.world import World  # noqa: E402
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie  # noqa: E402
+from crazyflie_driver.sim.crtp.setpoint_decode import decode_setpoint  # noqa: E402
+from crazyflie_driver.sim.onboard.planner import Evaluation, Plan, evaluate, figure_eight, online_piece  # noqa: E402
+from crazyflie_driver.sim.room.mocap import MocapModel  # noqa: E402
+from crazyflie_driver.sim.room.world import World  # noqa: E402
 
 GOAL = (0.0, 0.0, 0.5)
 FIG8_HALF_WIDTH, FIG8_HALF_HEIGHT = 1.0, 0.5       # m: x = w sin(ωt), y = h sin(2ωt)

@@ -48,7 +48,7 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 
 SETPOINT = bytes([0x30]) + struct.pack("<fffH", 0.0, 0.0, 0.0, 0)   # port 3 ch 0 RPYT, thrust 0
 WARMUP_S = 0.2

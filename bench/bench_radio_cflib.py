@@ -23,7 +23,7 @@ from bench_support import IdleVehicle
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from support.cflib_find_patch import install_find_patch
 
 URI = "radio://0/80/2M/E7E7E7E7E7"

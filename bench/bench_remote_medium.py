@@ -33,7 +33,7 @@ def measure(n: int, medium, local_medium) -> None:
         samples.append(time.perf_counter() - t0)
     samples.sort()
     local = local_medium()
-    from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+    from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
     local.add_crazyflie(SimulatedCrazyflie(addr, bs.IdleVehicle()), 80, 2)
     t0 = time.perf_counter()
     for _ in range(n):

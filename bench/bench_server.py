@@ -7,8 +7,8 @@ receives when cmd_vel arrives at 100 Hz per Crazyflie, and the cmd_vel-to-radio 
 moment cmd_vel is handed to the worker until the setpoint's radio round trip is acked; median and
 p99). Also the IMU messages per second each Crazyflie delivers with logging on.
 
-Runs the server's workers (registry, worker) in process against the real simulated world (sim.world.world.World stepping
-in real time, sim.air.server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
+Runs the server's workers (registry, worker) in process against the real simulated world (sim.room.world.World stepping
+in real time, sim.world_server.WorldServer's medium without TCP), so it measures the driver, not ROS transport. Usage:
     /usr/bin/python3 bench/bench_server.py [--seconds 3] [--out FILE]
 """
 from __future__ import annotations
@@ -25,8 +25,8 @@ from crazyflie_driver.radio.shared_radio import RadioManager  # noqa: E402
 from crazyflie_driver.server.registry import CrazyflieRegistry  # noqa: E402
 from crazyflie_driver.server.worker import WorkerConfig, WorkerListener  # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
-from crazyflie_driver.sim.air.server import WorldServer  # noqa: E402
-from crazyflie_driver.sim.world.world import World  # noqa: E402
+from crazyflie_driver.sim.room.world import World  # noqa: E402
+from crazyflie_driver.sim.world_server import WorldServer  # noqa: E402
 
 CMD_RATE_HZ = 100.0
 

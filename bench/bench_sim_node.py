@@ -65,7 +65,7 @@ class Flyer:
     def __init__(self, n: int) -> None:
         from crazyflie_driver.protocol.commander import rpyt_packet
         from crazyflie_driver.sim.air.medium import RemoteMedium
-        from crazyflie_driver.sim.world.physics import VehicleParams
+        from crazyflie_driver.sim.room.physics import VehicleParams
 
         self.medium = RemoteMedium(WORLD_ADDRESS)
         hover = int(round(VehicleParams().hover_command() * 1.02))

@@ -74,7 +74,7 @@ class Taps:
     def install(self) -> None:
         from crazyflie_driver.mocap.vrpn_server import VrpnTestServer
         from crazyflie_driver.sim.air import medium
-        from crazyflie_driver.sim.air.server import WorldServer
+        from crazyflie_driver.sim.world_server import WorldServer
 
         taps = self
         send_poses, transmit, start = VrpnTestServer.send_poses, medium.LocalMedium.transmit, WorldServer.start

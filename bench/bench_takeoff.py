@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Take-off to 0.5 m with the chapter's gains: the original controller vs the fixed one.
 
-Flies crazyflie_controller's PositionController against the simulated world (sim.world, fast mode,
+Flies crazyflie_controller's PositionController against the simulated world (sim.room, fast mode,
 in process, no ROS): cmd_vel → crazyflie_server's RPYT mapping → Vehicle.set_rpyt; pose from a
 100 Hz motion-capture model with 10 ms latency and 0.5 mm noise; controller at 50 Hz. For each
 variant and vehicle mass it prints the lift-off thrust, the Z integrator preload, the peak height,
@@ -62,11 +62,11 @@ def main() -> int:
     ap.add_argument("--out", default=os.path.join(HERE, "results", "takeoff.txt"))
     args = ap.parse_args()
     try:
-        import crazyflie_driver.sim.world.world  # noqa: F401
+        import crazyflie_driver.sim.room.world  # noqa: F401
     except ImportError as e:
-        print("sim.world is not available (%s): benchmark pending" % e)
+        print("sim.room is not available (%s): benchmark pending" % e)
         return 1
-    lines = ["take-off to %.1f m, chapter gains, sim.world fast mode, mocap 100 Hz / 10 ms / 0.5 mm, "
+    lines = ["take-off to %.1f m, chapter gains, sim.room fast mode, mocap 100 Hz / 10 ms / 0.5 mm, "
              "controller 50 Hz" % GOAL_Z,
              "%-9s %6s %8s %8s %8s %7s %9s %8s %9s %9s %9s" % (
                  "variant", "mass", "liftoff", "preload", "fitted", "peak", "overshoot", "settle5", "rms_z5-10",

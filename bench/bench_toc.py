@@ -15,7 +15,7 @@ from crazyflie_driver.protocol.crazyflie import Crazyflie  # noqa: E402
 from crazyflie_driver.radio.shared_radio import RadioManager  # noqa: E402
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
 from crazyflie_driver.sim.air.medium import LocalMedium  # noqa: E402
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie  # noqa: E402
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie  # noqa: E402
 
 URI = "radio://0/80/2M/E7E7E7E701"
 

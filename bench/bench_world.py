@@ -22,9 +22,9 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
-from crazyflie_driver.sim.firmware.setpoint_decode import decode_setpoint  # noqa: E402
-from crazyflie_driver.sim.world.physics import VehicleParams  # noqa: E402
-from crazyflie_driver.sim.world.world import World  # noqa: E402
+from crazyflie_driver.sim.crtp.setpoint_decode import decode_setpoint  # noqa: E402
+from crazyflie_driver.sim.room.physics import VehicleParams  # noqa: E402
+from crazyflie_driver.sim.room.world import World  # noqa: E402
 
 FLEETS = (1, 10, 49, 100)
 MODES = ("RPYT", "PID", "Mellinger")

@@ -2,14 +2,19 @@
 and of the world's truth, ``Bench.run`` (one row: hover, inject, observe) and the reading of the truth."""
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
 import subprocess
+import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
+
+from bench_support import REPO  # noqa: E402,F401  (the repository root, for the rows and the report)
 
 SIM_ADDRESS = "127.0.0.1:19897"
 URI = "radio://0/80/2M/E7E7E7E701"
@@ -321,16 +326,21 @@ class Bench:
             lost.append("firmware locked (%s): reboot to fly" % end["locked"])
         result["lost"] = lost
         result["setup_s"] = setup_s
-        try:
-            row.cleanup(self)
-        except Exception as e:
-            result["cleanup_error"] = str(e)
-        return result
+        return cleaned_up(row, self, result)
 
     def close(self) -> None:
         self.truth.stop()
         if self.graph is not None:
             self.graph.stop()
+
+
+def cleaned_up(row: Any, bench: Any, result: Dict[str, Any]) -> Dict[str, Any]:
+    """``result`` after the row's cleanup (a failed cleanup is noted in it, not raised)."""
+    try:
+        row.cleanup(bench)
+    except Exception as e:
+        result["cleanup_error"] = str(e)
+    return result
 
 
 def log_packets_lost(status) -> int:
@@ -344,24 +354,25 @@ def log_packets_lost(status) -> int:
 
 
 # --- reading the truth ---------------------------------------------------------------------------
-def distance(s: Dict[str, Any]) -> float:
-    return math.dist(s["position"], GOAL)
+def distance(s: Dict[str, Any], goal: Tuple[float, float, float] = GOAL) -> float:
+    return math.dist(s["position"], goal)
 
 
 def speed(s: Dict[str, Any]) -> float:
     return math.sqrt(sum(v * v for v in s["velocity"]))
 
 
-def hover_ok(s: Dict[str, Any]) -> bool:
-    return distance(s) < HOVER_TOLERANCE_M and speed(s) < HOVER_SPEED_MS
+def hover_ok(s: Dict[str, Any], goal: Tuple[float, float, float] = GOAL) -> bool:
+    return distance(s, goal) < HOVER_TOLERANCE_M and speed(s) < HOVER_SPEED_MS
 
 
 def floor_off(s: Dict[str, Any]) -> bool:
     return s["position"][2] < FLOOR_Z_M and max(s["motors"]) == 0
 
 
-def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: float, t_end: float) -> Dict[str, Any]:
-    """What the vehicle did after the fault, from the truth samples of the row."""
+def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: float, t_end: float,
+            goal: Tuple[float, float, float] = GOAL) -> Dict[str, Any]:
+    """What the vehicle did after the fault, from the truth samples of the row (hovering at ``goal``)."""
     out: Dict[str, Any] = {}
     known = [(t - t_fault, s) for t, s in samples if s is not None]
     gap = [t - t_fault for t, s in samples if s is None]
@@ -373,7 +384,7 @@ def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: floa
         return out
     motors_off = next((t for t, s in known if max(s["motors"]) == 0 and s["position"][2] >= FLOOR_Z_M), None)
     floor = next((t for t, s in known if s["position"][2] < FLOOR_Z_M), None)
-    max_dev = max(distance(s) for _, s in known)
+    max_dev = max(distance(s, goal) for _, s in known)
     min_z = min(s["position"][2] for _, s in known)
     final = known[-1][1]
     # the final stretch the vehicle was safe in, and since when
@@ -383,9 +394,9 @@ def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: floa
         while k > 0 and floor_off(known[k - 1][1]):
             k -= 1
         safe_kind, safe_at = "floor", known[k][0]
-    elif hover_ok(final):
+    elif hover_ok(final, goal):
         k = len(known)
-        while k > 0 and hover_ok(known[k - 1][1]):
+        while k > 0 and hover_ok(known[k - 1][1], goal):
             k -= 1
         safe_kind, safe_at = "hover", (0.0 if k == 0 else known[k][0])
     touchdown = None
@@ -408,10 +419,11 @@ def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: floa
                 how, floor, touchdown or 0.0, ", motors off after" if safe_kind == "floor" else ", motors on"))
     else:
         parts.append("still flying after %.0f s: %.2f m from the goal (max %.2f m), z %.2f m" %
-                     (t_end - t_fault, distance(final), max_dev, final["position"][2]))
+                     (t_end - t_fault, distance(final, goal), max_dev, final["position"][2]))
     if gap:
         parts.append("world gone %.1f-%.1f s" % out["world_gone_s"])
     out["does"] = "; ".join(parts)
+    out["max_dev"] = max_dev
     out["safe"] = None if safe_kind is None else ("%s %.2f s" % ("hovering after" if safe_kind == "hover"
                                                                   else "on the floor, motors off, after", safe_at))
     out["safe_s"] = safe_at
@@ -448,3 +460,52 @@ def reports(rec: Recorder, t_fault: float, t_end: float) -> List[str]:
     if states:
         out.append("controller state: " + " -> ".join("%s (+%.1fs)" % (s, t - t_fault) for t, s in states[:4]))
     return out
+
+
+# --- a bench run's ROS master --------------------------------------------------------------------
+def chosen(all_rows: List[Any], keys: Optional[str], prog: str) -> Optional[List[Any]]:
+    """The rows ``--rows`` names (all without it), in ``all_rows``' order; None (said on stderr) for an
+    unknown key."""
+    if not keys:
+        return list(all_rows)
+    wanted = keys.split(",")
+    unknown = set(wanted) - {r.key for r in all_rows}
+    if unknown:
+        print("%s: error: unknown rows %s" % (prog, ", ".join(sorted(unknown))), file=sys.stderr)
+        return None
+    return [r for r in all_rows if r.key in wanted]
+
+
+def commit_line() -> str:
+    """The stack's commit, for the table's head."""
+    return subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %s"], stdout=subprocess.PIPE,
+                          text=True).stdout.strip()[:100]
+
+
+@contextlib.contextmanager
+def bench_master(prefix: str, node: str) -> Iterator[str]:
+    """A private roscore on a free port (logs and TOC cache in a fresh work folder, yielded) with this
+    process as the node ``node``; the master is stopped on the way out."""
+    from bench_support import free_port
+    work = tempfile.mkdtemp(prefix=prefix)
+    port = free_port()
+    os.environ["ROS_MASTER_URI"] = "http://127.0.0.1:%d" % port
+    os.environ["ROS_LOG_DIR"] = os.path.join(work, "log")
+    os.environ["CRAZYFLIE_TOC_CACHE"] = os.path.join(work, "toc")
+    os.environ.setdefault("ROS_IP", "127.0.0.1")
+    core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        import rosgraph
+        deadline = time.monotonic() + 30.0
+        while not rosgraph.is_master_online() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        import rospy
+        rospy.init_node(node, disable_signals=True)
+        yield work
+    finally:
+        os.killpg(core.pid, signal.SIGINT)
+        try:
+            core.wait(15)
+        except subprocess.TimeoutExpired:
+            os.killpg(core.pid, signal.SIGKILL)

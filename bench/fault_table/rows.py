@@ -141,7 +141,7 @@ def battery_levels() -> Tuple[float, float, float, str]:
     """Voltages for the battery rows (what pm.vbat reads under the hover load right after the fault):
     between the stack's warning and critical levels, below its critical level, and below the firmware's
     cut-off; the stack's levels are its defaults where it has them, else the firmware's own."""
-    from crazyflie_driver.sim.world import battery as firmware
+    from crazyflie_driver.sim.room import battery as firmware
     try:
         from crazyflie_driver.server.safety import SafetyConfig
         config = SafetyConfig()

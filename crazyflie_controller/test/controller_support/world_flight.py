@@ -2,7 +2,7 @@
 
 No ROS and no radio: the controller's cmd_vel goes through crazyflie_server's cmd_vel -> RPYT
 mapping (``server.setpoint.setpoint_from_twist``) straight into ``Vehicle.set_rpyt``, and the pose
-comes from the world's motion-capture model (``sim.world.mocap.MocapModel``: rate, latency, noise;
+comes from the world's motion-capture model (``sim.room.mocap.MocapModel``: rate, latency, noise;
 frames stamped with their capture time, as vicon_bridge does).
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import List, NamedTuple, Optional, Tuple
 from crazyflie_controller.position_controller import Command, PoseSample, PositionController, State
 from crazyflie_driver.mocap.frames import yaw_of
 from crazyflie_driver.server.setpoint import setpoint_from_twist
-from crazyflie_driver.sim.world.mocap import MocapModel
-from crazyflie_driver.sim.world.world import World
+from crazyflie_driver.sim.room.mocap import MocapModel
+from crazyflie_driver.sim.room.world import World
 
 
 class Sample(NamedTuple):
@@ -89,7 +89,7 @@ class WorldFlight:
 
 def run_together(flights: List[WorldFlight], seconds: float) -> None:
     """Cycles flights that share one world in lockstep for ``seconds`` of world time (vehicles in
-    sim.world do not interact, so comparing controllers side by side costs one world, not several)."""
+    sim.room do not interact, so comparing controllers side by side costs one world, not several)."""
     world, period = flights[0].world, flights[0].period_ticks
     if any(f.world is not world or f.period_ticks != period for f in flights):
         raise ValueError("flights run together must share the world and the control rate")

@@ -1,4 +1,4 @@
-"""The controller flying the project's simulated Crazyflie (sim.world) in process, through set_rpyt.
+"""The controller flying the project's simulated Crazyflie (sim.room) in process, through set_rpyt.
 
 cmd_vel goes through crazyflie_server's mapping (server.setpoint.setpoint_from_twist); the pose
 comes from the world's motion-capture model at 100 Hz, 10 ms latency, 0.5 mm noise.
@@ -10,7 +10,7 @@ import pytest
 from crazyflie_controller.pid import PidGains
 from crazyflie_controller.position_controller import Command, ControllerConfig, PositionController, State
 
-pytest.importorskip("crazyflie_driver.sim.world.world")
+pytest.importorskip("crazyflie_driver.sim.room.world")
 from controller_support import world_flight  # noqa: E402
 
 X = PidGains(40, 20, 2, -10, 10, -0.1, 0.1)

@@ -16,22 +16,9 @@ import rospy
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.joystick import JoyState, Joystick
-from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down
+from crazyflie_driver.nodes.ros_signals import RosLogHandler, init_node, publish_unless_shutting_down
 
 DEFAULT_AUTOREPEAT_HZ = 20.0   # well inside the firmware's 2 s watchdog (and its 0.5 s level-off)
-
-
-class _RospyLogHandler(logging.Handler):
-    """Sends the ROS-free joystick module's log lines to rosout."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        text = self.format(record)
-        if record.levelno >= logging.ERROR:
-            rospy.logerr(text)
-        elif record.levelno >= logging.WARNING:
-            rospy.logwarn(text)
-        else:
-            rospy.loginfo(text)
 
 
 def to_message(state: JoyState, frame_id: str) -> Joy:
@@ -47,7 +34,7 @@ def main() -> None:
     init_node("joy_node")
     logger = logging.getLogger("crazyflie_demo.joy_node")
     logger.propagate = False
-    logger.addHandler(_RospyLogHandler())
+    logger.addHandler(RosLogHandler())
     logger.setLevel(logging.INFO)
     dev = str(rospy.get_param("~dev", "/dev/input/js0"))
     try:

@@ -10,6 +10,7 @@ from typing import List, Optional, Sequence, Tuple
 import yaml
 
 from crazyflie_driver.errors import SwarmConfigError
+from crazyflie_driver.server.swarm.config import parse_swarm
 
 #: Where Crazyswarm's scripts find the file: the launch directory beside their scripts directory.
 DEFAULT_YAML = os.path.join("..", "launch", "crazyflies.yaml")
@@ -57,12 +58,16 @@ def find(crazyflies_yaml: Optional[str] = None, script_dir: Optional[str] = None
 
 
 def entries(source: Source) -> List[Entry]:
-    """Each Crazyflie's id, initial position and ROS namespace (``tf_prefix``, default ``cf<id>``)."""
+    """Each Crazyflie's id, initial position and ROS namespace (``tf_prefix``, default ``cf<id>``; in a
+    Crazyswarm2 file the robot's name), of the enabled ones."""
     where = source.path or "<crazyflies yaml>"
     try:
         data = yaml.safe_load(source.text)
     except yaml.YAMLError as e:
         raise SwarmConfigError("%s: not valid YAML: %s" % (where, e)) from None
+    if isinstance(data, dict) and "robots" in data:     # Crazyswarm2's format: the server's reader checks it
+        return [Entry(cf.id, cf.initial_position, cf.tf_prefix)
+                for cf in parse_swarm(source.text, where).crazyflies]
     if not isinstance(data, dict) or not isinstance(data.get("crazyflies"), list) or not data["crazyflies"]:
         raise SwarmConfigError("%s: needs a non-empty 'crazyflies' list of {id, channel, initialPosition, type}"
                                % where)

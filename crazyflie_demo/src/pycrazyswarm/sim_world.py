@@ -43,6 +43,9 @@ def swarm_file_text(source: Source) -> str:
     """The swarm file the world and server read: the YAML's Crazyflies, its types or those of the
     crazyflieTypes.yaml beside it, Crazyswarm's server-wide parameters first. Checked here."""
     data = yaml.safe_load(source.text)
+    if isinstance(data, dict) and "robots" in data:     # Crazyswarm2's file names its own parameters
+        parse_swarm(source.text, source.path or "<crazyflies yaml>")
+        return source.text
     out: Dict[str, Any] = {"firmwareParams": CRAZYSWARM_FIRMWARE_PARAMS}
     out["crazyflies"] = data["crazyflies"]
     types = data.get("crazyflieTypes")
@@ -114,7 +117,7 @@ class SimWorld:
             f.write(text)
         address = os.environ.get("CRAZYFLIE_SIM_ADDRESS", DEFAULT_SIM_ADDRESS)
         host, port = address.rsplit(":", 1)
-        n = len(yaml.safe_load(text)["crazyflies"])
+        n = len(parse_swarm(text, self.source.path or "<crazyflies yaml>").crazyflies)     # the enabled ones
         cmd = ["roslaunch", "crazyflie_demo", "swarm.launch", "sim:=true", "demo:=false", "gui:=false",
                "swarm_file:=%s" % self._file, "n:=%d" % n, "sim_address:=%s" % address,
                "vrpn_port:=%d" % (int(port) + 1), "vrpn_server:=%s:%d" % (host, int(port) + 1)]

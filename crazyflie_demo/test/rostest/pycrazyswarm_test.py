@@ -31,6 +31,7 @@ from support.flight_support import Track, WorldProbe  # noqa: E402
 from uav_trajectory import Trajectory  # noqa: E402
 
 SCRIPTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "pycrazyswarm_scripts", "scripts")
+CRAZYSWARM2_DIR = os.path.join(SCRIPTS, "..", "crazyswarm2", "launch")    # crazyflies.yaml in Crazyswarm2's form
 NAMES = ("cf1", "cf2")
 INITIAL = {"cf1": (0.0, 0.0, 0.0), "cf2": (0.0, 1.5, 0.0)}
 SCRIPT_TIMEOUT_S = 240.0          # wall: a world start-up and the flight on a loaded machine
@@ -115,11 +116,13 @@ def wait_all_down(probe, names):
     return probe.clock.wait_until(lambda: all(probe.state(n)["on_ground"] for n in names), LANDING_TIMEOUT_S)[0]
 
 
-def run_and_record(name, *args, presses=None, pressed=None):
+def run_and_record(name, *args, presses=None, pressed=None, cwd=SCRIPTS):
+    """Run a script of SCRIPTS from ``cwd`` (whose ../launch/crazyflies.yaml it then flies, if there is one)."""
     env = dict(os.environ)
     env["CRAZYFLIE_SIM_ADDRESS"] = rospy.get_param("~sim_address")
     t0 = time.monotonic()
-    p = subprocess.Popen([sys.executable, name] + list(args), cwd=SCRIPTS, env=env, stdout=subprocess.PIPE,
+    p = subprocess.Popen([sys.executable, os.path.join(SCRIPTS, name)] + list(args), cwd=cwd, env=env,
+                         stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, stdin=subprocess.PIPE if presses else subprocess.DEVNULL,
                          universal_newlines=True)
     rec = Recording(rospy.get_param("~sim_address"))
@@ -204,6 +207,15 @@ class PycrazyswarmScripts(unittest.TestCase):
         self.check_figure8(code, rec)
         if self.mode == "sim":
             self.assertTrue(self.world_gone(), "the world the script started is still running")
+
+    def test_2b_a_crazyswarm2_yaml_flies_its_enabled_robots(self):
+        """hello_world.py with the same swarm in Crazyswarm2's form, run from that file's folder (a script
+        looks for ../launch/crazyflies.yaml from its working directory first: that very file)."""
+        if self.mode != "sim":
+            return
+        code, rec = run_and_record("hello_world.py", *self.sim_args, cwd=CRAZYSWARM2_DIR)
+        self.check_hello_world(code, rec)
+        self.assertTrue(self.world_gone(), "the world the script started is still running")
 
     def test_3_sim_joins_a_running_world(self):
         if self.mode != "swarm":

@@ -13,17 +13,22 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Sequence, Tuple
 
+import rospy
+
+from crazyflie_driver.clock import wait_for
+
 Vec3 = Tuple[float, float, float]
 
 
 def wait_until(cond: Callable[[], Any], timeout: float, period: float = 0.05) -> Any:
-    """cond()'s first truthy value, or its last value after ``timeout`` seconds."""
-    end = time.monotonic() + timeout
-    while True:
-        v = cond()
-        if v or time.monotonic() >= end:
-            return v
-        time.sleep(period)
+    """cond()'s first truthy value, or its last value after ``timeout`` seconds of ROS time (world time
+    under /use_sim_time: a slowed-down world is waited for, not judged; ``clock.wait_for``)."""
+    return wait_for(cond, timeout, ros_time, period, rospy.is_shutdown)
+
+
+def ros_time() -> float:
+    """ROS time [s] once this process is a node, the wall clock before."""
+    return rospy.get_time() if rospy.rostime.is_rostime_initialized() else time.monotonic()
 
 
 def inbound_connected(node: str, topic: str, caller: str = "/flight_support") -> bool:

@@ -117,6 +117,34 @@ def test_sim_swarm_file_takes_the_types_beside_it_and_crazyswarms_server_params(
     assert params["commander.enHighLevel"] == 1 and params["ctrlMel.mass"] == 0.032
 
 
+CRAZYSWARM2_YAML = """
+robots:
+  cf231:
+    enabled: true
+    uri: radio://0/80/2M/E7E7E7E7E7
+    initial_position: [0.0, 0.5, 0.0]
+    type: cf21
+  cf2:
+    enabled: false
+    uri: radio://0/80/2M/E7E7E7E702
+    type: cf21
+robot_types:
+  cf21:
+    battery: {voltage_warning: 3.8, voltage_critical: 3.7}
+all:
+  firmware_params:
+    stabilizer: {estimator: 2, controller: 2}
+"""
+
+
+def test_a_crazyswarm2_yaml_gives_the_enabled_robots_by_name_and_is_the_sim_swarm_file_itself():
+    source = config.find(CRAZYSWARM2_YAML)
+    assert config.entries(source) == [config.Entry(0xE7, (0.0, 0.5, 0.0), "cf231")]
+    assert swarm_file_text(source) == CRAZYSWARM2_YAML
+    params = dict(parse_swarm(swarm_file_text(source)).crazyflies[0].params)
+    assert params["stabilizer.controller"] == 2
+
+
 # -- the calls -----------------------------------------------------------------------------------------
 class Recorder:
     def __init__(self):

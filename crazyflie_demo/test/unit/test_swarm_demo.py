@@ -81,7 +81,7 @@ def test_pyramid_goals_raise_the_inner_rings_and_keep_every_crazyflie_over_its_s
 
 
 def test_plan_is_the_firmware_planners_path_and_the_figure8_relative_to_its_start():
-    from crazyflie_driver.sim.world.planner import poly7_nojerk
+    from crazyflie_driver.sim.onboard.planner import poly7_nojerk
     plan = Plan((0.5, -1.0, 0.0))
     plan.add(Phase("takeoff", 2.5, 1.0), 10.0, "cf1")
     c = poly7_nojerk(2.5, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0))        # what the simulated firmware flies

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, List, Optional, Protocol
+from typing import Callable, List, Optional, Protocol, TypeVar
+
+T = TypeVar("T")
 
 
 class Clock(Protocol):
@@ -212,3 +214,27 @@ class ManualClock:
                     return True
                 self._cond.wait(MANUAL_POLL_S)      # an event set by another thread is seen this soon
         return event.is_set() if event is not None else False
+
+
+def wait_for(cond: Callable[[], T], seconds: float, now: Callable[[], float], period_s: float = 0.02,
+             stop: Callable[[], bool] = lambda: False, wall: Callable[[], float] = time.monotonic,
+             sleep: Callable[[float], None] = time.sleep) -> T:
+    """``cond()``'s first truthy value, or its last one once ``seconds`` of ``now``'s time have passed.
+
+    For a script or test that waits on a flight: with ``now`` = ROS time, a world that a busy machine
+    slowed down is waited for as long as it takes in wall time. Where that time stands still (no
+    ``/clock`` yet, or a world that is gone) the wait ends after ``seconds`` of wall time without
+    progress instead of never. ``stop()`` (e.g. ``rospy.is_shutdown``) ends it at once.
+    """
+    t0, wall0 = now(), wall()
+    last, last_move = t0, wall0
+    while True:
+        value = cond()
+        if value or stop():
+            return value
+        t, w = now(), wall()
+        if t != last:
+            last, last_move = t, w
+        if t - t0 >= seconds or w - last_move >= seconds:
+            return value
+        sleep(period_s)

@@ -110,3 +110,7 @@ class FirmwareTableError(CrazyflieError, ValueError):
 
 class ConfigBlockError(CrazyflieError, ValueError):
     """Bytes that are not a valid EEPROM configuration block, or values one cannot hold."""
+
+
+class FirmwareImageError(CrazyflieError, ValueError):
+    """A file given to flash is not a firmware image for the chosen target (the message says why)."""

@@ -12,6 +12,9 @@ import rostest
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
+from crazyflie_driver.msg import crtpPacket
+from crazyflie_driver.srv import sendPacket
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
 from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until  # noqa: E402
 
@@ -32,12 +35,30 @@ class AddTopicSwitches(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         cls.world = start_test_node("add_topic_switches_test", ["crazyflie1", "crazyflie2"])
+        cls.packets = TopicRecorder("/crazyflie1/packets", crtpPacket)
         cls.recorders = {"imu1": TopicRecorder("/crazyflie1/imu", Imu),
                          "imu2": TopicRecorder("/crazyflie2/imu", Imu),
                          "battery1": TopicRecorder("/crazyflie1/battery", Float32),
                          "battery2": TopicRecorder("/crazyflie2/battery", Float32)}
         wait_until(lambda: cls.recorders["battery2"].latest() is not None
                    and cls.recorders["imu1"].latest() is not None, 20.0)
+
+    def test_send_packet_and_the_packets_topic(self):
+        """A raw link echo (port 15, channel 0) through send_packet comes back on packets (nothing in the
+        server reads it); a raw setpoint is refused with nothing sent; crazyflie2 has no packets topic."""
+        send = rospy.ServiceProxy("/crazyflie1/send_packet", sendPacket)
+        text = b"raw echo"
+        data = list(text) + [0] * (30 - len(text))
+        send(crtpPacket(size=len(text), header=0xFC, data=data))
+        echoed = lambda: [m for _, m in self.packets.since(0.0)
+                          if m.header >> 4 == 15 and bytes(m.data[:m.size]) == text]
+        self.assertTrue(wait_until(echoed, 5.0), [m for _, m in self.packets.since(0.0)][:5])
+        with self.assertRaises(rospy.ServiceException) as refused:
+            send(crtpPacket(size=14, header=0x3C, data=[0] * 30))       # an RPYT setpoint (port 3)
+        self.assertIn("steers the motors", str(refused.exception))
+        topics = {t for t, _ in rospy.get_published_topics()}
+        self.assertIn("/crazyflie1/packets", topics)
+        self.assertNotIn("/crazyflie2/packets", topics)
 
     def test_no_imu_topic_but_the_others(self):
         rates = rates_per_world_second(self.recorders, self.world, 2.0)

@@ -2,7 +2,7 @@
 """Swarm mode on the world's truth: crazyflie_server flies 8 simulated Crazyflies from its own motion
 capture stream (packed broadcasts from the world's tf; no controller node, no host-side mocap loop),
 by broadcast takeoff with group masks, lands a Crazyflie whose pose goes stale while the others keep
-hovering, and stops all on /emergency."""
+hovering, stops all on /emergency, and flies them again after /all/reboot."""
 from __future__ import annotations
 
 import math
@@ -150,6 +150,29 @@ class SwarmApi(unittest.TestCase):
             self.assertLess(s["locked_at"] - w0, 2.0, (n, s["locked_at"] - w0))
         with self.assertRaises(rospy.ServiceException):
             rospy.ServiceProxy("/land", Land)(groupMask=0, height=0.0, duration=rospy.Duration(2.0))
+
+    def test_5_a_reboot_of_all_brings_the_swarm_back_from_the_emergency(self):
+        every = self.names(*range(1, 9))
+        self.assertTrue(wait_until(lambda: all(self.z(n) < 0.03 for n in every), 10.0),
+                        {n: self.state(n)["position"] for n in every})
+        rospy.ServiceProxy("/all/reboot", Empty)()
+        self.assertTrue(wait_until(lambda: all(self.state(n)["locked"] == "" for n in every), 20.0),
+                        {n: self.state(n)["locked"] for n in every})     # each supervisor: unlocked by its reboot
+        takeoff = rospy.ServiceProxy("/takeoff", Takeoff)
+
+        def taken() -> bool:        # refused until every Crazyflie is back and placed again
+            try:
+                takeoff(groupMask=0, height=HEIGHT, duration=rospy.Duration(2.0))
+                return True
+            except rospy.ServiceException:
+                return False
+        ground = {n: self.state(n)["position"] for n in every}      # cf3 landed where its pose went stale
+        self.assertTrue(wait_until(taken, 30.0, 0.5), self.rosout.find("swarm"))
+        above = lambda n: math.dist(self.state(n)["position"], (ground[n][0], ground[n][1], HEIGHT))
+        self.assertTrue(wait_until(lambda: all(above(n) < TOL for n in every), 15.0),
+                        {n: self.state(n)["position"] for n in every})
+        back = "back after the reboot: flight commands are taken again"
+        self.assertTrue(wait_until(lambda: self.rosout.find(back), 5.0))
 
 
 if __name__ == "__main__":

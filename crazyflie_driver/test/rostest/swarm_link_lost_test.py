@@ -19,6 +19,7 @@ import rostest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
+from crazyflie_driver.server.swarm.heartbeat import PERIOD_S as KEEPALIVE_S  # the server's keep-alive period
 from crazyflie_driver.sim.air.faults import parse_command
 from crazyflie_driver.srv import Takeoff
 
@@ -28,7 +29,6 @@ from support.rostest_support import RosoutRecorder, TopicRecorder, wait_until, w
 HEIGHT = 0.5
 TOL = 0.05              # m from the hover point
 WATCHDOG_S = 1.0        # the firmware's emergency-stop watchdog period (world s)
-KEEPALIVE_S = 0.25      # the server's keep-alive period
 GHOST_S = 6.0           # how long the ghost is watched (s)
 
 
@@ -56,7 +56,7 @@ class SwarmLinkLost(unittest.TestCase):
         # every Crazyflie, cf4 among them: cf4 would take off from where its estimator believes it is
         with self.assertRaises(rospy.ServiceException) as refused:
             takeoff(groupMask=0, height=HEIGHT, duration=rospy.Duration(2.0))
-        self.assertIn("/takeoff: cf4: no first motion-capture pose", str(refused.exception))
+        self.assertIn("/takeoff refused: cf4: no first motion-capture pose", str(refused.exception))
         for n in every + ("unseen4",):      # nothing was sent: all still on the floor, motors off (cf4 is the
             # world's unseen4)
             s = self.state(n)

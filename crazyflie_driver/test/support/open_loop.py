@@ -8,9 +8,9 @@ from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
-from crazyflie_driver.sim.world import estimator
-from crazyflie_driver.sim.world.flight import OnboardFlight
-from crazyflie_driver.sim.world.stabilizer import OnboardController
+from crazyflie_driver.sim.onboard import estimator
+from crazyflie_driver.sim.onboard.flight import OnboardFlight
+from crazyflie_driver.sim.onboard.stabilizer import OnboardController
 
 #: states(t) -> (roll, pitch, yaw [deg]; position [m]; velocity [m/s]; gyro [deg/s]) at time t [s]
 States = Callable[[float], Tuple[Sequence[float], Sequence[float], Sequence[float], Sequence[float]]]

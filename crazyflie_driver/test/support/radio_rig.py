@@ -19,10 +19,10 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
-from crazyflie_driver.sim.world.mocap import MocapModel
-from crazyflie_driver.sim.world.ticks import FIRMWARE_TICK_S
-from crazyflie_driver.sim.world.world import World
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.onboard.ticks import FIRMWARE_TICK_S
+from crazyflie_driver.sim.room.mocap import MocapModel
+from crazyflie_driver.sim.room.world import World
 
 DEFAULT_URI = "radio://0/80/2M/E7E7E7E701"
 

@@ -9,18 +9,20 @@ import rosgraph
 import rospy
 from rosgraph_msgs.msg import Log
 
+from crazyflie_driver.clock import wait_for
 from crazyflie_driver.sim.air.medium import RemoteMedium
 from crazyflie_driver.sim.world_clock import WorldClock
 
 
 def wait_until(cond: Callable[[], Any], timeout: float, period: float = 0.02) -> Any:
-    """cond()'s first truthy value, or its last value after ``timeout`` s."""
-    end = time.monotonic() + timeout
-    while True:
-        v = cond()
-        if v or time.monotonic() >= end or rospy.is_shutdown():
-            return v
-        time.sleep(period)
+    """cond()'s first truthy value, or its last value after ``timeout`` s of ROS time: world time under
+    /use_sim_time, so a world slowed down by a busy machine is waited for, not judged (``clock.wait_for``)."""
+    return wait_for(cond, timeout, ros_time, period, rospy.is_shutdown)
+
+
+def ros_time() -> float:
+    """ROS time [s] once this process is a node, the wall clock before."""
+    return rospy.get_time() if rospy.rostime.is_rostime_initialized() else time.monotonic()
 
 
 class TopicRecorder:

@@ -10,9 +10,9 @@ from typing import Iterator, Sequence, Tuple
 def served_world(vehicles: Sequence[Tuple], world=None, dongles: int = 1) -> Iterator[Tuple[object, str]]:
     """A ``WorldServer`` on an ephemeral loopback port with ``vehicles`` as (uri, name[, position[,
     firmware]]) tuples, its world started when it can be; yields (server, "host:port"), stops both."""
-    from crazyflie_driver.sim.air.server import WorldServer
+    from crazyflie_driver.sim.world_server import WorldServer
     if world is None:
-        from crazyflie_driver.sim.world.world import World
+        from crazyflie_driver.sim.room.world import World
         world = World(speed=1.0, seed=3)
     server = WorldServer(world, dongles=dongles, port=0)
     for v in vehicles:

@@ -49,6 +49,6 @@ def test_the_map_lists_no_module_that_is_gone():
 
 def test_the_map_reader_reads_sibling_names():
     text = ("# Doc\n\n## Module map\n\n| module | what |\n|---|---|\n"
-            "| `sim.world.estimator`, `.flight` | x |\n\n## Next\n")
-    assert modules_in_map(text) == {"sim.world.estimator", "sim.world.flight"}
+            "| `sim.onboard.estimator`, `.flight` | x |\n\n## Next\n")
+    assert modules_in_map(text) == {"sim.onboard.estimator", "sim.onboard.flight"}
     assert "server.worker" in modules_in_tree() and "crazyflie_controller.pid" in modules_in_tree()

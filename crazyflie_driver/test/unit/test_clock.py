@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from crazyflie_driver.clock import WALL, FollowingClock, ManualClock
+from crazyflie_driver.clock import WALL, FollowingClock, ManualClock, wait_for
 
 
 def test_wall_clock_is_monotonic_and_waits_on_events():
@@ -123,3 +123,31 @@ def test_scaled_clock_runs_at_the_speed_it_is_given_and_never_jumps():
     clock.sleep(5.0)
     assert clock.wait(threading.Event(), 5.0) is False
     assert time.monotonic() - w1 < 0.1
+
+
+class _Times:
+    """A followed time and a wall clock that the test moves: each sleep advances the wall by its
+    length and the followed time by ``rate`` times that."""
+
+    def __init__(self, rate: float) -> None:
+        self.rate, self.t, self.w, self.calls = rate, 0.0, 0.0, 0
+
+    def sleep(self, s: float) -> None:
+        self.w += s
+        self.t += self.rate * s
+
+
+def test_wait_for_measures_the_followed_time_so_a_slow_world_is_waited_for_longer_in_wall_time():
+    slow = _Times(rate=0.1)              # the world at a tenth of real time
+    assert wait_for(lambda: slow.t >= 1.5, 2.0, lambda: slow.t, 0.01, wall=lambda: slow.w, sleep=slow.sleep)
+    assert 14.9 < slow.w < 15.2          # 1.5 world s took 15 wall s, within a 2 s (world) timeout
+    slow = _Times(rate=0.1)
+    assert wait_for(lambda: False, 2.0, lambda: slow.t, 0.01, wall=lambda: slow.w, sleep=slow.sleep) is False
+    assert slow.t == pytest.approx(2.0, abs=0.002)
+
+
+def test_wait_for_ends_after_its_length_in_wall_time_when_the_followed_time_stands_still():
+    stopped = _Times(rate=0.0)           # no /clock yet, or a world that is gone
+    assert wait_for(lambda: 0, 3.0, lambda: stopped.t, 0.01, wall=lambda: stopped.w, sleep=stopped.sleep) == 0
+    assert stopped.w == pytest.approx(3.0, abs=0.02)
+    assert wait_for(lambda: False, 3.0, lambda: 0.0, stop=lambda: True) is False     # shut down: at once

@@ -53,7 +53,7 @@ def test_malformed_roles_are_caught():
 
 
 # Dotted paths into the package written in docstrings (``crazyflie_driver.server.worker``,
-# ``sim.air.server.WorldServer``) must name modules that exist: the tree moves, the prose must follow.
+# ``sim.world_server.WorldServer``) must name modules that exist: the tree moves, the prose must follow.
 SRC = REPO / "crazyflie_driver" / "src" / "crazyflie_driver"
 MODULE_PATH = re.compile(r"(?<![\w.])(?:crazyflie_driver\.(?!msg\b|srv\b)((?:\w+\.)*\w+)|(sim(?:\.\w+)+))")
 NOT_MODULES = {"launch", "py", "yaml", "test", "md", "txt"}      # file names such as sim.launch
@@ -87,6 +87,6 @@ def test_stale_module_paths_are_caught():
     for stale in ("sim.server.WorldServer", "sim.mocap.MocapModel", "crazyflie_driver.sim.fake_usb"):
         m = MODULE_PATH.search(stale)
         assert m and not _resolves(m.group(1) or m.group(2)), stale
-    for live in ("sim.air.server.WorldServer", "crazyflie_driver.server.worker", "sim.launch"):
+    for live in ("sim.world_server.WorldServer", "crazyflie_driver.server.worker", "sim.launch"):
         m = MODULE_PATH.search(live)
         assert m and _resolves(m.group(1) or m.group(2)), live

@@ -7,6 +7,11 @@ backend choice (``usb_choice``) is the one bridge from the radio to the simulate
 entry points (nodes, tools, tests, benchmarks) use it. Only ``nodes`` imports rospy or ROS messages.
 Inside ``server``, swarm mode (``server.swarm``) builds on the per-Crazyflie path (worker, registry,
 safety, onboard commands), which never imports the swarm; every swarm module lives in that package.
+Inside ``sim``, each part sits in the package of what it plays: ``sim.onboard`` (the Crazyflie's
+flight software), ``sim.crtp`` (its radio side), ``sim.room`` (physics, sensors, battery, motion
+capture, world stepping), ``sim.air`` (dongles, media, UDP); ``sim.world_server`` and ``sim.node_config``
+compose them. The
+arrows between them are ``SIM_ARROWS`` (docs/architecture.md, "The simulator's parts").
 """
 from __future__ import annotations
 
@@ -105,6 +110,42 @@ def _sublayer(module: str) -> str:
     """``crazyflie_driver.server.swarm.watch`` -> ``server.swarm``; other modules: their layer."""
     parts = module.split(".")
     return "server.swarm" if parts[1:3] == ["server", "swarm"] else _layer(module)
+
+
+# What each part of the simulator may import of the others. ``sim.base``: the simulator's shared
+# modules at its top (rows of vehicle state, the world's clock, process priority).
+SIM_PARTS = ("onboard", "crtp", "room", "air")
+SIM_ARROWS: Dict[str, Set[str]] = {
+    "sim.base": set(),
+    "sim.onboard": {"sim.base"},
+    "sim.crtp": {"sim.onboard", "sim.base"},               # the radio side hands setpoints to the flight code
+    "sim.room": {"sim.onboard", "sim.base"},               # the world steps each vehicle's flight code
+    "sim.air": {"sim.base"},
+    "sim.root": {"sim.onboard", "sim.crtp", "sim.room", "sim.air", "sim.base"},
+}
+#: The simulator's composition roots at its top, which wire every part: the world server process and the
+#: sim node's plan (its parameters turned into a world, motion capture and faults).
+SIM_ROOTS = ("world_server", "node_config")
+
+
+def _sim_part(module: str) -> str:
+    """``crazyflie_driver.sim.room.world`` -> its part, ``"sim.room"``; a module at the top -> the shared base."""
+    parts = module.split(".")
+    if parts[2] in SIM_PARTS:
+        return "sim." + parts[2]
+    return "sim.root" if parts[2] in SIM_ROOTS else "sim.base"
+
+
+def test_every_sim_module_has_a_part():
+    assert {_sim_part(m) for m in MODULES if _layer(m) == "sim" and m != "crazyflie_driver.sim"} == set(SIM_ARROWS)
+    for part in SIM_PARTS:
+        assert (PACKAGE / "sim" / part / "__init__.py").is_file()
+
+
+def test_the_simulators_parts_import_only_along_their_arrows():
+    wrong = sorted((m, n) for m, lm, n, ln in _edges() if lm == ln == "sim" and m != "crazyflie_driver.sim"
+                   and _sim_part(m) != _sim_part(n) and _sim_part(n) not in SIM_ARROWS[_sim_part(m)])
+    assert wrong == []
 
 
 def test_the_per_crazyflie_server_never_imports_the_swarm():

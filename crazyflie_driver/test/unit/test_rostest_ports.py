@@ -21,7 +21,7 @@ import pytest
 
 from crazyflie_driver.mocap.vrpn_protocol import DEFAULT_PORT as VRPN_DEFAULT_PORT
 from crazyflie_driver.sim.air.medium import DEFAULT_PORT as WORLD_DEFAULT_PORT
-from crazyflie_driver.sim.air.server import UDP_BASE_PORT
+from crazyflie_driver.sim.world_server import UDP_BASE_PORT
 
 SRC = pathlib.Path(__file__).resolve().parents[3]
 TEST_FILES = sorted(SRC.glob("crazyflie_*/test/rostest/*.test"))

@@ -1,7 +1,7 @@
 """A vehicle's optional ``frame``: the tf frame the simulated Vicon publishes its pose under."""
 import pytest
 
-from crazyflie_driver.nodes.sim_node import SimConfigError, vehicles_from_params
+from crazyflie_driver.sim.node_config import SimConfigError, vehicles_from_params
 
 
 def test_frame_as_a_launch_file_passes_it():

@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-from crazyflie_driver.sim.air.server import WorldServer
-from crazyflie_driver.sim.world.world import World
+from crazyflie_driver.sim.room.world import World
+from crazyflie_driver.sim.world_server import WorldServer
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))

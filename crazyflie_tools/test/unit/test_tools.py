@@ -14,10 +14,11 @@ from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from crazyflie_tools import (
     battery,
     console,
+    flash,
     get_param,
     list_log_variables,
     list_params,
@@ -238,7 +239,7 @@ def test_version(sim, capsys):
     lines = capsys.readouterr().out.splitlines()
     serial = sim.backend.dongles[0].serial
     assert lines[0] == "Crazyradio 0: firmware 0.53, serial %s" % serial
-    assert lines[1] == "%s: protocol version 12, firmware 2026.04" % URI1
+    assert lines[1] == "%s: protocol version 12, firmware 2026.08" % URI1
 
 
 def test_absent_crazyflie(sim, capsys):
@@ -368,3 +369,34 @@ def test_reboot_and_power_reach_the_radio_chip(sim, capsys):
     assert not fw.radio_on
     assert reboot.main(["--uri", URI1]) == 1                          # nothing on the air any more
     assert "switched on" in capsys.readouterr().err
+
+
+def _stm32_image(version: bytes) -> bytes:
+    head = (0x20020000).to_bytes(4, "little") + (0x08004201).to_bytes(4, "little")
+    return head + bytes((i * 13) & 0xFF for i in range(11 * 1024)) + version + b"\x00"
+
+
+def test_flash_writes_through_the_radio_and_the_crazyflie_connects_with_the_new_version(sim, capsys, tmp_path):
+    fw = sim.add(URI1)
+    image = tmp_path / "cf2.bin"
+    image.write_bytes(_stm32_image(b"2026.11"))
+    assert flash.main(["--uri", URI1, "--target", "stm32", "--filename", str(image)]) == 0
+    assert capsys.readouterr().out == ("%s: stm32: wrote %d bytes (12 pages from page 16), verified, rebooted "
+                                       "into the firmware\n" % (URI1, image.stat().st_size))
+    assert not fw.in_bootloader and fw.powered
+    assert version.main(["--uri", URI1]) == 0
+    assert capsys.readouterr().out.splitlines()[1] == "%s: protocol version 12, firmware 2026.11" % URI1
+    assert flash.main(["--uri", URI1, "--target", "stm32", "--filename", str(image), "--mode", "verifyOnly"]) == 0
+    assert "the flash holds the image" in capsys.readouterr().out
+    assert get_param.main(["--uri", URI1, "--name", "deck.bcFlow2"]) == 0             # connects and reads again
+
+
+def test_flash_refuses_a_file_that_is_not_a_firmware_and_writes_nothing(sim, capsys, tmp_path):
+    fw = sim.add(URI1)
+    text = tmp_path / "notes.txt"
+    text.write_bytes(b"hello, this is not firmware\n" * 100)
+    assert flash.main(["--uri", URI1, "--target", "stm32", "--filename", str(text)]) == 1
+    assert "does not start like a stm32 firmware" in capsys.readouterr().err
+    assert not fw.bootloader.written[0xFF] and not fw.in_bootloader        # back in its old firmware
+    assert flash.main(["--uri", URI1, "--target", "nrf51", "--filename", str(tmp_path / "missing.bin")]) == 1
+    assert "cannot read" in capsys.readouterr().err

@@ -7,7 +7,7 @@ from test_tools import URI1, URI2, ClockVehicle, sim  # noqa: F401  (sim is a fi
 
 from crazyflie_driver.crtp import config_block as cb
 from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from crazyflie_tools import com_check, config, list_memories, log
 
 

@@ -33,11 +33,12 @@ from std_srvs.srv import Empty, EmptyResponse
 from crazyflie_driver.clock import WALL, Clock
 from crazyflie_driver.crtp.uri import parse_uri, radio_uri_of
 from crazyflie_driver.errors import CrazyflieError
-from crazyflie_driver.msg import GenericLogData
+from crazyflie_driver.msg import GenericLogData, crtpPacket
 from crazyflie_driver.nodes.onboard_ros import PosePublisher, RosOnboardCommands
 from crazyflie_driver.nodes.ros_clock import ros_clock
-from crazyflie_driver.nodes.ros_signals import init_node, publish_unless_shutting_down, shutting_down
+from crazyflie_driver.nodes.ros_signals import RosLogHandler, init_node, publish_unless_shutting_down, shutting_down
 from crazyflie_driver.nodes.swarm_ros import start_swarm
+from crazyflie_driver.protocol.console import rosout_line
 from crazyflie_driver.server import memory_config, power_control, radio_budget
 from crazyflie_driver.server.add_config import ACCEPTED_SWITCHES, apply_topic_switches, check_config
 from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
@@ -64,8 +65,9 @@ from crazyflie_driver.server.log_plan import (
 from crazyflie_driver.server.onboard_commands import OnboardCommands
 from crazyflie_driver.server.onboard_pose import POSE_TOPIC, is_pose_block
 from crazyflie_driver.server.param_names import param_values
+from crazyflie_driver.server.raw_packets import PACKETS_TOPIC, SEND_PACKET_SERVICE, packet_fields, raw_packet
 from crazyflie_driver.server.refusals import RefusalThrottle
-from crazyflie_driver.server.registry import CrazyflieRegistry
+from crazyflie_driver.server.registry import CrazyflieRegistry, DuplicateCrazyflie
 from crazyflie_driver.server.safety import SafetyConfig
 from crazyflie_driver.server.safety_actions import worker_onboard_commands
 from crazyflie_driver.server.status import CrazyflieStatus, worker_status
@@ -83,6 +85,8 @@ from crazyflie_driver.srv import (
     UpdateParamsResponse,
     WriteConfig,
     WriteConfigResponse,
+    sendPacket,
+    sendPacketResponse,
 )
 
 GRAVITY = 9.81
@@ -143,6 +147,7 @@ class RosCrazyflie(WorkerListener):
         self.ns = namespace(config.tf_prefix)
         self.frame_id = (config.tf_prefix.strip("/") + "/base_link") if config.tf_prefix.strip("/") else "base_link"
         self.worker: Optional[CrazyflieWorker] = None
+        self._packets_pub: Optional[Any] = None     # the packets topic, once attached (enable_logging_packets)
         self._services: List[Any] = []
         self._subscribers: List[Any] = []
         # Publishers are made once the Crazyflie answered (attach): an absent one costs the server
@@ -182,6 +187,9 @@ class RosCrazyflie(WorkerListener):
         self._subscribers.append(rospy.Subscriber(name("cmd_vel"), Twist, self._on_cmd_vel, queue_size=1,
                                                   tcp_nodelay=True))
         self._services.append(rospy.Service(name("emergency"), Empty, self._on_emergency))
+        self._services.append(rospy.Service(name(SEND_PACKET_SERVICE), sendPacket, self._on_send_packet))
+        self._packets_pub = (rospy.Publisher(name(PACKETS_TOPIC), crtpPacket, queue_size=100)
+                             if config.log_packets else None)
         self._services.append(rospy.Service(name("update_params"), UpdateParams, self._on_update_params))
         self._services.append(rospy.Service(name(power_control.ARM_SERVICE), Arm, self._on_arm))
         self._services.append(rospy.Service(name(memory_config.READ_CONFIG_SERVICE), ReadConfig, self._on_read_config))
@@ -375,6 +383,25 @@ class RosCrazyflie(WorkerListener):
     def on_link_restored(self) -> None:
         self.publish_status()
 
+    def on_packet(self, packet) -> None:
+        pub = self._packets_pub
+        if pub is not None:
+            size, header, data = packet_fields(packet)
+            pub.publish(crtpPacket(size=size, header=header, data=data))
+
+    def _on_send_packet(self, req):
+        p = req.packet
+        if self.worker is None:
+            raise rospy.ServiceException("send_packet: %s is not connected yet" % self.config.uri)
+        try:
+            self.worker.send_raw(raw_packet(p.header, p.size, bytearray(p.data)))
+        except CrazyflieError as e:
+            raise rospy.ServiceException(str(e)) from e
+        return sendPacketResponse()
+
+    def on_console(self, line: str) -> None:
+        rospy.loginfo(rosout_line(self.ns.strip("/") or str(self.config.uri), line))
+
     def on_log_late(self, message: str, late: bool) -> None:
         self.publish_status()
 
@@ -392,24 +419,6 @@ class RosCrazyflie(WorkerListener):
         if gave_up and self._on_gave_up is not None:
             # not in the worker's own thread: removing joins it
             threading.Thread(target=self._on_gave_up, name="remove %s" % self.config.uri, daemon=True).start()
-
-
-class RosLogHandler(logging.Handler):
-    """Sends the library's Python log records to rosout."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            text = self.format(record)
-        except Exception:
-            text = record.getMessage()
-        if record.levelno >= logging.ERROR:
-            rospy.logerr(text)
-        elif record.levelno >= logging.WARNING:
-            rospy.logwarn(text)
-        elif record.levelno >= logging.INFO:
-            rospy.loginfo(text)
-        else:
-            rospy.logdebug(text)
 
 
 def topic_switches_of(tf_prefix: str) -> Dict[str, Any]:
@@ -594,12 +603,12 @@ class CrazyflieServer:
         key = self.registry.canonical_uri(config.uri)
         if not config.tf_prefix:
             rospy.logwarn("add_crazyflie: %s with an empty tf_prefix: its topics and services are global", key)
-        taken = [w for w in self.registry.workers()
-                 if w.uri == key or self.registry.canonical_uri(w.uri) == key or w.config.tf_prefix == config.tf_prefix]
-        if taken:   # refused before any publisher is made, so the served one's topics stay untouched
-            msg = "could not add %s: %s is already served as %r" % (key, taken[0].uri, taken[0].config.tf_prefix)
+        try:        # refused before any publisher is made, so the served one's topics stay untouched
+            self.registry.check_free(config)
+        except DuplicateCrazyflie as e:
+            msg = "could not add %s: %s" % (key, e)
             rospy.logerr(msg)
-            raise rospy.ServiceException(msg)
+            raise rospy.ServiceException(msg) from None
         rospy.loginfo("adding %s as %r", key, config.tf_prefix)
         ros = worker = None
         try:

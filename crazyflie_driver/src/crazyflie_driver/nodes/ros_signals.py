@@ -150,3 +150,21 @@ def publish_unless_shutting_down(publisher: rospy.Publisher, msg: Any) -> bool:
         if shutting_down():
             return False
         raise
+
+
+class RosLogHandler(logging.Handler):
+    """Sends Python log records to rosout at their level (the library's, a ROS-free module's)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = self.format(record)
+        except Exception:
+            text = record.getMessage()
+        if record.levelno >= logging.ERROR:
+            rospy.logerr(text)
+        elif record.levelno >= logging.WARNING:
+            rospy.logwarn(text)
+        elif record.levelno >= logging.INFO:
+            rospy.loginfo(text)
+        else:
+            rospy.logdebug(text)

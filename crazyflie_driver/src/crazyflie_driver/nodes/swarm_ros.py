@@ -29,7 +29,7 @@ from crazyflie_driver.server import radio_budget
 from crazyflie_driver.server.swarm.commands import SwarmMember
 from crazyflie_driver.server.swarm.config import load_swarm_file
 from crazyflie_driver.server.swarm.options import options_from_params
-from crazyflie_driver.server.swarm.policy import SwarmPolicy
+from crazyflie_driver.server.swarm.policy import REBOOT_ALL_SERVICE, SwarmPolicy, refusal_text
 from crazyflie_driver.server.worker import WorkerConfig
 from crazyflie_driver.srv import (
     Arm,
@@ -149,6 +149,7 @@ class RosSwarm:
             ("/all/notify_setpoints_stop", NotifySetpointsStop, NotifySetpointsStopResponse,
              lambda r: p.notify_setpoints_stop(r.groupMask, r.remainValidMillisecs)),
             ("/all/arm", Arm, ArmResponse, lambda r: p.arm(r.arm)),
+            (REBOOT_ALL_SERVICE, Empty, EmptyResponse, lambda r: p.reboot_all()),
         ]
         for name, kind, response, handler in services:
             self._services.append(rospy.Service(name, kind, self._service(name, handler, response)))
@@ -159,15 +160,17 @@ class RosSwarm:
             try:
                 handler(req)
             except (ValueError, CrazyflieError) as e:
-                rospy.logerr("swarm: %s refused: %s", name, e)
-                raise rospy.ServiceException("%s: %s" % (name, e)) from e
+                text = refusal_text(name, e)
+                rospy.logerr("swarm: %s", text)
+                raise rospy.ServiceException(text) from e
             return response()
         return callback
 
     def _on_emergency(self, _req) -> EmptyResponse:
         failures = self.policy.emergency()
-        rospy.logwarn("swarm: EMERGENCY: e-stop broadcast on every radio and sent to each of %d Crazyflies%s",
-                      len(self.policy.members), "; failed: " + "; ".join(failures) if failures else "")
+        rospy.logwarn("swarm: EMERGENCY: e-stop broadcast on every radio and sent to each of %d Crazyflies%s; %s",
+                      len(self.policy.members), "; failed: " + "; ".join(failures) if failures else "",
+                      self.policy.emergency_advice())
         return EmptyResponse()
 
     # -- diagnostics --------------------------------------------------------------------------------
@@ -253,6 +256,8 @@ def start_swarm(server) -> Optional[RosSwarm]:
     load_swarm_file(options.swarm_file, options.swarm_types_file or None)     # file faults first, fast
     dongles = count_dongles(options.dongle_wait)
     config = load_swarm_file(options.swarm_file, options.swarm_types_file or None, dongles=dongles)
+    for note in config.notes:
+        rospy.logwarn("swarm: %s: %s", options.swarm_file, note)
     if not rospy.has_param("~budget_setpoint_rate"):
         server.budget_setpoint_rate = 0.0     # nothing streams setpoints in swarm mode
     swarm = RosSwarm(SwarmPolicy(ServerPort(server), options, config))

@@ -14,8 +14,17 @@ from crazyflie_driver.crtp.packet import PORT_CONSOLE, CRTPPacket
 
 _LOG = logging.getLogger(__name__)
 
+#: What the original driver's server put before each console line on rosout (``CF Console: <line>``).
+ROSOUT_PREFIX = "CF Console: "
 #: Text kept for ``text()``; older text is dropped so a chatty firmware cannot fill memory.
 MAX_KEPT_CHARS = 65536
+
+
+def rosout_line(name: str, line: str) -> str:
+    """A console line as the server logs it: the original's prefix, then which Crazyflie (a server serves
+    many), then the line with its control characters made visible."""
+    visible = "".join(c if c.isprintable() else "\\x%02x" % ord(c) for c in line.rstrip("\r"))
+    return "%s[%s] %s" % (ROSOUT_PREFIX, name, visible)
 
 
 class Console:

@@ -77,6 +77,7 @@ class RadioLink:
         self._request_lock = threading.Lock()
         self._subs_lock = threading.Lock()
         self._subs: Dict[int, Tuple[Tuple[Optional[int], Callback], ...]] = {}
+        self._unclaimed: Optional[Callback] = None
         self._waiter: Optional[_Waiter] = None
 
     @property
@@ -211,6 +212,13 @@ class RadioLink:
                     return True
             return False
 
+    def exchange_raw(self, data: bytes) -> Optional[bytes]:
+        """One raw radio payload outside CRTP and safelink (the bootloaders' packets); the ack's payload,
+        or None when no ack came."""
+        with self._send_lock:
+            ack = self._round_trip(bytes(data))
+            return bytes(ack.data) if ack.ack else None
+
     def _resync_safelink(self) -> bool:
         ack = self._round_trip(SAFELINK_ON)
         if ack.ack and ack.data == SAFELINK_ON:
@@ -232,15 +240,21 @@ class RadioLink:
         subs = self._subs.get(port)
         waiter = self._waiter
         if subs is None and waiter is None:
+            if self._unclaimed is not None:
+                self._hand_unclaimed(CRTPPacket(port, header & 0x03, payload[1:]))
             return
         channel = header & 0x03
         packet = CRTPPacket(port, channel, payload[1:])
+        claimed = False
         if waiter is not None and waiter.result is None:
             try:
                 if waiter.match(packet):
                     waiter.result = packet
+                    claimed = True
             except Exception as exc:   # the requester's bug: re-raised in its own thread
                 waiter.error = exc
+        if not subs and not claimed and self._unclaimed is not None:
+            self._hand_unclaimed(packet)
         if subs:
             for want, callback in subs:
                 if want is None or want == channel:
@@ -248,6 +262,20 @@ class RadioLink:
                         callback(packet)
                     except Exception:
                         _log.exception("%s: downlink callback %r failed on %r", self.uri, callback, packet)
+
+    def on_unclaimed(self, callback: Optional[Callback]) -> None:
+        """Call ``callback(packet)`` for each downlink packet no subscriber and no request took (the
+        original driver's ``packets`` topic); None: no more. Same thread rules as ``subscribe``."""
+        self._unclaimed = callback
+
+    def _hand_unclaimed(self, packet: CRTPPacket) -> None:
+        callback = self._unclaimed
+        if callback is None:
+            return
+        try:
+            callback(packet)
+        except Exception:
+            _log.exception("%s: unclaimed-packet callback failed on %r", self.uri, packet)
 
     def subscribe(self, port: int, channel: Optional[int], callback: Callback) -> Callable[[], None]:
         """Call ``callback(packet)`` for each downlink packet on ``port`` (any channel if None).

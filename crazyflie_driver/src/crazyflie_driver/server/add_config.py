@@ -130,9 +130,12 @@ def log_blocks_from_params(params: Mapping[str, Any]) -> Tuple[LogBlockSpec, ...
 #: ms between the ``pose`` topic's log packets with ``enable_logging_pose`` (the original driver's period).
 HEAD_POSE_PERIOD_MS = 10
 
-#: The original driver's switches we accept and read but that change nothing here (the reason is in
-#: docs/coming_from_crazyswarm.md): raw packets have no topic yet; every stamp is already ROS time.
-ACCEPTED_SWITCHES = ("enable_logging_packets", "use_ros_time")
+#: The original driver's switch of the ``packets`` topic (raw CRTP the server does not read; default true).
+PACKETS_SWITCH = "enable_logging_packets"
+#: The original driver's switches read beside the topic switches: the ``packets`` topic's, and
+#: ``use_ros_time``, accepted but changing nothing (every stamp is already ROS time; the reason is in
+#: docs/coming_from_crazyswarm.md).
+ACCEPTED_SWITCHES = (PACKETS_SWITCH, "use_ros_time")
 
 
 def topic_switches_from_params(params: Mapping[str, Any]) -> Dict[str, bool]:
@@ -144,10 +147,11 @@ def topic_switches_from_params(params: Mapping[str, Any]) -> Dict[str, bool]:
 
 
 def apply_topic_switches(config: WorkerConfig, switches: Mapping[str, Any]) -> WorkerConfig:
-    """``config`` with the fixed topics whose switch is false left out of the log plan."""
+    """``config`` with the fixed topics whose switch is false left out of the log plan, and the ``packets``
+    topic as its switch says."""
     checked = topic_switches_from_params(switches)
     disabled = frozenset(topic for name, topic in TOPIC_SWITCHES if not checked[name])
-    return replace(config, disabled_topics=disabled)
+    return replace(config, disabled_topics=disabled, log_packets=checked[PACKETS_SWITCH])
 
 
 def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:

@@ -30,6 +30,7 @@ MAGNETIC_FIELD_TOPIC = "magnetic_field"
 PRESSURE_TOPIC = "pressure"
 BATTERY_TOPIC = "battery"
 RADIO_RSSI_TOPIC = "rssi"
+BATTERY_VARIABLE = "pm.vbat"            # battery voltage [V]; the safety monitor's input
 
 # The fixed sensor topics: (topic, period ms, log variables). A topic is delivered whole (all
 # its values from one log packet); topics of the same period share blocks as they fit.
@@ -38,7 +39,7 @@ FIXED_LOG_TOPICS: Tuple[Tuple[str, int, Tuple[str, ...]], ...] = (
     (TEMPERATURE_TOPIC, 100, ("baro.temp",)),
     (MAGNETIC_FIELD_TOPIC, 100, ("mag.x", "mag.y", "mag.z")),
     (PRESSURE_TOPIC, 100, ("baro.pressure",)),
-    (BATTERY_TOPIC, 100, ("pm.vbat",)),
+    (BATTERY_TOPIC, 100, (BATTERY_VARIABLE,)),
 )
 #: crazyflie_add's per-topic switches (the original driver's names) and the fixed topic each turns off.
 TOPIC_SWITCHES: Tuple[Tuple[str, str], ...] = (

@@ -38,17 +38,27 @@ class CrazyflieRegistry:
     def canonical_uri(uri: str) -> str:
         return str(parse_link_uri(uri))
 
+    def check_free(self, config: WorkerConfig) -> None:
+        """DuplicateCrazyflie when ``config``'s URI or tf_prefix is already served; callers ask before
+        they build anything for it (``add`` asks again under its lock)."""
+        with self._lock:
+            self._check_free(self.canonical_uri(config.uri), config.tf_prefix)
+
+    def _check_free(self, key: str, tf_prefix: str) -> None:
+        if key in self._workers:
+            raise DuplicateCrazyflie("Crazyflie %s is already served as %r"
+                                     % (key, self._workers[key].config.tf_prefix))
+        for w in self._workers.values():
+            if w.config.tf_prefix == tf_prefix:
+                raise DuplicateCrazyflie("tf_prefix %r is already served by %s" % (tf_prefix, w.uri))
+
     def add(self, config: WorkerConfig, listener: Optional[WorkerListener] = None,
             timeout: float = 20.0) -> CrazyflieWorker:
         """Connect a Crazyflie and start serving it; raises a clear error and keeps nothing on failure."""
         key = self.canonical_uri(config.uri)
         validate_log_block_specs(config.log_blocks)
         with self._lock:
-            if key in self._workers:
-                raise DuplicateCrazyflie("Crazyflie %s is already added" % key)
-            for w in self._workers.values():
-                if w.config.tf_prefix == config.tf_prefix:
-                    raise DuplicateCrazyflie("tf_prefix %r is already used by %s" % (config.tf_prefix, w.uri))
+            self._check_free(key, config.tf_prefix)
             cf = self._factory(config.uri)
             worker = CrazyflieWorker(config, cf, listener, **self._options)
             self._workers[key] = worker      # reserve the URI while connecting

@@ -54,6 +54,7 @@ from crazyflie_driver.server import power_control, safety_actions, watchdog_noti
 from crazyflie_driver.server.diagnostics import UNKNOWN_BOTTLENECK, CrazyflieHealth, Reports
 from crazyflie_driver.server.log_plan import (
     BATTERY_TOPIC,
+    BATTERY_VARIABLE,
     DIAGNOSTIC_LOG_TOPICS,
     RADIO_RSSI_TOPIC,
     RSSI_LOG_VARIABLE,
@@ -98,6 +99,16 @@ class WorkerConfig:
     # s between polls when nothing is queued, with sparse pacing, polls behind the other round trips waiting
     # for the dongle (swarm mode); 0: the server's period, eager pacing
     keepalive_period: float = 0.0
+    # ms between battery samples logged for the safety monitor alone when enable_logging is off (swarm
+    # mode); 0: none, so no battery reaction without enable_logging
+    battery_watch_ms: int = 0
+    # the original driver's enable_logging_packets: packets nothing in the server reads go to on_packet
+    log_packets: bool = False
+
+    @property
+    def logs_anything(self) -> bool:
+        """Whether the connection sets up log blocks at all."""
+        return bool(self.enable_logging or self.log_blocks or self.battery_watch_ms)
 
 
 class WorkerListener:
@@ -133,6 +144,12 @@ class WorkerListener:
     def on_link_restored(self) -> None:
         """The Crazyflie answers again after ``on_link_lost``."""
 
+    def on_console(self, line: str) -> None:
+        """One line of the Crazyflie's console (port 0), without its newline; runs in the link's thread."""
+
+    def on_packet(self, packet: CRTPPacket) -> None:
+        """A packet nothing in the server reads (``WorkerConfig.log_packets``); runs in the link's thread."""
+
     def on_emergency(self) -> None:
         """Emergency was triggered (runs in the caller's thread)."""
 
@@ -164,6 +181,12 @@ class CrazyflieWorker:
         self.config = config
         self.cf = crazyflie
         self.listener = listener or WorkerListener()
+        console = getattr(crazyflie, "console", None)
+        if console is not None:     # the listener is asked each time: a server may attach its own later
+            console.on_line(lambda line: self.listener.on_console(line))
+        link = getattr(crazyflie, "link", None)
+        if config.log_packets and link is not None and hasattr(link, "on_unclaimed"):
+            link.on_unclaimed(lambda packet: self.listener.on_packet(packet))
         self.keepalive_period = config.keepalive_period or keepalive_period
         self.link_lost_timeout = link_lost_timeout
         self.lost_retry_period = lost_retry_period
@@ -415,11 +438,28 @@ class CrazyflieWorker:
         sup_flying = bits is not None and at is not None and now - at < 1.0 and bool(decode_state(bits).flags["flying"])
         return self.watchdog.flying_for(now), sup_flying
 
+    def send_raw(self, packet: CRTPPacket) -> None:
+        """A packet built by ``raw_packets.raw_packet`` (the original's send_packet), sent once as it is;
+        CommandRejected after an emergency (nothing goes to a stopped Crazyflie but a reboot) and while the
+        link does not run, as the configuration services say it."""
+        if self._emergency:
+            raise CommandRejected("%s: send_packet refused: emergency is active; %s"
+                                  % (self.uri, power_control.REBOOT_ADVICE))
+        offline = self._offline()
+        if offline:
+            raise CommandRejected("%s: send_packet refused: %s" % (self.uri, offline))
+        with self._send_lock:
+            self.cf.link.send(packet)
+
+    def reboot_refusal(self) -> Optional[str]:
+        """Why a reboot is refused now (it flies), or None."""
+        flying_for, sup_flying = self._airborne()
+        return power_control.power_change_refusal("reboot", flying_for, sup_flying, self._emergency)
+
     def reboot(self) -> None:
         """Restart it into its firmware; the worker then waits for it and sets up again what the server
         set up (log blocks, the parameters written through ``update_params``), and an emergency is over."""
-        flying_for, sup_flying = self._airborne()
-        refusal = power_control.power_change_refusal("reboot", flying_for, sup_flying, self._emergency)
+        refusal = self.reboot_refusal()
         if refusal is not None:
             raise CommandRejected("%s: %s" % (self.uri, refusal))
         with self._send_lock:
@@ -538,7 +578,7 @@ class CrazyflieWorker:
         cfg, cf = self.config, self.cf
         self._connect_link()
         self._check_cancelled()
-        if cfg.enable_logging or cfg.log_blocks:
+        if cfg.logs_anything:
             cf.log.reset()
         if cfg.enable_parameters:
             self._check_cancelled()
@@ -549,7 +589,7 @@ class CrazyflieWorker:
             self.param_values = dict(values)
             self._check_cancelled()
             self.listener.on_params(dict(values))
-        if cfg.enable_logging or cfg.log_blocks:
+        if cfg.logs_anything:
             self._check_cancelled()
             cf.log.fetch_toc()
             self._log_plan = self._plan_logging(toc_types(cf.log.toc))
@@ -603,6 +643,9 @@ class CrazyflieWorker:
                 if host_periods and all(v in types for v in variables):
                     topics.append((name, host_periods[0], variables))
             plan.extend(plan_log_blocks(topics, types, share=True))
+        elif cfg.battery_watch_ms and BATTERY_TOPIC not in cfg.disabled_topics and BATTERY_VARIABLE in types:
+            plan.extend(plan_log_blocks([(BATTERY_TOPIC, cfg.battery_watch_ms, (BATTERY_VARIABLE,))], types,
+                                        share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
         plan.extend(plan_log_blocks(custom, types, share=False))
         log = self.cf.log       # the firmware's limits over all blocks, before the first is created

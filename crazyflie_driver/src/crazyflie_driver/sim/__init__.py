@@ -1,1 +1,3 @@
-"""The simulated Crazyflie world: fake Crazyradio, firmware protocol side, physics (no rospy)."""
+"""The simulated Crazyflie world (no rospy), one package per part it plays: ``onboard`` (flight
+software), ``crtp`` (radio side), ``room`` (physics, sensors, motion capture, stepping), ``air``
+(fake Crazyradio, media, UDP); ``world_server`` composes them."""

@@ -41,6 +41,6 @@ def test_toc_codes_name_each_type_once():
 
 
 def test_users_share_the_table():
-    from crazyflie_driver.sim.firmware import tables
+    from crazyflie_driver.sim.crtp import tables
     assert tables.CTYPES is CTYPES and tables.LOG_TYPES is BY_LOG_CODE
     assert all(tables.CTYPES[e.ctype].size for e in tables.LOG_TABLE + tables.PARAM_TABLE)

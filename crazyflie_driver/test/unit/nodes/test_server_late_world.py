@@ -8,8 +8,8 @@ from crazyflie_driver import usb_choice
 from crazyflie_driver.nodes.crazyflie_server import make_factory
 from crazyflie_driver.server.registry import CrazyflieRegistry
 from crazyflie_driver.server.worker import WorkerConfig, WorkerListener, WorkerState
-from crazyflie_driver.sim.air.server import WorldServer
-from crazyflie_driver.sim.world.world import World
+from crazyflie_driver.sim.room.world import World
+from crazyflie_driver.sim.world_server import WorldServer
 from support.ports import free_port
 
 URI = "radio://0/80/2M/E7E7E7E701"

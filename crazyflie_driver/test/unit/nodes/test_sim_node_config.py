@@ -1,9 +1,9 @@
-"""The sim node's parameters, without ROS (its mocap frames are sim.world.mocap.MocapModel's, tested with the world)."""
+"""The sim node's parameters, without ROS (its mocap frames are sim.room.mocap.MocapModel's, tested with the world)."""
 from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.nodes.sim_node import (
+from crazyflie_driver.sim.node_config import (
     MocapConfig,
     SimConfigError,
     dongles_needed,
@@ -79,3 +79,46 @@ def test_vehicles_from_the_servers_swarm_file(tmp_path):
         vehicles_from_swarm_file(str(nested))
     with pytest.raises(SwarmConfigError, match="cannot be read"):
         vehicles_from_swarm_file(str(tmp_path / "missing.yaml"))
+
+
+def test_plan_holds_every_start_up_decision():
+    from crazyflie_driver.sim.node_config import plan_from_params
+
+    plan = plan_from_params({"vehicles": [{"uri": "radio://1/80/2M/E7E7E7E701", "name": "cf1", "frame": "body1"},
+                                          {"uri": "radio://0/80/2M/E7E7E7E702", "name": "cf2"}],
+                             "speed": "auto", "seed": "7", "usb": "cf1, cf2", "mocap": "vrpn", "vrpn": True,
+                             "packet_loss": 0.25, "faults": "unplug 1", "publish_clock": False})
+    assert plan.names == ["cf1", "cf2"] and plan.dongles == 2 and plan.seed == 7
+    assert plan.pacing.auto and plan.usb == ("cf1", "cf2") and plan.mocap.style == "vrpn"
+    assert plan.vicon_frames == {"cf1": "body1"} and (plan.vrpn_on, plan.vrpn_port) == (True, None)
+    assert [op for op, _ in plan.start_faults] == ["set_dongle_faults"] * 3            # loss on both, then unplug 1
+    assert plan.address == "127.0.0.1:19840" and plan.dongle_model == "PA" and plan.publish_clock is False
+    assert plan.priority_boost == 5
+
+
+def test_plan_reads_the_swarm_file_through_the_loader_it_is_given():
+    from crazyflie_driver.sim.node_config import VehicleSpec, plan_from_params
+
+    asked = []
+
+    def load(path):
+        asked.append(path)
+        return [VehicleSpec("radio://0/80/2M/E7E7E7E701", "cf1", (0.0, 0.0, 0.0))], 3
+
+    plan = plan_from_params({"swarm_file": "/x/swarm.yaml"}, load)
+    assert asked == ["/x/swarm.yaml"] and plan.dongles == 3           # the swarm file's dongle count
+    with pytest.raises(SimConfigError, match="~swarm_file"):
+        plan_from_params({"swarm_file": "/x/swarm.yaml"})
+    with pytest.raises(SimConfigError, match="~priority_boost"):
+        plan_from_params({"uri": "radio://0/80/2M", "priority_boost": "high"})
+    with pytest.raises(SimConfigError, match="no vehicles"):
+        plan_from_params({})
+
+
+def test_vehicles_name_their_decks_and_unknown_decks_are_refused():
+    spec = vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701",
+                                               "decks": ["bcFlow2", "bcLighthouse4"]}]})[0]
+    assert spec.decks == ("bcFlow2", "bcLighthouse4")
+    assert vehicles_from_params({"uri": "radio://0/80/2M/E7E7E7E701", "name": "cf1"})[0].decks == ()
+    with pytest.raises(SimConfigError, match="decks must be a list of deck names out of bcDWM1000"):
+        vehicles_from_params({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701", "decks": ["bcFlow3"]}]})

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.nodes.sim_node import SimConfigError, faults_status, start_faults_from_params
+from crazyflie_driver.sim.node_config import SimConfigError, faults_status, start_faults_from_params
 
 
 def test_no_fault_parameters_means_no_operations():

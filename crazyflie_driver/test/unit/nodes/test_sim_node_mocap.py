@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from crazyflie_driver.nodes.sim_node import StampGuard, newest_per_body, world_status
-from crazyflie_driver.sim.world.mocap import MocapFrame
+from crazyflie_driver.sim.node_config import StampGuard, newest_per_body, world_status
+from crazyflie_driver.sim.room.mocap import MocapFrame
 
 genpy = pytest.importorskip("genpy")
 geometry_msgs = pytest.importorskip("geometry_msgs.msg")
@@ -82,12 +82,12 @@ def test_world_status_warns_with_the_factor_when_behind():
 
 
 def test_world_that_cannot_keep_real_time_warns_with_its_factor(caplog):
-    from crazyflie_driver.sim.world.world import World
+    from crazyflie_driver.sim.room.world import World
 
     w = World(speed=1.0, seed=1)
     w.add_vehicle("cf1")
     w.add_tick_listener(lambda t: time.sleep(0.004), 0.001)    # each 1 ms tick costs >= 4 ms of wall time
-    with caplog.at_level("WARNING", logger="crazyflie_driver.sim.world.world"):
+    with caplog.at_level("WARNING", logger="crazyflie_driver.sim.room.world"):
         w.start()
         try:
             end = time.monotonic() + 10.0
@@ -102,7 +102,7 @@ def test_world_that_cannot_keep_real_time_warns_with_its_factor(caplog):
 
 
 def test_world_status_says_the_speed_mode_the_target_and_the_host_lag():
-    from crazyflie_driver.sim.world.pacing import Pacing
+    from crazyflie_driver.sim.room.pacing import Pacing
 
     slowed = world_status(0.5, 0.5, 1, 0, 0, 3.0, 0.95, Pacing(True, 1.0), 0.004)
     values = dict(slowed.values)
@@ -117,7 +117,7 @@ def test_clock_is_published_at_start_and_every_period_of_world_time_with_the_tic
     """/clock is the world's own time: one message now (0), then one per CLOCK_PERIOD_S of world time."""
     rosgraph_msgs = pytest.importorskip("rosgraph_msgs.msg")
     from crazyflie_driver.nodes.sim_node import CLOCK_PERIOD_S, _publish_clock
-    from crazyflie_driver.sim.world.world import World
+    from crazyflie_driver.sim.room.world import World
 
     class Pub:
         def __init__(self):

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from crazyflie_driver.nodes.sim_node import MocapConfig, SimConfigError, mocap_model, vehicles_from_params
-from crazyflie_driver.sim.world.world import World
+from crazyflie_driver.sim.node_config import MocapConfig, SimConfigError, mocap_model, vehicles_from_params
+from crazyflie_driver.sim.room.world import World
 
 
 def test_vehicles_as_yaml_text_like_the_launch_files_pass_it():

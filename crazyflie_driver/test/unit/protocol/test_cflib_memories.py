@@ -11,7 +11,7 @@ import subprocess
 import pytest
 
 from crazyflie_driver.crtp import config_block as cb
-from crazyflie_driver.sim.air.server import WorldServer
+from crazyflie_driver.sim.world_server import WorldServer
 from support.cflib_python import cflib_python
 
 TEST = pathlib.Path(__file__).resolve().parents[2]
@@ -26,7 +26,7 @@ def python():
 
 
 def test_cflib_reads_decks_and_reads_and_writes_the_config_block(python):
-    from crazyflie_driver.sim.world.world import World
+    from crazyflie_driver.sim.room.world import World
     world = World(speed=1.0, seed=3)
     server = WorldServer(world, dongles=1, port=0, seed=3)
     cf = server.add_crazyflie(URI, "cf5", (0.0, 0.0, 0.0), "current", decks=("bcFlow2", "bcMultiranger"))

@@ -17,7 +17,7 @@ import subprocess
 
 import pytest
 
-from crazyflie_driver.sim.air.server import WorldServer
+from crazyflie_driver.sim.world_server import WorldServer
 from support.cflib_python import cflib_python
 
 TEST = pathlib.Path(__file__).resolve().parents[2]        # crazyflie_driver/test
@@ -29,7 +29,7 @@ SESSION_TIMEOUT_S = 25.0
 
 
 def make_world():
-    from crazyflie_driver.sim.world.world import World
+    from crazyflie_driver.sim.room.world import World
     return World(speed=1.0, seed=7)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import struct
 
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle, drain
 
 ADDRESS = bytes.fromhex("E7E7E7E701")

@@ -8,7 +8,7 @@ from crazyflie_driver.crtp import config_block as cb
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import ConfigBlockError, LinkTimeout, NotSupported
 from crazyflie_driver.protocol.memory import TYPE_EEPROM, TYPE_ONE_WIRE, TYPE_TRAJECTORY, MemoryClient, type_name
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle
 
 

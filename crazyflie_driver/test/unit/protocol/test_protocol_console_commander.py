@@ -112,3 +112,23 @@ def test_close_and_reconnect():
     assert link.closed == 2 and not cf.connected
     cf.connect()
     assert cf.connected and link.opened == 2
+
+
+def test_a_worker_hands_each_console_line_to_its_listener_and_the_server_logs_it_as_the_original():
+    from crazyflie_driver.protocol.console import rosout_line
+    from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig, WorkerListener
+
+    class Lines(WorkerListener):
+        def __init__(self) -> None:
+            self.lines = []
+
+        def on_console(self, line: str) -> None:
+            self.lines.append(line)
+    cf, link, fw = make_crazyflie(12)
+    listener = Lines()
+    CrazyflieWorker(WorkerConfig("radio://0/80/2M/E7E7E7E7E7", "cf1"), cf, listener)
+    link.push(CRTPPacket(0, 0, b"SYS: Crazyflie 2.1 is up and"), CRTPPacket(0, 0, b" running!\r\nIMU: ok\n"))
+    link.drain()
+    assert listener.lines == ["SYS: Crazyflie 2.1 is up and running!\r", "IMU: ok"]
+    assert rosout_line("cf1", listener.lines[0]) == "CF Console: [cf1] SYS: Crazyflie 2.1 is up and running!"
+    assert rosout_line("cf1", "a\x1b[0mb") == "CF Console: [cf1] a\\x1b[0mb"      # no terminal escapes in the log

@@ -14,7 +14,7 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle
 
 URI = "radio://0/80/2M/E7E7E7E701"

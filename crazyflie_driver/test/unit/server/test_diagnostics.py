@@ -283,3 +283,28 @@ def test_the_worlds_speed_share_comes_from_its_diagnostics_values():
     assert world_speed_share({"real-time factor": "40.0", "speed": "0.000"}) is None     # as fast as it can
     assert world_speed_share({"speed": "1.0"}) is None and world_speed_share({"real-time factor": "x",
                                                                             "speed": "1"}) is None
+
+
+def test_with_the_sensor_topics_off_a_battery_watch_still_feeds_the_safety_monitor():
+    """Swarm mode's workers log no sensor topic; ``battery_watch_ms`` logs pm.vbat alone for the battery
+    reaction (one block, that period), and nothing else (its samples reaching the reaction: the swarm
+    rows of bench/bench_faults_swarm.py)."""
+    rig = RadioRig()
+    cf = Crazyflie(rig.uri, radio_manager=rig.manager, timeout=1.0)
+    worker = CrazyflieWorker(WorkerConfig(str(rig.uri), "cf1", enable_logging=False, enable_parameters=False,
+                                          battery_watch_ms=100), cf)
+    worker.start()
+    try:
+        worker.wait_ready(10.0)
+        assert [(b.period_ms, [t[0] for t in b.topics]) for b in worker._log_plan] == [(100, ["battery"])]
+        assert worker.log_topics == ["battery"]          # its block was created on the Crazyflie
+    finally:
+        worker.stop()
+    plain = CrazyflieWorker(WorkerConfig(str(rig.uri), "cf1", enable_logging=False, enable_parameters=False),
+                            Crazyflie(rig.uri, radio_manager=rig.manager, timeout=1.0))
+    plain.start()
+    try:
+        plain.wait_ready(10.0)
+        assert plain._log_plan == []
+    finally:
+        plain.stop()

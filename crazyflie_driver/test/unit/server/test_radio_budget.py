@@ -11,7 +11,7 @@ from crazyflie_driver.server import radio_budget as rb
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle
 
 

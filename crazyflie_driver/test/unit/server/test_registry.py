@@ -24,10 +24,15 @@ def test_registry_refuses_duplicates_and_serves_others_while_one_times_out():
     reg = CrazyflieRegistry(factory)
     try:
         reg.add(WorkerConfig(uri="radio://0/80/2M/E7E7E7E701", tf_prefix="cf1"))
-        with pytest.raises(DuplicateCrazyflie, match="already added"):
+        with pytest.raises(DuplicateCrazyflie, match="already served"):
             reg.add(WorkerConfig(uri="radio://0/80/2m/e7e7e7e701", tf_prefix="other"))
         with pytest.raises(DuplicateCrazyflie, match="tf_prefix"):
             reg.add(WorkerConfig(uri="radio://0/80/2M/E7E7E7E702", tf_prefix="cf1"))
+        with pytest.raises(DuplicateCrazyflie, match="already served as 'cf1'"):   # asked before building
+            reg.check_free(WorkerConfig(uri="radio://0/80/2m/e7e7e7e701", tf_prefix="other"))
+        with pytest.raises(DuplicateCrazyflie, match="tf_prefix 'cf1' is already served by"):
+            reg.check_free(WorkerConfig(uri="radio://0/80/2M/E7E7E7E702", tf_prefix="cf1"))
+        reg.check_free(WorkerConfig(uri="radio://0/80/2M/E7E7E7E702", tf_prefix="cf2"))     # free: no error
         n = len(made["radio://0/80/2M/E7E7E7E701"].of_kind("null"))
         with pytest.raises(LinkTimeout, match="no answer"):
             reg.add(WorkerConfig(uri="radio://0/80/2M/E7E7E7E709", tf_prefix="cf9"))

@@ -184,6 +184,7 @@ def update_params(members: Sequence[SwarmMember], names: Sequence[str], lookup: 
         converted = param_value(full, ctype_name, value)
         for m in members:
             m.worker.param_values[full] = converted
+            m.worker.user_params[full] = converted      # set again after a reboot, as a unicast write is
             plans[m.name][0].pop(full, None)
         written[full] = [m.name for m in members]
 

@@ -16,6 +16,27 @@ file, or the types in a second one)::
         batteryVoltageCritical: 3.7
     firmwareParams: {...}                   # optional, for every Crazyflie
 
+Crazyswarm2's ``crazyflies.yaml`` is read too::
+
+    robots:
+      cf1:                                  # the name is the tf_prefix
+        enabled: true                       # false: left out of the swarm
+        uri: radio://0/80/2M/E7E7E7E701
+        initial_position: [0.0, 0.0, 0.0]
+        type: cf21
+        # optional: firmware_params, firmware_logging
+    robot_types:
+      cf21:
+        battery: {voltage_warning: 3.8, voltage_critical: 3.7}
+        # optional: firmware_params; motion_capture, big_quad, firmware_logging (see notes)
+    all:
+      firmware_params: {...}                # for every Crazyflie
+      # optional: firmware_logging, broadcasts (see notes)
+
+What such a file asks that this server takes from elsewhere (logging topics, broadcast repeats, a
+type without motion capture) is listed in ``SwarmConfig.notes``, for the node to log: nothing in
+it is dropped silently.
+
 Radios: Crazyflies without a ``uri`` go to one Crazyradio per channel, in the order the channels
 first appear (``radio://<dongle>/<channel>/2M/E7E7E7E7<id>``); an explicit ``uri`` keeps its dongle,
 and its channel then stays on that dongle. Firmware parameters are applied swarm-wide first, then
@@ -92,6 +113,7 @@ class SwarmConfig:
     source: str
     crazyflies: Tuple[SwarmCrazyflie, ...]
     types: Mapping[str, CrazyflieType] = field(default_factory=dict)
+    notes: Tuple[str, ...] = ()              # what the file asks that is taken from elsewhere here
 
     def radios(self) -> Dict[int, List[SwarmCrazyflie]]:
         """The Crazyflies of each dongle index, in file order."""
@@ -250,6 +272,11 @@ def parse_swarm(text: str, source: str = "<swarm file>", types_text: Optional[st
     """:func:`load_swarm_file` on text (tests and the sim node use it directly)."""
     doc = _Doc(text, source)
     data = doc.data
+    if isinstance(data, dict) and "robots" in data:
+        if types_text is not None:
+            raise doc.error(["robots"], "a Crazyswarm2 file (robots, robot_types, all) holds its types itself; "
+                                        "give no separate types file")
+        return _parse_crazyswarm2(doc, data, dongles)
     if not isinstance(data, dict) or "crazyflies" not in data:
         raise doc.error([], "a swarm file is a mapping with a 'crazyflies' list (and 'crazyflieTypes'); "
                             "see crazyflie_driver/config/swarm_example.yaml")
@@ -278,9 +305,103 @@ def parse_swarm(text: str, source: str = "<swarm file>", types_text: Optional[st
     return SwarmConfig(source, _crazyflies(doc, entries, types, swarm_params, dongles), types)
 
 
+# -- Crazyswarm2's crazyflies.yaml ------------------------------------------------------------------
+_CS2_TOP_KEYS = {"fileversion", "robots", "robot_types", "all"}
+_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging"}
+_CS2_TYPE_KEYS = {"motion_capture", "big_quad", "battery", "firmware_params", "firmware_logging"}
+_CS2_ALL_KEYS = {"firmware_params", "firmware_logging", "broadcasts"}
+
+
+def _mapping(doc: _Doc, path: Sequence[Any], where: str, value: Any, known: set) -> Dict[str, Any]:
+    """``value`` as a mapping whose keys are all in ``known`` (None: empty)."""
+    value = {} if value is None else value
+    if not isinstance(value, dict):
+        raise doc.error(path, "%s must be a mapping, got %r" % (where, value))
+    unknown = sorted(map(str, set(value) - known))
+    if unknown:
+        raise doc.error(list(path) + [unknown[0]], "%s: unknown key(s) %s; known: %s"
+                        % (where, ", ".join(unknown), ", ".join(sorted(known))))
+    return value
+
+
+def _logging_note(where: str, logging: Any) -> List[str]:
+    if isinstance(logging, dict) and logging.get("enabled"):
+        return ["%s.firmware_logging: log topics in swarm mode come from the server's parameters "
+                "(~pose_period_ms, enable_logging), not from the file" % where]
+    return []
+
+
+def _parse_crazyswarm2(doc: _Doc, data: Dict[str, Any], dongles: Optional[int]) -> SwarmConfig:
+    """A Crazyswarm2 file, read into the same swarm as a Crazyswarm 1 file (the robot's name is its
+    tf_prefix; a robot with ``enabled: false`` is left out; ``enabled`` missing counts as true)."""
+    _mapping(doc, [], "a Crazyswarm2 swarm file", data, _CS2_TOP_KEYS)
+    notes: List[str] = []
+    types: Dict[str, CrazyflieType] = {}
+    raw_types = data.get("robot_types") or {}
+    if not isinstance(raw_types, dict):
+        raise doc.error(["robot_types"], "robot_types must be a mapping of type name to {battery, "
+                                         "firmware_params, ...}, got %r" % (raw_types,))
+    for name, body in raw_types.items():
+        here = ["robot_types", name]
+        where = "robot_types.%s" % name
+        body = _mapping(doc, here, where, body, _CS2_TYPE_KEYS)
+        battery = body.get("battery") or {}
+        if not isinstance(battery, dict):
+            raise doc.error(here + ["battery"], "%s.battery must be {voltage_warning, voltage_critical}, got %r"
+                            % (where, battery))
+        warning = _number(doc, here + ["battery"], where + ".battery.voltage_warning",
+                          battery.get("voltage_warning", DEFAULT_BATTERY_WARNING_V))
+        critical = _number(doc, here + ["battery"], where + ".battery.voltage_critical",
+                           battery.get("voltage_critical", DEFAULT_BATTERY_CRITICAL_V))
+        if critical > warning:
+            raise doc.error(here + ["battery"], "%s: voltage_critical %.2f V is above voltage_warning %.2f V; the "
+                                                "critical level must be the lower one" % (where, critical, warning))
+        mocap = body.get("motion_capture")
+        if isinstance(mocap, dict) and mocap.get("enabled") is False:
+            notes.append("%s.motion_capture.enabled is false: in swarm mode every Crazyflie gets the motion "
+                         "capture the server streams (~mocap none turns it off for all)" % where)
+        notes.extend(_logging_note(where, body.get("firmware_logging")))
+        types[str(name)] = CrazyflieType(str(name), _params(doc, here + ["firmware_params"], where + ".firmware_params",
+                                                            body.get("firmware_params")), warning, critical)
+    if DEFAULT_TYPE not in types:
+        types[DEFAULT_TYPE] = CrazyflieType(DEFAULT_TYPE, BUILTIN_DEFAULT_PARAMS)
+    every = _mapping(doc, ["all"], "all", data.get("all"), _CS2_ALL_KEYS)
+    swarm_params = _params(doc, ["all", "firmware_params"], "all.firmware_params", every.get("firmware_params"))
+    notes.extend(_logging_note("all", every.get("firmware_logging")))
+    if every.get("broadcasts"):
+        notes.append("all.broadcasts: broadcast repeats come from the server's ~broadcast_repeats and "
+                     "~broadcast_interval, not from the file")
+    robots = data["robots"]
+    if not isinstance(robots, dict) or not robots:
+        raise doc.error(["robots"], "'robots' must be a non-empty mapping of name to {enabled, uri, "
+                                    "initial_position, type}, got %r" % (robots,))
+    entries: List[Tuple[List[Any], Dict[str, Any]]] = []
+    for name, body in robots.items():
+        here = ["robots", name]
+        where = "robots.%s" % name
+        body = _mapping(doc, here, where, body, _CS2_ROBOT_KEYS)
+        if body.get("enabled", True) is False:
+            continue
+        if "uri" not in body:
+            raise doc.error(here, "%s: give its 'uri' (e.g. radio://0/80/2M/E7E7E7E701)" % where)
+        notes.extend(_logging_note(where, body.get("firmware_logging")))
+        item = {"uri": body["uri"], "tf_prefix": str(name), "type": body.get("type", DEFAULT_TYPE)}
+        if "initial_position" in body:
+            item["initialPosition"] = body["initial_position"]
+        if "firmware_params" in body:
+            item["firmwareParams"] = body["firmware_params"]
+        entries.append((here, item))
+    if not entries:
+        raise doc.error(["robots"], "no robot is enabled; set 'enabled: true' on the Crazyflies to fly")
+    return SwarmConfig(doc.source, _crazyflies(doc, [item for _, item in entries], types, swarm_params, dongles,
+                                               paths=[here for here, _ in entries]), types, tuple(notes))
+
+
 def _crazyflies(doc: _Doc, entries: List[Any], types: Dict[str, CrazyflieType], swarm_params: ParamList,
-                dongles: Optional[int]) -> Tuple[SwarmCrazyflie, ...]:
-    parsed = [_entry(doc, i, item, types) for i, item in enumerate(entries)]
+                dongles: Optional[int], paths: Optional[List[List[Any]]] = None) -> Tuple[SwarmCrazyflie, ...]:
+    """``paths``: where each entry is in the file (Crazyswarm 1: ``crazyflies[i]``)."""
+    paths = paths if paths is not None else [["crazyflies", i] for i in range(len(entries))]
+    parsed = [_entry(doc, i, item, types, paths[i]) for i, item in enumerate(entries)]
     # channels pinned to a dongle by explicit URIs, then the others one dongle each in order of appearance
     dongle_of: Dict[int, int] = {}
     for e in parsed:
@@ -310,29 +431,34 @@ def _crazyflies(doc: _Doc, entries: List[Any], types: Dict[str, CrazyflieType], 
                                    (seen_prefixes, e["tf_prefix"], "tf_prefix %r" % e["tf_prefix"])):
             if value in table:
                 first = table[value]
-                raise doc.error(["crazyflies", i], "%s: %s is already used by crazyflies[%d] (line %d); give each "
-                                                   "Crazyflie its own" % (where, what, first,
-                                                                          doc.line("crazyflies", first)))
+                raise doc.error(paths[i], "%s: %s is already used by %s (line %d); give each Crazyflie its own"
+                                % (where, what, _label(paths[first]), doc.line(*paths[first])))
             table[value] = i
         if dongles is not None and uri.index >= dongles:
-            raise doc.error(["crazyflies", i], "%s: needs Crazyradio %d (channel %d) but %d %s present; the swarm "
+            raise doc.error(paths[i], "%s: needs Crazyradio %d (channel %d) but %d %s present; the swarm "
                                                "uses %d channel(s), one Crazyradio each: plug in more Crazyradios or "
                                                "put these Crazyflies on fewer channels"
                             % (where, uri.index, uri.channel, dongles, "is" if dongles == 1 else "are",
                                len(set(dongle_of.values()))))
         params = merge_params(swarm_params, types[e["type"]].firmware_params, e["params"])
         out.append(SwarmCrazyflie(e["id"], key, uri.index, uri.channel, e["tf_prefix"], e["position"], e["type"],
-                                  params, e["group_mask"], doc.line("crazyflies", i)))
+                                  params, e["group_mask"], doc.line(*paths[i])))
     return tuple(out)
 
 
-def _entry(doc: _Doc, i: int, item: Any, types: Dict[str, CrazyflieType]) -> Dict[str, Any]:
-    path = ["crazyflies", i]
-    where = "crazyflies[%d]" % i
+def _label(path: Sequence[Any]) -> str:
+    """An entry's name in messages: ``crazyflies[i]`` (Crazyswarm 1) or ``robots.<name>`` (Crazyswarm2)."""
+    return "crazyflies[%d]" % path[1] if path[0] == "crazyflies" else "%s.%s" % (path[0], path[1])
+
+
+def _entry(doc: _Doc, i: int, item: Any, types: Dict[str, CrazyflieType],
+           path: Optional[List[Any]] = None) -> Dict[str, Any]:
+    path = path if path is not None else ["crazyflies", i]
+    where = _label(path)
     if not isinstance(item, dict):
         raise doc.error(path, "%s must be a mapping {id, channel, initialPosition, type}, got %r" % (where, item))
     if "id" in item:
-        where = "crazyflies[%d] (id %s)" % (i, item["id"])
+        where = "%s (id %s)" % (where, item["id"])
     unknown = sorted(set(item) - _ENTRY_KEYS)
     if unknown:
         raise doc.error(path + [unknown[0]], "%s: unknown key(s) %s; known: %s"
@@ -369,8 +495,9 @@ def _entry(doc: _Doc, i: int, item: Any, types: Dict[str, CrazyflieType]) -> Dic
     position = tuple(_number(doc, path + ["initialPosition"], where + ".initialPosition", v) for v in pos)
     kind = item.get("type", DEFAULT_TYPE)
     if kind not in types:
-        raise doc.error(path + ["type"], "%s: unknown type %r; defined types: %s (add it under crazyflieTypes)"
-                        % (where, kind, ", ".join(sorted(types))))
+        raise doc.error(path + ["type"], "%s: unknown type %r; defined types: %s (add it under %s)"
+                        % (where, kind, ", ".join(sorted(types)),
+                           "crazyflieTypes" if path[0] == "crazyflies" else "robot_types"))
     tf_prefix = item.get("tf_prefix", "cf%d" % ident)
     if not isinstance(tf_prefix, str) or not all(_IDENTIFIER.match(p) and p[0].isalpha()
                                                  for p in tf_prefix.strip("/").split("/")):

@@ -18,8 +18,11 @@ from crazyflie_driver.clock import WALL, Clock
 
 LOG = logging.getLogger("crazyflie_driver.server.swarm")
 
-#: s between two keep-alives: four chances within the firmware's 1 s watchdog period.
-PERIOD_S = 0.25
+#: s between two keep-alives: ten chances within the firmware's 1 s watchdog period. A broadcast has no
+#: acknowledgement, so a lossy radio loses keep-alives outright: with 30 % packet loss all ten are lost with
+#: probability 6e-6; with four (0.25 s) a Crazyflie on such a radio was stopped in the air within 1-2 s
+#: (bench/bench_faults_swarm.py). Ten packets a second per radio.
+PERIOD_S = 0.1
 
 
 class Heartbeat:

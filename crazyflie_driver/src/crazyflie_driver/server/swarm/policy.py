@@ -43,12 +43,22 @@ PLACEMENT_LOGGED_ATTEMPTS = 3
 PLACEMENT_LOG_EVERY = 10
 #: s between a swarm Crazyflie's polls when nothing is queued: the radio budget's keep-alive floor.
 SWARM_KEEPALIVE_S = 1.0 / radio_budget.KEEPALIVE_FLOOR_HZ
+#: ms between battery samples each swarm Crazyflie logs for its safety monitor when the sensor topics are
+#: off (~enable_logging false, the default): without them a critical battery went unnoticed in the air
+#: (bench/bench_faults_swarm.py). One log packet per 0.5 s, under the monitor's 1 s staleness.
+BATTERY_WATCH_MS = 500
 #: s between two tries of a watch's unicast land whose link is down.
 LAND_RETRY_S = 0.1
 #: s between two log lines about a land not delivered yet (one Crazyflie).
 LAND_RETRY_LOG_EVERY_S = 2.0
 #: Crazyflies connected at once at start.
 MAX_PARALLEL_ADDS = 64
+#: The swarm service that brings every Crazyflie back after an emergency (Crazyswarm2's ``all/`` prefix).
+REBOOT_ALL_SERVICE = "/all/reboot"
+#: s (server clock) a rebooted swarm waits for every Crazyflie to answer and be set up again.
+REBOOT_BACK_S = 20.0
+#: s between two looks at whether the rebooted Crazyflies are back.
+REBOOT_POLL_S = 0.1
 
 
 class SwarmServer(Protocol):
@@ -89,13 +99,15 @@ def pose_periods(config: SwarmConfig, options: SwarmOptions) -> Dict[str, int]:
 
 
 def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0) -> WorkerConfig:
-    """No parameter read-back at connect: reading every parameter of 49 Crazyflies one by one takes
+    """The battery logged for the safety monitor even with the sensor topics off. No parameter read-back at
+    connect: reading every parameter of 49 Crazyflies one by one takes
     ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types.
     Polls at the keep-alive floor: nothing streams setpoints, and 17 Crazyflies polling every 10 ms
     would fill their radio."""
     blocks = (pose_block(pose_period_ms),) if pose_period_ms else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
-                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S)
+                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S,
+                        battery_watch_ms=BATTERY_WATCH_MS)
 
 
 def initial_position_params(position: Sequence[float]) -> Dict[str, Any]:
@@ -121,6 +133,13 @@ def refusal_in_safety(member: SwarmMember, what: str, clock: Clock) -> Optional[
 def height_in_safety(member: SwarmMember, clock: Clock) -> Optional[float]:
     """The height of the Crazyflie's last fresh pose, as its safety monitor knows it (None: unknown)."""
     return member.worker.safety.current_height(clock.now())
+
+
+def refusal_text(service: str, error: Exception) -> str:
+    """``<service> refused: <why>`` for a swarm service's caller and log, naming the service once (the
+    policy's own refusals already start with it)."""
+    why = str(error)
+    return why if why.startswith(service + " ") else "%s refused: %s" % (service, why)
 
 
 def _daemon(target: Callable[[], object], name: str) -> None:
@@ -149,6 +168,7 @@ class SwarmPolicy:
         self.lock = threading.Lock()            # the watch and the link states (the diagnostics read them too)
         self.link_ok: Dict[str, bool] = {}
         self.emergency_active = False
+        self.recovering = False                  # reboot_all is waiting for the Crazyflies to come back
         self.placement = estimator_placement.EstimatorPlacement(self.clock)
         self.pose_periods: Dict[str, int] = {}
         self._placement_attempts: Dict[str, int] = {}      # failed initial-position writes, per Crazyflie
@@ -227,8 +247,7 @@ class SwarmPolicy:
     def _flight_commands(self, what: str) -> SwarmCommands:
         """The swarm commands, once started and while not in emergency (CommandRejected otherwise)."""
         if self.emergency_active:
-            raise CommandRejected("%s refused: the swarm is in emergency (restart the Crazyflies and the server to "
-                                  "fly again)" % what)
+            raise CommandRejected("%s refused: the swarm is in emergency (%s)" % (what, self.emergency_advice()))
         if self.commands is None:
             raise CommandRejected("%s refused: the swarm has not started (no Crazyflie added yet)" % what)
         return self.commands
@@ -293,6 +312,77 @@ class SwarmPolicy:
         if self.heartbeat is not None:
             self.heartbeat.stop()
         return self.commands.emergency() if self.commands is not None else []
+
+    def emergency_advice(self) -> str:
+        """What brings the swarm back after an emergency, for refusals and the log."""
+        if self.recovering:
+            return "its Crazyflies are rebooting; flight commands are taken again once all are back"
+        return ("the motors stay off until a reboot: %s reboots every Crazyflie, and the swarm flies again once "
+                "all are back" % REBOOT_ALL_SERVICE)
+
+    def reboot_all(self) -> List[str]:
+        """``/all/reboot``: reboot every Crazyflie of the swarm, refused whole (nothing sent) while any of
+        them flies. Once each answers again and is set up again (its log blocks and parameters by its
+        worker; its group mask, the high-level commander's priority and a first fix from its next pose
+        here), an emergency is over: the pose stream and the watchdog keep-alive go on. Runs the wait in
+        the background; returns the names rebooted."""
+        if self.commands is None:
+            raise CommandRejected("%s refused: the swarm has not started (no Crazyflie added yet)"
+                                  % REBOOT_ALL_SERVICE)
+        if self.recovering:
+            raise CommandRejected("%s refused: a reboot of the swarm is under way" % REBOOT_ALL_SERVICE)
+        members = self.live_members()
+        refusals = ["%s: %s" % (m.name, why) for m in members for why in [m.worker.reboot_refusal()] if why]
+        if refusals:
+            raise CommandRejected("%s refused, nothing sent: %s" % (REBOOT_ALL_SERVICE, "; ".join(refusals)))
+        self.recovering = True
+        self.placement = estimator_placement.EstimatorPlacement(self.clock)    # a rebooted estimator is unplaced
+        rebooted: List[SwarmMember] = []
+        for m in members:
+            try:
+                m.worker.reboot()
+                rebooted.append(m)
+            except CrazyflieError as e:
+                LOG.error("swarm: %s: not rebooted: %s", m.name, e)
+        LOG.warning("swarm: %d of %d Crazyflies rebooting; flight commands wait until all are back",
+                    len(rebooted), len(members))
+        self._spawn(functools.partial(self.come_back, rebooted, len(rebooted) == len(members)), "swarm reboot")
+        return [m.name for m in rebooted]
+
+    def come_back(self, rebooted: Sequence[SwarmMember], all_rebooted: bool) -> bool:
+        """After ``reboot_all``: wait (REBOOT_BACK_S at most) for each rebooted Crazyflie's worker to run
+        again, set up what the swarm set up, and leave emergency when every Crazyflie came back. Whether
+        the swarm flies again."""
+        deadline = self.clock.now() + REBOOT_BACK_S
+        waiting = list(rebooted)
+        while waiting and self.clock.now() < deadline and not self.server.shutting_down():
+            waiting = [m for m in waiting if m.worker.state != WorkerState.RUNNING]
+            if waiting:
+                self.clock.sleep(REBOOT_POLL_S)
+        back = [m for m in rebooted if m not in waiting]
+        groups = {cf.tf_prefix: cf.group_mask for cf in self.config.crazyflies}
+        for m in back:
+            try:
+                if groups.get(m.name):
+                    m.onboard.set_group_mask(groups[m.name])
+                m.onboard.notify_setpoints_stop(0)
+            except (CrazyflieError, ValueError) as e:
+                LOG.warning("swarm: %s: after the reboot: %s", m.name, e)
+            if self.stream is not None:
+                self.stream.refix(m.name)
+        self.recovering = False
+        if waiting or not all_rebooted:
+            LOG.error("swarm: still in emergency: %s did not come back within %.0f s; call %s again",
+                      ", ".join(m.name for m in waiting) or "not every Crazyflie rebooted", REBOOT_BACK_S,
+                      REBOOT_ALL_SERVICE)
+            return False
+        self.emergency_active = False
+        if self.stream is not None:
+            self.stream.pause(False)
+        if self.options.emergency_watchdog and self.broadcaster is not None:
+            self.heartbeat = Heartbeat(self.broadcaster.watchdog, clock=self.clock).start()
+        LOG.warning("swarm: all %d Crazyflies back after the reboot: flight commands are taken again", len(back))
+        return True
 
     def update_params(self, names: Sequence[str], lookup: Lookup) -> Dict[str, List[str]]:
         """``/update_params`` of the swarm (``commands.update_params``): {parameter: [Crazyflies written]};

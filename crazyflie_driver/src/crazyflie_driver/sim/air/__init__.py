@@ -1,1 +1,1 @@
-"""Between host and world: the fake Crazyradio, the media, the world server and its wire, UDP."""
+"""Between host and world: the fake Crazyradio and its USB side, the media, the world server's wire, UDP."""

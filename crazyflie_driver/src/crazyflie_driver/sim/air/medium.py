@@ -3,8 +3,8 @@
 ``LocalMedium`` lives in the process that owns the world: a registry of ``SimulatedCrazyflie`` by
 (channel, datarate, address), per-dongle fault injection (packet loss and ack loss in percent of
 round trips, added latency, unplug) and a per-Crazyflie RSSI model. ``RemoteMedium`` is the same
-interface for another process: it forwards every call to a world server (``sim.air.server``) over a
-loopback TCP connection with a small binary framing (see ``sim.air.server_framing``).
+interface for another process: it forwards every call to a world server (``sim.world_server``) over a
+loopback TCP connection with a small binary framing (see ``sim.air.world_framing``).
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 from crazyflie_driver.errors import CrazyflieError, RadioMediumGone
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
-from crazyflie_driver.sim.air import server_framing as framing
+from crazyflie_driver.sim.air import world_framing as framing
 from crazyflie_driver.sim.air.usb_descriptors import MODELS
 
 DEFAULT_HOST = "127.0.0.1"

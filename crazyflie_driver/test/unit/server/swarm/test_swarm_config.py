@@ -161,3 +161,72 @@ def test_bad_types_and_file_level_faults(tmp_path):
         load_swarm_file(str(tmp_path / "missing.yaml"))
     with pytest.raises(SwarmConfigError, match="non-empty list"):
         parse_swarm("crazyflies: []\n", "s.yaml")
+
+
+CRAZYSWARM2 = """
+robots:
+  cf231:
+    enabled: true
+    uri: radio://0/80/2M/E7E7E7E7E7
+    initial_position: [0.5, -0.5, 0.0]
+    type: cf21
+    firmware_params:
+      ring: {effect: 7}
+  cf5:
+    enabled: false
+    uri: radio://0/80/2M/E7E7E7E705
+    initial_position: [0.0, 0.0, 0.0]
+    type: cf21
+  cf6:
+    uri: radio://0/90/2M/E7E7E7E706
+    type: cf21
+robot_types:
+  cf21:
+    motion_capture: {enabled: true, marker: default_single_marker, dynamics: default}
+    big_quad: false
+    battery: {voltage_warning: 3.9, voltage_critical: 3.6}
+    firmware_params:
+      stabilizer: {controller: 2}
+all:
+  firmware_logging:
+    enabled: true
+    default_topics:
+      pose: {frequency: 10}
+  firmware_params:
+    commander: {enHighLevel: 1}
+    stabilizer: {estimator: 2, controller: 1}
+  broadcasts: {num_repeats: 15, delay_between_repeats_ms: 1}
+"""
+
+
+def test_a_crazyswarm2_file_gives_the_same_swarm_its_names_and_layers_and_says_what_it_takes_elsewhere():
+    config = parse_swarm(CRAZYSWARM2, "crazyflies.yaml")
+    assert [(cf.tf_prefix, cf.uri, cf.id, cf.dongle, cf.initial_position) for cf in config.crazyflies] == [
+        ("cf231", "radio://0/80/2M/E7E7E7E7E7", 0xE7, 0, (0.5, -0.5, 0.0)),
+        ("cf6", "radio://0/90/2M/E7E7E7E706", 6, 0, (0.0, 0.0, 0.0))]          # cf5 is not enabled
+    params = dict(config.crazyflies[0].params)
+    assert params == {"commander.enHighLevel": 1, "stabilizer.estimator": 2, "stabilizer.controller": 2,
+                      "ring.effect": 7}                     # all, then the type, then the robot's own
+    t = config.type_of(config.crazyflies[0])
+    assert (t.battery_voltage_warning, t.battery_voltage_critical) == (3.9, 3.6)
+    assert [n.split(":")[0] for n in config.notes] == ["all.firmware_logging", "all.broadcasts"]
+
+
+@pytest.mark.parametrize("text, says", [
+    ("robots:\n  cf1:\n    enabled: true\n    initial_position: [0, 0, 0]\n",
+     "crazyflies.yaml:2: robots.cf1: give its 'uri'"),
+    ("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\n    colour: red\n",
+     "crazyflies.yaml:4: robots.cf1: unknown key(s) colour"),
+    ("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\n    enabled: false\n",
+     "crazyflies.yaml:1: no robot is enabled"),
+    ("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\n  cf2:\n    uri: radio://0/80/2M/E7E7E7E701\n",
+     "crazyflies.yaml:4: robots.cf2: id 1 is already used by robots.cf1 (line 2)"),
+    ("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\n    type: cf21\n",
+     "crazyflies.yaml:4: robots.cf1: unknown type 'cf21'; defined types: default (add it under robot_types)"),
+    ("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\nrobot_types:\n  t:\n    battery: {voltage_warning: 3.5, "
+     "voltage_critical: 3.7}\n", "crazyflies.yaml:6: robot_types.t: voltage_critical 3.70 V is above"),
+])
+def test_a_crazyswarm2_file_fault_is_named_with_its_line(text, says):
+    with pytest.raises(SwarmConfigError) as e:
+        parse_swarm(text, "crazyflies.yaml")
+    assert str(e.value).startswith(says), str(e.value)

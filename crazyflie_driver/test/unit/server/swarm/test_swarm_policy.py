@@ -23,7 +23,14 @@ from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.server.swarm.commands import SwarmMember
 from crazyflie_driver.server.swarm.config import load_swarm_file
 from crazyflie_driver.server.swarm.options import SwarmOptions
-from crazyflie_driver.server.swarm.policy import LAND_RETRY_S, SwarmPolicy, initial_position_params
+from crazyflie_driver.server.swarm.policy import (
+    LAND_RETRY_S,
+    REBOOT_ALL_SERVICE,
+    REBOOT_BACK_S,
+    SwarmPolicy,
+    initial_position_params,
+    refusal_text,
+)
 from crazyflie_driver.server.worker import WorkerState
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
@@ -66,6 +73,16 @@ class Worker:
         self.emergency_active = False
         self.log_packet_rate = 0.0
         self.param_values: Dict[str, Any] = {}
+        self.flying: Optional[str] = None       # why a reboot is refused
+        self.reboots = 0
+
+    def reboot_refusal(self) -> Optional[str]:
+        return self.flying
+
+    def reboot(self) -> None:
+        self.reboots += 1
+        self.state = WorkerState.LOST           # until it answers again
+        self.emergency_active = False
 
     def update_params(self, values):
         if self.fail_writes:
@@ -312,3 +329,67 @@ def test_after_the_emergency_every_flight_command_is_refused_with_nothing_on_the
         with pytest.raises(CommandRejected, match="emergency"):
             call()
     assert len(broadcasts(port)) == sent
+
+
+def test_after_the_emergency_a_reboot_of_all_brings_the_swarm_back_once_every_crazyflie_is_back():
+    port = Port()
+    p = policy(port, mocap="vrpn")
+    p.start()
+    p.stream = Stream()         # type: ignore[assignment]
+    p.emergency()
+    with pytest.raises(CommandRejected, match=REBOOT_ALL_SERVICE):     # the refusal names the way back
+        p.takeoff(0, 0.5, 2.0)
+    assert p.reboot_all() == ["cf1", "cf2", "cf3"]
+    assert all(m.worker.reboots == 1 for m in p.members)
+    with pytest.raises(CommandRejected, match="rebooting"):
+        p.takeoff(0, 0.5, 2.0)
+    with pytest.raises(CommandRejected, match="under way"):
+        p.reboot_all()
+    (name, come_back), = p.spawned
+    for m in p.members:
+        m.worker.state = WorkerState.RUNNING        # each answered and was set up again by its worker
+    assert come_back() is True
+    cf2 = port.members["cf2"]
+    assert cf2.onboard.calls[-2:] == [("set_group_mask", 1), ("notify_setpoints_stop", 0)]
+    assert sorted(p.stream.refixed) == ["cf1", "cf2", "cf3"] and p.stream.paused is False
+    assert not p.emergency_active
+    for m in p.members:                              # new first fixes place the estimators again
+        assert p.write_initial_position(m, (0.0, 0.0, 0.0)) is True
+    assert p.takeoff(0, 0.5, 2.0) > 0
+
+
+def test_a_reboot_of_all_is_refused_whole_while_one_flies_and_one_that_never_comes_back_keeps_the_emergency():
+    port = Port()
+    p = policy(port)
+    p.start()
+    p.emergency()
+    port.members["cf3"].worker.flying = "not done: a reboot would drop it out of the air"
+    with pytest.raises(CommandRejected, match="cf3: not done"):
+        p.reboot_all()
+    assert all(m.worker.reboots == 0 for m in p.members)
+    port.members["cf3"].worker.flying = None
+    p.reboot_all()
+    (_, come_back), = p.spawned
+    port.members["cf1"].worker.state = WorkerState.RUNNING
+    port.members["cf2"].worker.state = WorkerState.RUNNING          # cf3 stays silent
+    with running_clock(port.clock):
+        assert come_back() is False
+    assert port.clock.now() >= REBOOT_BACK_S and p.emergency_active
+    with pytest.raises(CommandRejected, match=REBOOT_ALL_SERVICE):
+        p.land(0, 0.0, 2.0)
+
+
+def test_a_refusal_names_its_service_once():
+    p = policy()
+    with pytest.raises(CommandRejected) as e:
+        p.takeoff(0, 0.5, 2.0)
+    assert refusal_text("/takeoff", e.value) == str(e.value) == (
+        "/takeoff refused: the swarm has not started (no Crazyflie added yet)")
+    assert refusal_text("/update_params", ValueError("1 not applied: x")) == "/update_params refused: 1 not applied: x"
+
+
+def test_swarm_workers_log_their_battery_for_the_safety_monitor_with_the_sensor_topics_off():
+    config = load_swarm_file(EXAMPLE, dongles=2)
+    from crazyflie_driver.server.swarm.policy import BATTERY_WATCH_MS, worker_config
+    wc = worker_config(config.crazyflies[0], SwarmOptions(swarm_file=EXAMPLE))
+    assert wc.enable_logging is False and wc.battery_watch_ms == BATTERY_WATCH_MS > 0

@@ -18,7 +18,7 @@ from crazyflie_driver.server.worker import CrazyflieWorker, WorkerConfig
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from crazyflie_driver.sim.air.medium import LocalMedium
-from crazyflie_driver.sim.firmware.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
 from support.sim_doubles import FakeVehicle
 from support.worker_doubles import wait_for
 
@@ -106,6 +106,7 @@ def test_an_allcfs_value_goes_by_one_broadcast_per_radio_even_with_every_transmi
     assert all(swarm.written(r, "ring.effect", 5) == n and swarm.written(r, "ring.solidRed", 0x20) == n
                for r, n in PER_RADIO.items())
     assert all(w.param_values["ring.solidRed"] == 0x20 for w in swarm.workers)
+    assert all(w.user_params["ring.solidRed"] == 0x20 for w in swarm.workers)     # set again after a reboot
 
 
 def test_own_values_go_by_unicast_to_every_radio_at_once_and_a_held_radio_holds_up_no_other_nor_a_placement(swarm):

@@ -1,1 +1,0 @@
-"""The simulated Crazyflie's protocol side: link layer, TOCs, ports."""

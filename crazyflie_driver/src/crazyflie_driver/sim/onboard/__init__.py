@@ -1,0 +1,2 @@
+"""The simulated Crazyflie's onboard flight software: stabilizer, estimator, controllers, planner,
+high-level commander and supervisor, all vehicles at once (numpy rows)."""

@@ -1,1 +1,0 @@
-"""What the simulated world plays: physics, stabilizer, sensors, battery, motion capture."""
