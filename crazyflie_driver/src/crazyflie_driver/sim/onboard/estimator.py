@@ -7,7 +7,8 @@ without switching estimators, and it is kept.
 
 The Kalman estimator is the firmware's error-state extended Kalman filter (``kalman.py``; docs/
 simulation.md, "Onboard estimator"), run as the firmware's filter task: the IMU's readings are
-averaged between predictions (100 Hz), process noise is added per 1 ms loop, external positions
+the accelerometer's raw samples pass the firmware's 30 Hz low-pass (``imu_filter``) and are
+averaged with the gyro's between predictions (100 Hz), process noise is added per 1 ms loop, external positions
 and poses are queued and fused at the next loop (here the next even tick), then the attitude error
 is folded back and the supervisor resets the filter when its state leaves ``kalman.maxPos`` /
 ``kalman.maxVel``. It starts from what the vehicle believes (``kalman.initial*``, level, at rest),
@@ -16,20 +17,33 @@ not from the truth, and its attitude is its own, driven by the biased, noisy gyr
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
 
 from crazyflie_driver.sim.onboard import kalman
 from crazyflie_driver.sim.onboard.body import BodyRows
+from crazyflie_driver.sim.onboard.imu_filter import ACC_LPF, lpf2p_steady, lpf2p_step
 from crazyflie_driver.sim.vehicle_rows import Rows, Vector
 
 COMPLEMENTARY, KALMAN = 1, 2
 PREDICT_EVERY = 10                  # ticks (1 ms): the Kalman filter predicts at 100 Hz
 
-#: (rows, mean specific force (n,3) m/s², mean body rate (n,3) rad/s, window s) -> the mean
-#: accelerometer (m/s²) and gyro (rad/s) readings of those rows over the window
-ImuMeans = Callable[[np.ndarray, np.ndarray, np.ndarray, float], Tuple[np.ndarray, np.ndarray]]
+
+
+class ImuSource(Protocol):
+    """The IMU of every vehicle as the firmware's sensors task reads it (the room provides it)."""
+
+    def acc_raw(self, samples: int) -> np.ndarray:
+        """The accelerometer's next ``samples`` raw readings of every row, (samples, N, 3) m/s² in
+        the body frame: the true specific force with the sensor's bias and noise, vibration
+        included, before the firmware's low-pass filter."""
+        ...
+
+    def gyro_means(self, rows: np.ndarray, omega: np.ndarray, window_s: float) -> np.ndarray:
+        """The mean filtered gyro readings (n,3, rad/s) of ``rows`` over ``window_s`` given their
+        true mean body rates ``omega``."""
+        ...
 
 # parameter name -> (field, column) ; defaults of the current firmware
 DEFAULTS: Dict[str, float] = {
@@ -49,8 +63,11 @@ class EstimatorStates(Rows):
     FIELDS = {
         "kind": ((), np.int8),
         "exact": ((), bool),              # the estimate is the truth (reference runs of the controllers)
-        "imu_sum": ((6,), float),         # true specific force (m/s²), body rate (rad/s), summed since the prediction
+        "imu_sum": ((6,), float),         # filtered acc (m/s²), true body rate (rad/s), summed since the prediction
         "imu_n": ((), float),             # samples in imu_sum
+        "acc_d1": ((3,), float),          # the accelerometer low-pass's delay elements, m/s²
+        "acc_d2": ((3,), float),
+        "acc_settled": ((), bool),        # ... hold the filter's state (False: set from the next sample)
         "predict_ms": ((), float),        # world ms of the last prediction
         "pending": ((), bool),            # an external position waits for the filter's next loop
         "pend_pos": ((3,), float),
@@ -72,6 +89,9 @@ class EstimatorStates(Rows):
     exact: np.ndarray
     imu_sum: np.ndarray
     imu_n: np.ndarray
+    acc_d1: np.ndarray
+    acc_d2: np.ndarray
+    acc_settled: np.ndarray
     predict_ms: np.ndarray
     pending: np.ndarray
     pend_pos: np.ndarray
@@ -109,6 +129,7 @@ class Estimator:
     def boot(self, i: int, truth: Vector, now: float) -> None:
         s = self.s
         s.kind[i] = COMPLEMENTARY
+        s.acc_settled[i] = False
         s.exact[i] = False
         s.std_pos[i] = DEFAULTS["locSrv.extPosStdDev"]
         s.std_quat[i] = DEFAULTS["locSrv.extQuatStdDev"]
@@ -141,6 +162,7 @@ class Estimator:
             if kind != s.kind[i]:
                 s.kind[i] = kind
                 if kind == KALMAN:
+                    s.acc_settled[i] = False       # (its low-pass ran unobserved meanwhile)
                     self.reset(i, truth, now)
             return True
         if name == "kalman.resetEstimation":
@@ -201,54 +223,79 @@ class Estimator:
         s.pending[rows] = False
 
     # --- the tick ---------------------------------------------------------------------------------
-    def update(self, tick: int, now: float, thrust: np.ndarray, bodies: BodyRows,
-               imu: Optional[ImuMeans] = None) -> None:
-        """One loop of the filter task (called every other tick): IMU samples accumulated, the
-        prediction every PREDICT_EVERY ticks, process noise, queued measurements, fold-back, bounds.
-        ``thrust`` (N,) > 0 means flying; ``bodies`` gives the true specific force and body rates;
-        ``imu`` turns their means into readings (noise-free without it)."""
-        s, k = self.s, self.k
+    def update(self, tick: int, now: float, thrust: np.ndarray, bodies: BodyRows, samples: int,
+               imu: Optional[ImuSource] = None) -> None:
+        """One loop of the filter task, called every ``samples`` ticks: the IMU's samples of those
+        ticks accumulated, the prediction every PREDICT_EVERY ticks, process noise, queued
+        measurements, fold-back, bounds. ``thrust`` (N,) > 0 means flying; ``bodies`` gives the
+        true specific force and body rates; ``imu`` their readings (noise-free without it)."""
+        s = self.s
         if not len(s):
             return
         filtering = (s.kind == KALMAN) & ~s.exact
         if not filtering.any():                # estimator 1 everywhere: no filter runs
             return
+        self._accumulate(bodies, samples, imu)
         predicting = tick % PREDICT_EVERY == 0
-        if not predicting and not self._any_pending:   # only the IMU's samples: summed for every row
-            s.imu_sum[:, :3] += bodies.specific_force
-            s.imu_sum[:, 3:] += bodies.omega
-            s.imu_n += 1.0
+        if not predicting and not self._any_pending:
             return
         rows = np.flatnonzero(filtering)
         self._any_pending = False
-        s.imu_sum[:, :3] += bodies.specific_force
-        s.imu_sum[:, 3:] += bodies.omega
-        s.imu_n += 1.0
         now_ms = round(now * 1000.0)
         touched = s.pending[rows]
         if predicting:
-            mean = s.imu_sum[rows] / np.maximum(s.imu_n[rows], 1.0)[:, None]
-            dt = (now_ms - s.predict_ms[rows]) / 1000.0
-            window = float(PREDICT_EVERY) * 1e-3
-            acc, gyro = imu(rows, mean[:, :3], mean[:, 3:], window) if imu is not None else (mean[:, :3], mean[:, 3:])
-            ok = dt > 0.0
-            if not np.all(ok):
-                rows_p, acc, gyro, dt = rows[ok], acc[ok], gyro[ok], dt[ok]
-            else:
-                rows_p = rows
-            if len(rows_p):
-                # all rows share one loop period but a reset row may have a shorter one
-                for step in np.unique(dt):
-                    sel = dt == step
-                    kalman.predict(k, rows_p[sel], acc[sel], gyro[sel], float(step), thrust[rows_p[sel]] > 0.0)
-            s.predict_ms[rows_p] = now_ms
-            s.imu_sum[rows] = 0.0
-            s.imu_n[rows] = 0.0
-            touched = np.ones(len(rows), bool)
-            touched[~ok] = s.pending[rows[~ok]]
-        if not np.any(touched):
-            return
-        done = rows[touched]
+            predicted = self._predict(rows, now_ms, thrust, imu)
+            touched = predicted | s.pending[rows]
+        if np.any(touched):
+            self._loop_end(rows[touched], now_ms, now)
+
+    def _accumulate(self, bodies: BodyRows, samples: int, imu: Optional[ImuSource]) -> None:
+        """The IMU samples of the last ``samples`` ticks of every row: the accelerometer's through
+        the firmware's low-pass, then summed for the next prediction (the bodies move once per
+        control period, so the true values are the same for these samples)."""
+        s = self.s
+        if imu is not None:
+            raw = imu.acc_raw(samples)
+        else:
+            raw = np.broadcast_to(bodies.specific_force, (samples,) + bodies.specific_force.shape)
+        fresh = ~s.acc_settled
+        if fresh.any():
+            steady = lpf2p_steady(ACC_LPF, raw[0][fresh])
+            s.acc_d1[fresh] = steady
+            s.acc_d2[fresh] = steady
+            s.acc_settled[fresh] = True
+        d1, d2 = s.acc_d1, s.acc_d2
+        acc = lpf2p_step(ACC_LPF, d1, d2, raw[0])
+        for j in range(1, samples):
+            acc = acc + lpf2p_step(ACC_LPF, d1, d2, raw[j])
+        s.imu_sum[:, :3] += acc
+        s.imu_sum[:, 3:] += samples * bodies.omega
+        s.imu_n += float(samples)
+
+    def _predict(self, rows: np.ndarray, now_ms: float, thrust: np.ndarray,
+                 imu: Optional[ImuSource]) -> np.ndarray:
+        """The prediction of ``rows`` on their mean readings since the last one; which rows did."""
+        s, k = self.s, self.k
+        mean = s.imu_sum[rows] / np.maximum(s.imu_n[rows], 1.0)[:, None]
+        dt = (now_ms - s.predict_ms[rows]) / 1000.0
+        acc = mean[:, :3]
+        gyro = imu.gyro_means(rows, mean[:, 3:], float(PREDICT_EVERY) * 1e-3) if imu is not None else mean[:, 3:]
+        ok = dt > 0.0
+        rows_p = rows[ok]
+        acc, gyro, dt = acc[ok], gyro[ok], dt[ok]
+        # all rows share one loop period but a reset row may have a shorter one
+        for step in np.unique(dt):
+            sel = dt == step
+            kalman.predict(k, rows_p[sel], acc[sel], gyro[sel], float(step), thrust[rows_p[sel]] > 0.0)
+        s.predict_ms[rows_p] = now_ms
+        s.imu_sum[rows] = 0.0
+        s.imu_n[rows] = 0.0
+        return ok
+
+    def _loop_end(self, done: np.ndarray, now_ms: float, now: float) -> None:
+        """Process noise, the queued measurements and the fold-back of ``done``; the supervisor's
+        bounds."""
+        s, k = self.s, self.k
         kalman.add_process_noise(k, done, now_ms)
         waiting = done[s.pending[done]]
         if len(waiting):

@@ -14,7 +14,7 @@ import numpy as np
 from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.sim.onboard.body import BodyRows
 from crazyflie_driver.sim.onboard.estimator import DEFAULTS as ESTIMATOR_DEFAULTS
-from crazyflie_driver.sim.onboard.estimator import PREDICT_EVERY, Estimator, ImuMeans
+from crazyflie_driver.sim.onboard.estimator import PREDICT_EVERY, Estimator, ImuSource
 from crazyflie_driver.sim.onboard.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
 from crazyflie_driver.sim.onboard.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS
 from crazyflie_driver.sim.onboard.mellinger import MELLINGER_EVERY
@@ -192,14 +192,14 @@ class OnboardFlight:
 
     # --- the tick ------------------------------------------------------------------------------------
     def step(self, tick: int, now: float, bodies: BodyRows, stab, ground_asl: float,
-             imu: Optional[ImuMeans] = None) -> bool:
+             imu: Optional[ImuSource] = None) -> bool:
         """Before the stabilizer's tick: estimator loop (``imu`` gives its readings), then (100 Hz) the
         position controller.
 
         Returns True when it wrote new setpoints into the stabilizer's rows."""
         wrote = False
         if tick % MELLINGER_EVERY == 0:     # every stage here runs on even ticks only, but the mode check
-            self.estimator.update(tick, now, stab.thrust, bodies, imu)
+            self.estimator.update(tick, now, stab.thrust, bodies, MELLINGER_EVERY, imu)
             wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
         if self.control.pending:            # every tick, before the controllers, as the firmware's
             wrote = self._new_setpoints(tick, bodies, stab, ground_asl) or wrote

@@ -289,6 +289,23 @@ def _tilt_cos(q: np.ndarray) -> float:
     return float(1.0 - 2.0 * (q[0] * q[0] + q[1] * q[1]))
 
 
+class _Imu:
+    """The vehicles' IMU as the onboard estimator reads it (``estimator.ImuSource``)."""
+
+    def __init__(self, sensors: _sensors.SensorStates, bodies: BodyStates, rng: np.random.Generator) -> None:
+        self._sensors, self._bodies, self._rng = sensors, bodies, rng
+
+    def acc_raw(self, samples: int) -> np.ndarray:
+        b = self._bodies
+        fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
+        return _sensors.acc_raw(self._sensors, b.specific_force, fraction, samples, self._rng)
+
+    def gyro_means(self, rows: np.ndarray, omega: np.ndarray, window_s: float) -> np.ndarray:
+        b = self._bodies
+        fraction = (b.thrust[rows] @ _ONES4) * b.inv_mass[rows, 0] / b.gravity[rows]
+        return _sensors.gyro_means(self._sensors, rows, omega, fraction, window_s, self._rng)
+
+
 class World:
     """All simulated vehicles, stepped together; optionally by a real-time background thread."""
 
@@ -306,6 +323,7 @@ class World:
         self.battery = _battery.BatteryStates()
         self.flight = _flight.OnboardFlight()
         self.rng = np.random.default_rng(seed)
+        self._imu = _Imu(self.sensors, self.bodies, self.rng)
         self._lock = threading.RLock()
         self._vehicles: Dict[str, Vehicle] = {}
         self._order: List[Vehicle] = []
@@ -412,13 +430,6 @@ class World:
                 except Exception:
                     _log.exception("world tick listener %r failed", entry[0])
 
-    def _imu_means(self, rows: np.ndarray, specific_force: np.ndarray, omega: np.ndarray,
-                   window_s: float) -> Tuple[np.ndarray, np.ndarray]:
-        """The onboard Kalman filter's IMU readings of ``rows`` (mean over ``window_s``)."""
-        b = self.bodies
-        fraction = (b.thrust[rows] @ _ONES4) * b.inv_mass[rows, 0] / b.gravity[rows]
-        return _sensors.imu_means(self.sensors, rows, specific_force, omega, fraction, window_s, self.rng)
-
     def _tick(self) -> None:
         """One firmware tick of every vehicle: a fixed pipeline of whole-fleet numpy stages.
 
@@ -433,7 +444,7 @@ class World:
         if len(self._order):
             b = self.bodies
             onboard = self.onboard
-            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl, self._imu_means):
+            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl, self._imu):
                 onboard.dirty = True
             if k % CONTROL_TICKS == 0:
                 thrust_fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
