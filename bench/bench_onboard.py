@@ -28,6 +28,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 import bench_support  # noqa: E402,F401  (the sources and the tests' support on the path)
 from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie  # noqa: E402
 from crazyflie_driver.sim.crtp.setpoint_decode import decode_setpoint  # noqa: E402
+from crazyflie_driver.sim.crtp.trajectory_memory import MEMORY_TYPE_TRAJECTORY  # noqa: E402
 from crazyflie_driver.sim.onboard.planner import Evaluation, Plan, evaluate, figure_eight, online_piece  # noqa: E402
 from crazyflie_driver.sim.room.mocap import MocapModel  # noqa: E402
 from crazyflie_driver.sim.room.world import World  # noqa: E402
@@ -58,6 +59,20 @@ def high_level(cf, payload: bytes) -> None:
     cf.handle_crtp(bytes([0x8C]) + payload)
 
 
+def trajectory_memory_id(cf) -> int:
+    """The trajectory memory's id, found as a host finds it (port 4, channel 0: the number of
+    memories, then each one's type): ids follow the decks and the EEPROM, so it is not 0."""
+    def ask(payload: bytes) -> bytes:
+        while cf.pop_outgoing() is not None:
+            pass
+        cf.handle_crtp(bytes([0x4C]) + payload)
+        return cf.pop_outgoing()[1:]
+    for ident in range(ask(b"\x01")[1]):
+        if ask(bytes([2, ident]))[2] == MEMORY_TYPE_TRAJECTORY:
+            return ident
+    raise RuntimeError("the simulated Crazyflie lists no trajectory memory")
+
+
 def takeoff_and_figure_eight(controller: int, seed: int):
     """HL takeoff to 0.5 m in 2 s (true z against the planner's polynomial), then a figure-8 at
     Crazyswarm's average speed (true position against the trajectory, first to last point)."""
@@ -71,8 +86,9 @@ def takeoff_and_figure_eight(controller: int, seed: int):
     world.step(2000)
     pieces = figure_eight(FIG8_HALF_WIDTH, FIG8_HALF_HEIGHT, FIG8_PERIOD, 12, 0.5)
     data = b"".join(struct.pack("<33f", *p.coeffs.reshape(-1), p.duration) for p in pieces)
+    memory = trajectory_memory_id(cf)
     for offset in range(0, len(data), 24):
-        cf.handle_crtp(bytes([0x4E, 0]) + struct.pack("<I", offset) + data[offset:offset + 24])
+        cf.handle_crtp(bytes([0x4E, memory]) + struct.pack("<I", offset) + data[offset:offset + 24])
     high_level(cf, struct.pack("<BBBBIB", 6, 1, 1, 0, 0, len(pieces)))
     high_level(cf, struct.pack("<BBBBBBf", 13, 0, 0, 0, 0, 1, 1.0))
     plan = Plan(1, pieces, world.time)

@@ -67,6 +67,11 @@ class OnboardFlight:
         self.control.add()
         self.hl.append_row()
 
+    def carried(self, i: int) -> None:
+        """Row ``i`` was put somewhere by hand (a teleport of the room): its IMU filter reads the new
+        rest state from the next sample instead of ringing from a jump no sensor could see."""
+        self.estimator.s.acc_settled[i] = False
+
     def boot(self, i: int, truth: Sequence[float], now: float) -> None:
         self.estimator.boot(i, truth, now)
         self.control.boot(i)
@@ -136,17 +141,7 @@ class OnboardFlight:
         yaw = start.yaw if args.get("use_current_yaw") else float(args.get("yaw", 0.0))
         duration = float(args.get("duration", 0.0))
         if command in ("takeoff", "land"):
-            height = float(args["height"])
-            velocity = args.get("velocity")
-            if args.get("relative"):
-                height = start.pos[2] + height if command == "takeoff" else start.pos[2] - height
-            if velocity is not None:
-                default = hl.takeoff_velocity[i] if command == "takeoff" else hl.landing_velocity[i]
-                v = float(velocity) if float(velocity) > 0 else default
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    duration = float(np.float64(abs(height - start.pos[2])) / v)
-            fn = hl.takeoff if command == "takeoff" else hl.land
-            return fn(i, start, height, yaw, duration, now)
+            return self._takeoff_or_land(i, command, args, start, yaw, duration, now)
         if command == "go_to":
             return hl.go_to(i, start, args["goal"], float(args["yaw"]), duration, bool(args.get("relative")),
                             bool(args.get("linear")), now)
@@ -159,6 +154,24 @@ class OnboardFlight:
                                        bool(args.get("reversed")), bool(args.get("relative")),
                                        bool(args.get("relative_yaw")), now)
         raise ValueError("unknown high-level command %r" % (command,))
+
+    def _takeoff_or_land(self, i: int, command: str, args: Dict, start: Evaluation, yaw: float,
+                         duration: float, now: float) -> int:
+        """takeoff / land: a relative height counts from the start; a velocity (<= 0: the default)
+        sets the duration from the distance."""
+        hl = self.hl
+        takeoff = command == "takeoff"
+        height = float(args["height"])
+        if args.get("relative"):
+            height = start.pos[2] + height if takeoff else start.pos[2] - height
+        velocity = args.get("velocity")
+        if velocity is not None:
+            default = hl.takeoff_velocity[i] if takeoff else hl.landing_velocity[i]
+            v = float(velocity) if float(velocity) > 0 else default
+            with np.errstate(divide="ignore", invalid="ignore"):
+                duration = float(np.float64(abs(height - start.pos[2])) / v)
+        fn = hl.takeoff if takeoff else hl.land
+        return fn(i, start, height, yaw, duration, now)
 
     def _high_level_tick(self, now: float, stab) -> bool:
         """The planners' 100 Hz tick: each evaluates its plan (also while a low-level setpoint holds the

@@ -306,7 +306,19 @@ class OnboardController:
         self.time = now
         if len(s) == 0:
             return s.motors
-        # supervisor: watchdog and battery
+        level = self._supervise(now, battery_empty)
+        thrust = self._thrust()
+        if tick % CONTROL_TICKS == 0:
+            self._control(tick, body, gyro_deg, thrust, level)
+        m = self._mix(thrust)
+        s.thrust = thrust
+        s.motors = m
+        return m
+
+    def _supervise(self, now: float, battery_empty: np.ndarray) -> Optional[np.ndarray]:
+        """The supervisor's setpoint watchdog and battery lock; the rows whose stale setpoint is levelled
+        (None: none)."""
+        s = self.s
         age = now - s.sp_time
         watched = age > WATCHDOG_LEVEL_S
         level: Optional[np.ndarray] = watched
@@ -324,7 +336,11 @@ class OnboardController:
             level = None
         if np.count_nonzero(battery_empty):
             self._lock_rows(battery_empty, LOCK_BATTERY)
+        return level
 
+    def _thrust(self) -> np.ndarray:
+        """The base thrust of every row: the setpoint's within the firmware's limits, 0 where locked."""
+        s = self.s
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
         if np.count_nonzero(s.generic):     # the position controller's thrust goes to the mixer as it is
@@ -332,22 +348,31 @@ class OnboardController:
         off = s.thrust_locked | (s.lock != LOCK_NONE) | s.disarmed
         if np.count_nonzero(off):
             thrust[off] = 0.0
+        return thrust
 
-        if tick % CONTROL_TICKS == 0:
-            terms = _attitude_terms(body.quaternion)
-            if self._tumble(terms[:, 2], thrust):
-                thrust[s.lock != LOCK_NONE] = 0.0
-            s.attitude = _attitude_from_terms(terms)
-            # attitude loop: 500 Hz (current), 250 Hz (2016.02, still with dt = 1/500 in its PIDs)
-            due = None if tick % (2 * CONTROL_TICKS) == 0 or not np.count_nonzero(s.gen2016) else ~s.gen2016
-            self._attitude_loop(due, level)
-            self._rate_loop(gyro_deg)
-            if np.count_nonzero(s.moment_law):
-                self._moment_law(body.quaternion, gyro_deg, level)
-            idle = thrust <= 0.0
-            if np.count_nonzero(idle):
-                self._reset(idle)
+    def _control(self, tick: int, body: BodyRows, gyro_deg, thrust: np.ndarray,
+                 level: Optional[np.ndarray]) -> None:
+        """The controllers' run (every CONTROL_TICKS): crash check, attitude and rate loops, the
+        moment law, PID resets of idle rows (``thrust`` zeroed where a crash locks)."""
+        s = self.s
+        terms = _attitude_terms(body.quaternion)
+        if self._tumble(terms[:, 2], thrust):
+            thrust[s.lock != LOCK_NONE] = 0.0
+        s.attitude = _attitude_from_terms(terms)
+        # attitude loop: 500 Hz (current), 250 Hz (2016.02, still with dt = 1/500 in its PIDs)
+        due = None if tick % (2 * CONTROL_TICKS) == 0 or not np.count_nonzero(s.gen2016) else ~s.gen2016
+        self._attitude_loop(due, level)
+        self._rate_loop(gyro_deg)
+        if np.count_nonzero(s.moment_law):
+            self._moment_law(body.quaternion, gyro_deg, level)
+        idle = thrust <= 0.0
+        if np.count_nonzero(idle):
+            self._reset(idle)
 
+    def _mix(self, thrust: np.ndarray) -> np.ndarray:
+        """The motor commands (N,4) from the rate loop's output and ``thrust``: the mixer, its limits,
+        motor power overrides and the Brushless idle."""
+        s = self.s
         m = s.rate_out @ MIX
         m += thrust[:, None]
         if m.max() > 65535.0:
@@ -361,8 +386,6 @@ class OnboardController:
         if np.count_nonzero(s.idle_motor):      # armed Brushless rows idle their motors
             idling = (s.idle_motor > 0.0) & ~s.disarmed & (s.lock == LOCK_NONE)
             m = np.where(idling[:, None], np.maximum(m, s.idle_motor[:, None]), m)
-        s.thrust = thrust
-        s.motors = m
         return m
 
     def set_armed(self, i: int, armed: bool) -> None:

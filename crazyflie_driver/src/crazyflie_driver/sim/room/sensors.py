@@ -22,6 +22,7 @@ GYRO_RESIDUAL_BIAS_DPS = 0.05         # after the firmware's at-rest bias estima
 GYRO_RAW_OFFSET_DPS = 2.0             # zero-rate offset of the raw registers (datasheet ±5)
 GYRO_LSB_PER_DPS = 16.4               # ±2000 deg/s range
 ACC_NOISE_G = 0.008                   # rms at 94 Hz
+ACC_RANGE_G = 16.0                    # full scale the current firmware configures (±16 g)
 GYRO_BANDWIDTH_HZ = 98.0              # DLPF bandwidth the gyro noise figure is given at
 ACC_RESIDUAL_BIAS_G = 0.005           # after calibration (EST)
 ACC_VIBRATION_G = 0.08                # extra rms at hover thrust of the raw samples, before the firmware's
@@ -80,12 +81,14 @@ def acc_raw(s: SensorStates, specific_force: np.ndarray, thrust_fraction: np.nda
             rng: np.random.Generator) -> np.ndarray:
     """``samples`` raw accelerometer readings (samples, N, 3) in m/s² of every vehicle at 1 kHz, as
     the sensors task reads them before its low-pass filter: the specific force (N,3), the residual
-    bias, white noise with the vibration's. The vibration figure is of the raw sensor: the rotors
-    turn at about 300 Hz at hover, where the firmware's 30 Hz second-order filter passes 0.5 %, so
-    0.08 g after it would need some 17 g of raw vibration, beyond the sensor's ±16 g range."""
+    bias, white noise with the vibration's, clipped at the full scale. The vibration figure is of
+    the raw sensor: the rotors turn at about 300 Hz at hover, where the firmware's 30 Hz
+    second-order filter passes 0.5 %, so 0.08 g after it would need some 17 g of raw vibration,
+    beyond the sensor's ±16 g range."""
     sigma = (ACC_NOISE_G + ACC_VIBRATION_G * vibration(thrust_fraction)) * GRAVITY
     noise = rng.standard_normal((samples,) + specific_force.shape) * sigma[:, None]
-    return noise + (specific_force + s.acc_bias * GRAVITY)
+    full_scale = ACC_RANGE_G * GRAVITY
+    return np.clip(noise + (specific_force + s.acc_bias * GRAVITY), -full_scale, full_scale)
 
 
 def gyro_means(s: SensorStates, rows: np.ndarray, omega: np.ndarray, thrust_fraction: np.ndarray,

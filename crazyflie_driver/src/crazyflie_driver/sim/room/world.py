@@ -278,6 +278,9 @@ class Vehicle:
             b.velocity[i] = 0.0
             b.omega[i] = 0.0
             b.quaternion[i] = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+            b.acceleration[i] = 0.0
+            b.specific_force[i] = (0.0, 0.0, b.gravity[i] if b.position[i, 2] <= 0.0 else 0.0)
+            w.flight.carried(i)
             self._cache_tick = -1
 
     def __repr__(self) -> str:
