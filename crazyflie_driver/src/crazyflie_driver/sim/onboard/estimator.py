@@ -6,10 +6,10 @@ its height from the barometer. That is the trap users hit when they stream motio
 without switching estimators, and it is kept.
 
 The Kalman estimator is the firmware's error-state extended Kalman filter (``kalman.py``; docs/
-simulation.md, "Onboard estimator"), run as the firmware's filter task: the IMU's readings are
-the accelerometer's raw samples pass the firmware's 30 Hz low-pass (``imu_filter``) and are
-averaged with the gyro's between predictions (100 Hz), process noise is added per 1 ms loop, external positions
-and poses are queued and fused at the next loop (here the next even tick), then the attitude error
+simulation.md, "Onboard estimator"), run as the firmware's filter task: the accelerometer's raw
+samples pass the firmware's 30 Hz low-pass (``imu_filter``) and are averaged with the gyro's
+between predictions (100 Hz), process noise is added per 1 ms loop, external positions and poses
+are queued and fused at the next loop (here the next even tick), then the attitude error
 is folded back and the supervisor resets the filter when its state leaves ``kalman.maxPos`` /
 ``kalman.maxVel``. It starts from what the vehicle believes (``kalman.initial*``, level, at rest),
 not from the truth, and its attitude is its own, driven by the biased, noisy gyro.
@@ -28,7 +28,6 @@ from crazyflie_driver.sim.vehicle_rows import Rows, Vector
 
 COMPLEMENTARY, KALMAN = 1, 2
 PREDICT_EVERY = 10                  # ticks (1 ms): the Kalman filter predicts at 100 Hz
-
 
 
 class ImuSource(Protocol):
