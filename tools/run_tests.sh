@@ -10,11 +10,11 @@
 # A job beyond the first starts only while the machine has room for it: CRAZYFLIE_TEST_IDLE_CORES
 # (default 0.6) of its cores idle over the last second, and at least the cores the job is expected to
 # use (its CPU over its wall seconds in tools/test_durations.txt); and the cores the running jobs are
-# expected to use, with it, leave that margin free. The simulated worlds step in real time, and a
-# world starved of CPU stalls its radio and motion capture while the host's clocks run on, which the
-# stack rightly reads as a lost link or a lost pose. A job that must wait lets later jobs of the
-# queue start first if they fit. On a machine busy with other work the run takes longer instead
-# (the summary says how long starts were held back).
+# expected to use, with it, leave that margin free. Flight figures do not depend on this (the
+# simulated worlds run on ROS time and slow down under load: docs/testing.md), but a world slowed
+# down stretches its test in wall time, and rostest's time-limit counts wall seconds. A job that must
+# wait lets later jobs of the queue start first if they fit. On a machine busy with other work the
+# run takes longer instead (the summary says how long starts were held back).
 # The rostests are isolated from each other: each has its own master (rostest picks a free port)
 # and its own world address and ports (test_rostest_ports.py holds that). One line per test as it
 # ends: "PASS <pkg>/<file>.test (<wall> s, CPU <cpu> s)" or FAIL with the log's tail; logs, the

@@ -10,10 +10,10 @@ Where this differs from crazyflie_ros HEAD (see the package README):
 * ``cmd_hover`` / ``cmd_velocity_world`` yaw rates mean the same on every firmware (HEAD passes
   them raw into the legacy types, whose yaw rate the firmware negates);
 * a high-level command after low-level setpoints (the zero setpoints every connect sends, this
-  API's streams and the worker's own: cmd_vel, a controller's RPYT) is preceded by
+  API's streams and the worker's own: cmd_vel, a controller's RPYT) is followed by
   notify-setpoints-stop, because the firmware ignores the high-level commander while low-level
-  setpoints hold the priority (docs/protocol.md, "The commander's priority"); HEAD leaves that to
-  the user;
+  setpoints hold the priority, and an idle planner given the priority stops the motors at its next
+  tick (docs/protocol.md, "The commander's priority"); HEAD leaves that to the user;
 * a command whose group mask does not address this Crazyflie is refused (HEAD sends it, the firmware
   answers OK and does nothing), and so is a land that would drop it (``server.safety.checked_landing``).
 """
@@ -152,12 +152,34 @@ class OnboardCommands:
         return None
 
     def _fly(self, what: str, packet: CRTPPacket, group_mask: int, idempotent: bool = True) -> None:
-        """Send a checked high-level packet; first hand control back from the low-level stream."""
+        """Send a checked high-level packet. After low-level setpoints it goes out first and
+        notify-setpoints-stop after it: the plan is in place when the priority comes back, so no tick of
+        the idle planner (its null setpoint stops the motors) falls between the two packets, however
+        late the second one is."""
         with self._lock:
             self._refuse(what, group_mask)
-            if self.low_level_active:
-                self.notify_setpoints_stop(0)
+            if not self.low_level_active:
+                self.cf.high_level.command(packet, idempotent=idempotent)
+                return
+            since = self.stop_stream()
             self.cf.high_level.command(packet, idempotent=idempotent)
+            if self.hand_over(since) and idempotent:
+                # a setpoint already on its way went out after the command and stopped its plan
+                self.cf.high_level.command(packet, idempotent=idempotent)
+
+    def stop_stream(self) -> Optional[int]:
+        """Stop the worker's low-level stream before a high-level command; the count of low-level
+        setpoints sent so far (None when not counted), for ``hand_over``."""
+        self._stream(None)
+        return self._low_level_sent() if self._low_level_sent is not None else None
+
+    def hand_over(self, since: Optional[int]) -> bool:
+        """Notify-setpoints-stop after a high-level command went out (the firmware plans a command
+        while a low-level setpoint holds the priority; notify hands the priority to that plan). True
+        when a low-level setpoint went out after ``stop_stream`` counted ``since``: it may have stopped
+        the plan, so the command needs sending again."""
+        self.notify_setpoints_stop(0)
+        return since is not None and self._sent_at_notify != since
 
     def notify_setpoints_stop(self, remain_valid_ms: int = 0) -> None:
         """Give control back to the high-level commander (stops the worker's low-level stream)."""

@@ -41,15 +41,18 @@ def wire(cf):
     return [(p.port, p.channel, p.data[0]) for p in cf.link.sent]
 
 
-def test_high_level_after_low_level_setpoints_first_hands_control_back():
+def test_high_level_after_low_level_setpoints_goes_out_first_then_hands_control_back():
+    """After low-level setpoints the command goes first and notify-setpoints-stop after it: the firmware
+    plans the command meanwhile, so when the priority comes back its plan is there and no tick of an
+    idle planner (its null setpoint stops the motors) falls between the two packets."""
     commands, cf, streamed, _ = make()
     commands.takeoff(0, 0.5, 2.0)            # after connect: the zero setpoints hold the priority
     commands.go_to(0, False, (1.0, 0.0, 0.5), 0.0, 2.0)
     commands.cmd_position(1.0, 0.0, 0.5, 0.0)
     commands.land(0, 0.0, 2.0)
-    assert wire(cf) == [(7, 1, 0), (8, 0, 7), (8, 0, 12), (7, 1, 0), (8, 0, 8)]
-    assert streamed[0] is None and streamed[1].port == 7 and streamed[1].data[0] == 7 and streamed[2] is None
-    takeoff = cf.link.sent[1].data
+    assert wire(cf) == [(8, 0, 7), (7, 1, 0), (8, 0, 12), (8, 0, 8), (7, 1, 0)]
+    assert streamed[0] is None and streamed[2].port == 7 and streamed[2].data[0] == 7 and streamed[3] is None
+    takeoff = cf.link.sent[0].data
     assert struct.unpack("<BBff?f", takeoff) == (7, 0, 0.5, 0.0, True, 2.0)
 
 
@@ -64,15 +67,26 @@ def test_worker_setpoints_since_the_last_notify_need_another_one():
     sent[0] += 3                             # the worker sent cmd_vel setpoints
     assert commands.low_level_active
     commands.takeoff(0, 0.5, 2.0)
-    assert wire(cf) == [(7, 1, 0), (8, 0, 7), (8, 0, 8), (7, 1, 0), (8, 0, 7)]
+    assert wire(cf) == [(8, 0, 7), (7, 1, 0), (8, 0, 8), (8, 0, 7), (7, 1, 0)]
 
 
-def test_a_setpoint_sent_during_notify_gets_a_second_notify():
+def test_a_setpoint_that_goes_out_after_the_command_gets_the_command_again_after_notify():
+    """A setpoint already in the worker's hands went out after the command: in the firmware it stopped
+    the plan, so notify goes out again (the setpoint took the priority back) and the command once more."""
     cf = Crazyflie()
-    counts = iter([0, 1, 1, 1, 1, 1])        # one setpoint was already on its way when notify went out
+    counts = iter([0, 1, 1, 1, 1, 1])        # stop_stream: 0; then the setpoint has gone out
     commands = OnboardCommands(cf, lambda packet: True, lambda: False, "cf1", low_level_sent=lambda: next(counts))
     commands.takeoff(0, 0.5, 2.0)
-    assert wire(cf) == [(7, 1, 0), (7, 1, 0), (8, 0, 7)]
+    assert wire(cf) == [(8, 0, 7), (7, 1, 0), (8, 0, 7)]
+
+
+def test_a_relative_go_to_is_not_sent_twice():
+    """A relative go_to taken twice would fly twice the distance: it is not repeated."""
+    cf = Crazyflie()
+    counts = iter([0, 1, 1, 1, 1, 1])
+    commands = OnboardCommands(cf, lambda packet: True, lambda: False, "cf1", low_level_sent=lambda: next(counts))
+    commands.go_to(0, True, (0.5, 0.0, 0.0), 0.0, 2.0)
+    assert wire(cf) == [(8, 0, 12), (7, 1, 0)]
 
 
 def test_streaming_topics_become_port_7_packets_for_the_worker():
@@ -119,7 +133,7 @@ def test_upload_and_start_trajectory_and_bad_requests():
     commands.start_trajectory(0, 1, 1.0, False, True)
     assert cf.firmware.memory[:264] == b"".join(struct.pack("<33f", *([0.0] * 16 + [0.5] + [0.0] * 15 + [1.5]))
                                                 for _ in range(2))
-    assert wire(cf)[-3:] == [(8, 0, 6), (7, 1, 0), (8, 0, 13)]
+    assert wire(cf)[-3:] == [(8, 0, 6), (8, 0, 13), (7, 1, 0)]
     before = len(cf.link.sent)
     commands.cmd_position(0.0, 0.0, 0.5, 0.0)   # flying on low-level setpoints: a bad request must not
     #                                             hand control to the idle planner (motors off)

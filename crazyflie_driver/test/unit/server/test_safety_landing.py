@@ -227,12 +227,12 @@ def test_per_crazyflie_group_mask_that_does_not_address_it_is_refused_for_every_
     assert cf.link.sent == []
     commands.set_group_mask(6)
     commands.takeoff(2, 0.5, 2.0)
-    assert cf.link.sent[-1].data[:2] == bytes([7, 2])
+    assert [p for p in cf.link.sent if p.port == 8][-1].data[:2] == bytes([7, 2])     # notify follows it
     # a Crazyflie that kept its groups from an earlier session (read at connect)
     assert known_group_mask({"hlCommander.groupmask": 4}) == 4 and known_group_mask({}) == 0
     commands, cf, _, _ = observed(group_mask=4)
     commands.takeoff(4, 0.5, 2.0)
-    assert cf.link.sent[-1].data[:2] == bytes([7, 4])
+    assert [p for p in cf.link.sent if p.port == 8][-1].data[:2] == bytes([7, 4])
 
 
 def served(n: int = 1):
@@ -254,7 +254,7 @@ def test_a_group_mask_written_by_update_params_is_the_one_the_per_crazyflie_chec
         commands.takeoff(1, 0.5, 2.0)
     assert wire.link.sent == []
     commands.takeoff(2, 0.5, 2.0)
-    assert wire.link.sent[-1].data[:2] == bytes([7, 2])
+    assert [p for p in wire.link.sent if p.port == 8][-1].data[:2] == bytes([7, 2])   # notify follows it
     # whichever came last counts: set_group_mask, then a write again
     commands.set_group_mask(4)
     assert commands.group_mask == 4 and worker.param_values[GROUP_MASK_PARAM] == 4

@@ -80,21 +80,23 @@ class SwarmCommands:
                                 "landing's end" % (what, "; ".join("%s: %s" % r for r in refused[:3]),
                                                    ", ".join(name for name, _ in refused)))
 
-    def _hand_over(self, targets: Sequence[SwarmMember]) -> None:
-        """A Crazyflie whose low-level setpoints hold the priority ignores the high-level commander:
-        notify-setpoints-stop to each such one (unicast, acknowledged) before the broadcast."""
-        for m in targets:
-            if m.onboard.low_level_active and not m.worker.emergency_active:
-                try:
-                    m.onboard.notify_setpoints_stop(0)
-                except CrazyflieError as e:
-                    LOG.warning("%s: %s (the broadcast goes out anyway)", m.name, e)
-
     def _send(self, targets: Sequence[SwarmMember], broadcast: Callable[[], int], what: str = "",
               duration: float = 0.0) -> int:
+        """A Crazyflie whose low-level setpoints hold the priority ignores the high-level commander's
+        setpoints: its stream stops, the broadcast goes out (the firmware plans it meanwhile), then
+        notify-setpoints-stop (unicast, acknowledged) hands the priority to that plan. In this order
+        no tick of an idle planner (its null setpoint stops the motors) falls in between."""
         with self._lock:
-            self._hand_over(targets)
+            handing = [m for m in targets if m.onboard.low_level_active and not m.worker.emergency_active]
+            since = {m.name: m.onboard.stop_stream() for m in handing}
             sent = broadcast()
+            for m in handing:
+                try:
+                    if m.onboard.hand_over(since[m.name]):
+                        LOG.warning("%s: a low-level setpoint went out after the %s broadcast and may have "
+                                    "stopped its plan: send %s to it again", m.name, what or "command", what)
+                except CrazyflieError as e:
+                    LOG.warning("%s: %s (the %s broadcast went out)", m.name, e, what or "command")
         if self._observe is not None and what:
             self._observe(targets, what, duration)
         return sent

@@ -20,13 +20,27 @@ URIS = ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702", "radio://1/9
 
 
 class Onboard:
-    def __init__(self, mask=0):
+    """``on_air()`` counts the broadcasts on the air, to tell whether notify went out after them."""
+
+    def __init__(self, mask=0, on_air=lambda: 0):
         self.group_mask = mask
         self.low_level_active = True
         self.notified = 0
+        self.stopped = 0
+        self.notified_after = []        # broadcasts on the air at each notify
+        self.on_air = on_air
+
+    def stop_stream(self):
+        self.stopped += 1
+        return 0
+
+    def hand_over(self, since):
+        self.notify_setpoints_stop(0)
+        return False
 
     def notify_setpoints_stop(self, remain_valid_ms=0):
         self.notified += 1
+        self.notified_after.append(self.on_air())
         self.low_level_active = False
 
 
@@ -57,8 +71,8 @@ def swarm(masks=(0, 1, 2)):
     backend = FakeUsbBackend(medium, dongles=2, timing=DongleTiming.instant())
     bc = SwarmBroadcaster(URIS, 12, RadioManager(backend), repeats=2, sleep=FakeClock().sleep)
     bc.open()
-    members = [SwarmMember("cf%d" % (i + 1), uri, Worker(), Onboard(mask)) for i, (uri, mask) in
-               enumerate(zip(URIS, masks))]
+    members = [SwarmMember("cf%d" % (i + 1), uri, Worker(), Onboard(mask, lambda: len(broadcasts(medium))))
+               for i, (uri, mask) in enumerate(zip(URIS, masks))]
     return SwarmCommands(lambda: members, bc), members, medium
 
 
@@ -70,7 +84,9 @@ def test_group_rule_is_the_firmware_one():
     assert in_groups(0, 0) and in_groups(3, 0) and in_groups(3, 2) and not in_groups(0, 1) and not in_groups(4, 3)
 
 
-def test_takeoff_with_a_group_mask_hands_over_only_the_addressed_then_broadcasts_on_every_radio():
+def test_takeoff_with_a_group_mask_broadcasts_on_every_radio_then_hands_over_only_the_addressed():
+    """Notify-setpoints-stop goes out after the broadcast: the plan is there when the priority comes
+    back, so no tick of an idle planner (motors off) falls in between."""
     commands, members, medium = swarm()
     assert [m.name for m in commands.targets(1)] == ["cf2"]
     assert commands.takeoff(1, 0.5, 2.0) == 4
@@ -78,8 +94,10 @@ def test_takeoff_with_a_group_mask_hands_over_only_the_addressed_then_broadcasts
     assert sorted((t.dongle, t.channel) for t in sent) == [(0, 80), (0, 80), (1, 90), (1, 90)]
     assert {t.data for t in sent} == {bytes([0x8C]) + struct.pack("<BBff?f", 7, 1, 0.5, 0.0, True, 2.0)}
     assert [m.onboard.notified for m in members] == [0, 1, 0]
+    assert members[1].onboard.stopped == 1 and members[1].onboard.notified_after == [4]
     commands.land(0, 0.0, 2.0)
     assert [m.onboard.notified for m in members] == [1, 1, 1]
+    assert members[0].onboard.notified_after == [8]
 
 
 def test_go_to_is_relative_and_start_trajectory_needs_the_trajectory_on_every_addressed_crazyflie():

@@ -194,6 +194,42 @@ def test_notify_hands_over_at_the_planners_next_tick_and_go_to_starts_at_the_est
     assert lowest > 0 and np.linalg.norm(rig.truth() - (1.0, 0.0, 0.5)) < 0.05
 
 
+def test_a_land_planned_before_notify_takes_over_without_an_idle_tick_however_late_notify_is():
+    """The order the host uses: the land goes out while the last streamed setpoint still holds the
+    priority (planned, its setpoints lose), notify follows; here 50 ms later, five planner ticks. The
+    motors never stop on the way down. Notify first and the land 50 ms later: the idle planner's null
+    setpoint stops the motors in the air."""
+    for land_first in (True, False):
+        rig = Rig()
+        rig.position_setpoint(0.0, 0.0, 0.6)
+        rig.fly(3.0)
+        rig.setpoint = None
+        land = struct.pack("<BBff?f", 8, 0, 0.0, 0.0, False, 1.5)
+        if land_first:
+            assert hl(rig, land)[-1] == 0
+        else:
+            notify(rig)
+        lowest = np.inf
+        for _ in range(5):
+            rig.fly(0.01)
+            lowest = min(lowest, rig.vehicle.motors().min())
+        if land_first:
+            notify(rig)
+        else:
+            assert hl(rig, land)[-1] == 0
+        in_the_air = np.inf                     # the lowest motor command while above 0.2 m
+        for _ in range(150):
+            rig.fly(0.01)
+            if rig.truth()[2] > 0.2:
+                in_the_air = min(in_the_air, rig.vehicle.motors().min())
+        if land_first:
+            assert lowest > 0 and in_the_air > 0
+            rig.fly(1.0)
+            assert rig.truth()[2] < 0.02 and rig.vehicle.lock_reason == ""
+        else:
+            assert lowest == 0                                                   # stopped in the air
+
+
 def figure_eight_pieces():
     """Two pieces drawing an ellipse-like loop at 0.5 m: enough to test upload and playback."""
     pieces = []
