@@ -10,7 +10,7 @@
    the socket read returning to the messages being serialised (median, p99), and from the
    server's header timestamp to the same point (adds the server and the kernel).
 
-Run: PYTHONPATH=crazyflie_driver/src /usr/bin/python3 bench/bench_vrpn.py  (writes bench/results/vrpn.txt)
+Run: /usr/bin/python3 bench/bench_vrpn.py  (writes bench/results/vrpn.txt)
 """
 from __future__ import annotations
 

@@ -15,7 +15,6 @@ Private params: ``sim_address``, ``measure_s`` (seconds of world time to count o
 """
 from __future__ import annotations
 
-import os
 import statistics
 import sys
 import threading
@@ -27,9 +26,7 @@ import rospy
 import rostest
 
 from crazyflie_driver.msg import GenericLogData
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, wait_until
 
 NAME = "crazyflie"
 PERIOD_MS = {"log1": 10, "log2": 100}         # as customLogBlocks.launch asks

@@ -4,7 +4,6 @@ the motors at once, the vehicle falls to the floor and stays there although the 
 controller keeps publishing cmd_vel. Judged by the simulated vehicle's motors and position."""
 from __future__ import annotations
 
-import os
 import sys
 import time
 import unittest
@@ -14,8 +13,7 @@ import rostest
 from geometry_msgs.msg import Twist
 from std_srvs.srv import Empty
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, wait_until
 
 NAME = "crazyflie"
 

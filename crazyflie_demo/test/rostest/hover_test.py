@@ -13,7 +13,6 @@ an older) stamp (tf2's TF_REPEATED_DATA), and the world's real-time status must 
 """
 from __future__ import annotations
 
-import os
 import sys
 import unittest
 
@@ -25,8 +24,7 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 from rosgraph_msgs.msg import Log
 from tf2_msgs.msg import TFMessage
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, hold_errors, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, hold_errors, wait_until
 
 
 class Hover(unittest.TestCase):

@@ -8,7 +8,6 @@ thrust 0..60000 and yaw rate +-200 deg/s. Unplugging the joystick must zero cmd_
 from __future__ import annotations
 
 import math
-import os
 import sys
 import threading
 import time
@@ -21,9 +20,7 @@ from geometry_msgs.msg import Twist
 
 from crazyflie_demo.fake_joystick import FakeJoystick
 from crazyflie_demo.joystick import scale_axis
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import inbound_connected, wait_until  # noqa: E402
+from support.flight_support import inbound_connected, wait_until
 
 UP, DOWN, LEFT, RIGHT = -32767, 32767, -32767, 32767
 Fields = Tuple[float, float, float, float]    # linear.x, linear.y, linear.z, angular.z

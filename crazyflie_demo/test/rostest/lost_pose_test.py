@@ -6,7 +6,6 @@ was, not fly away, and end with its motors stopped. Judged by the world's true s
 from __future__ import annotations
 
 import math
-import os
 import sys
 import threading
 import time
@@ -17,8 +16,7 @@ import rostest
 import rostopic
 from std_srvs.srv import SetBool
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import Track, WorldProbe, wait_until  # noqa: E402
+from support.flight_support import Track, WorldProbe, wait_until
 
 NAME = "crazyflie"
 HOVER = (0.0, 0.0, 0.5)

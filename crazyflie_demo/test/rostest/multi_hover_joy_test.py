@@ -10,7 +10,6 @@ Private params: ``sim_address``, ``joy_dev`` (the FIFO), ``vehicles`` = [{name, 
 """
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -22,9 +21,7 @@ from sensor_msgs.msg import Joy
 from std_msgs.msg import String
 
 from crazyflie_demo.fake_joystick import FakeJoystick
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, inbound_connected, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, inbound_connected, wait_until
 
 TAKEOFF, EMERGENCY = 2, 1            # the chapter's buttons
 EMERGENCY_STATUS = "Idle: emergency stop: restart and re-add the Crazyflie to fly"

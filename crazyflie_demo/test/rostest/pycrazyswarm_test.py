@@ -25,10 +25,9 @@ import numpy as np
 import rospy
 import rostest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from crazyflie_driver.nodes.ros_signals import init_node  # noqa: E402
-from support.flight_support import Track, WorldProbe  # noqa: E402
-from uav_trajectory import Trajectory  # noqa: E402
+from crazyflie_driver.nodes.ros_signals import init_node
+from support.flight_support import Track, WorldProbe
+from uav_trajectory import Trajectory
 
 SCRIPTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "pycrazyswarm_scripts", "scripts")
 CRAZYSWARM2_DIR = os.path.join(SCRIPTS, "..", "crazyswarm2", "launch")    # crazyflies.yaml in Crazyswarm2's form

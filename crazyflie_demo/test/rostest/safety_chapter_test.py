@@ -26,8 +26,7 @@ from rosgraph_msgs.msg import Log
 from std_msgs.msg import String
 from std_srvs.srv import Empty
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import Track, WorldProbe, distance, wait_until  # noqa: E402
+from support.flight_support import Track, WorldProbe, distance, wait_until
 
 #: Fastest descent the reaction may reach (m/s): twice its 0.3 m/s rate plus the hover-thrust
 #: estimate's error; the firmware's 2 s cut at 0.5 m hits the floor at about 3 m/s.

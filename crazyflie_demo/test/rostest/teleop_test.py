@@ -27,8 +27,7 @@ import rospy
 import rostest
 from sensor_msgs.msg import Joy
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, wait_until
 
 NAME = "crazyflie"
 JS_EVENT_BUTTON, JS_EVENT_AXIS, JS_EVENT_INIT = 0x01, 0x02, 0x80

@@ -12,7 +12,6 @@ Private params: ``sim_address``, ``joy_dev`` (the FIFO), ``deadzone`` (the joy n
 """
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -25,9 +24,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Joy
 
 from crazyflie_demo.fake_joystick import FakeJoystick
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import WorldProbe, distance, inbound_connected, wait_until  # noqa: E402
+from support.flight_support import WorldProbe, distance, inbound_connected, wait_until
 
 NAME = "crazyflie"
 START = (0.0, 0.0, 0.5)

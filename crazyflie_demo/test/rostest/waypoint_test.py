@@ -12,7 +12,6 @@ arrival comes a mocap latency and a demo loop later.) Private params: ``sim_addr
 """
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -23,8 +22,7 @@ import rostest
 from geometry_msgs.msg import PointStamped
 from std_msgs.msg import Bool, Int32
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.flight_support import Track, WorldProbe, distance, wait_until  # noqa: E402
+from support.flight_support import Track, WorldProbe, distance, wait_until
 
 #: The demo's tolerance per axis [m].
 TOLERANCE = 0.3

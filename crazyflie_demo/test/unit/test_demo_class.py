@@ -17,9 +17,8 @@ IMPORT_ONLY = "from demo import Demo; d = Demo([[0, 0, 0.5, 0, 2]]); print(type(
 
 def _import_from(directory: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9")   # nothing listens there
-    return subprocess.run([sys.executable, "-c", "import sys; sys.path.insert(0, %r); %s" % (directory, IMPORT_ONLY)],
-                          env=env, capture_output=True, text=True,
-                          timeout=30)
+    return subprocess.run([sys.executable, "-c", IMPORT_ONLY], cwd=directory,      # as a user runs it from there
+                          env=env, capture_output=True, text=True, timeout=30)
 
 
 def test_import_and_construct_without_a_master():

@@ -3,8 +3,6 @@
 packets on the radio than the same Crazyflie with imu on (both judged on the world's truth)."""
 from __future__ import annotations
 
-import os
-import sys
 import unittest
 
 import rospy
@@ -14,9 +12,7 @@ from std_msgs.msg import Float32
 
 from crazyflie_driver.msg import crtpPacket
 from crazyflie_driver.srv import sendPacket
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until  # noqa: E402
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until
 
 ON, OFF = "radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702"
 IMU_VARIABLES = {"acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z"}

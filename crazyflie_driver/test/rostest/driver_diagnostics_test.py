@@ -6,7 +6,6 @@ counted), and OK again once cleared. Only messages whose counting window began a
 judged: the window is host time, stamp - window [s] > the moment of the change."""
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import unittest
@@ -17,9 +16,7 @@ import rostest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 from crazyflie_driver.server.diagnostics import ack_ratio_tolerance
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import start_test_node, wait_until  # noqa: E402
+from support.rostest_support import start_test_node, wait_until
 
 NAMES = ("crazyflie1", "crazyflie2")
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR

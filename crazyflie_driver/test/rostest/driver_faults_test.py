@@ -2,7 +2,6 @@
 """Faults never take the server down and never disturb the other Crazyflies."""
 from __future__ import annotations
 
-import os
 import sys
 import time
 import unittest
@@ -14,9 +13,7 @@ from sensor_msgs.msg import Imu
 
 from crazyflie_driver.msg import LogBlock
 from crazyflie_driver.srv import AddCrazyflie, AddCrazyflieRequest, UpdateParams
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, rates_per_world_second, start_test_node, wait_until  # noqa: E402
+from support.rostest_support import RosoutRecorder, TopicRecorder, rates_per_world_second, start_test_node, wait_until
 
 NAMES = ("crazyflie1", "crazyflie2", "crazyflie3")
 

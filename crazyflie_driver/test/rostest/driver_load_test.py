@@ -3,7 +3,6 @@
 server says about its data (rates, ages, the Crazyflies' transmit queues) is true."""
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -16,8 +15,7 @@ from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_served, wait_until  # noqa: E402
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_served, wait_until
 
 NAMES = ["cf%d" % i for i in range(1, 13)]
 

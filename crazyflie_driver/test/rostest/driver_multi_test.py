@@ -2,7 +2,6 @@
 """Three Crazyflies, two dongles: every one served at full rate, each cmd_vel reaches only its own."""
 from __future__ import annotations
 
-import os
 import sys
 import time
 import unittest
@@ -13,8 +12,7 @@ import tf2_ros
 from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Imu
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_connected, wait_until  # noqa: E402
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_connected, wait_until
 
 CRAZYFLIES = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702",
               "crazyflie3": "radio://1/90/2M/E7E7E7E703"}

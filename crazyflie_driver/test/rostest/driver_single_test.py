@@ -2,7 +2,6 @@
 """One simulated Crazyflie behind crazyflie_server: topics, rates, params, cmd_vel, custom logs, emergency."""
 from __future__ import annotations
 
-import os
 import statistics
 import sys
 import time
@@ -17,9 +16,7 @@ from std_srvs.srv import Empty
 
 from crazyflie_driver.msg import GenericLogData
 from crazyflie_driver.srv import UpdateParams
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until, world_window  # noqa: E402
+from support.rostest_support import TopicRecorder, rates_per_world_second, start_test_node, wait_until, world_window
 
 NS = "/crazyflie1"
 

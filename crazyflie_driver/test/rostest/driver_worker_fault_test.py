@@ -3,7 +3,6 @@
 the worker restarts and flies on; an error that keeps coming removes the Crazyflie."""
 from __future__ import annotations
 
-import os
 import sys
 import unittest
 
@@ -14,9 +13,7 @@ from geometry_msgs.msg import Twist
 
 from crazyflie_driver.nodes.crazyflie_server import start_server
 from crazyflie_driver.srv import AddCrazyflieRequest
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (  # noqa: E402
+from support.rostest_support import (
     Repeating,
     TopicRecorder,
     add_crazyflies,

@@ -6,7 +6,6 @@ mocap loop feeds the world's true position to ``external_position``."""
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import unittest
@@ -17,9 +16,7 @@ from geometry_msgs.msg import PointStamped, Twist
 
 from crazyflie_driver.msg import TrajectoryPolynomialPiece
 from crazyflie_driver.srv import GoTo, Land, StartTrajectory, Takeoff, UpdateParams, UploadTrajectory
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import Repeating, start_test_node, wait_connected, wait_until  # noqa: E402
+from support.rostest_support import Repeating, start_test_node, wait_connected, wait_until
 
 NS = "/crazyflie1"
 MOCAP_PERIOD_S = 0.02

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import codecs
 import math
-import os
 import random
 import sys
 import time
@@ -46,9 +45,7 @@ from crazyflie_driver.srv import (
     UpdateParams,
     UploadTrajectory,
 )
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import (  # noqa: E402
+from support.rostest_support import (
     RosoutRecorder,
     TopicRecorder,
     add_crazyflies,

@@ -5,7 +5,6 @@ a clear error while the server keeps serving."""
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import unittest
@@ -18,9 +17,7 @@ from std_msgs.msg import Empty as EmptyMsg
 
 from crazyflie_driver.msg import FullState, GenericLogData, Hover, Position, TrajectoryPolynomialPiece, VelocityWorld
 from crazyflie_driver.srv import GoTo, StartTrajectory, UpdateParams, UploadTrajectory
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, start_test_node, wait_until  # noqa: E402
+from support.rostest_support import TopicRecorder, start_test_node, wait_until
 
 NS = "/crazyflie1"
 SERVICES = {"takeoff": "Takeoff", "land": "Land", "stop": "Stop", "go_to": "GoTo",

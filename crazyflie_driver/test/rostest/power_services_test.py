@@ -12,8 +12,6 @@ simulated firmware holds the written block, a bad channel is refused and changes
 from __future__ import annotations
 
 import math
-import os
-import sys
 import time
 import unittest
 
@@ -23,10 +21,9 @@ from geometry_msgs.msg import PointStamped
 from std_msgs.msg import Float32
 from std_srvs.srv import Empty
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
-from crazyflie_driver.srv import Arm, Land, ReadConfig, Stop, Takeoff, UpdateParams, WriteConfig  # noqa: E402
-from support.rostest_support import Repeating, TopicRecorder, start_test_node, wait_connected, wait_until  # noqa: E402
+from crazyflie_driver.sim.world_clock import WorldClock
+from crazyflie_driver.srv import Arm, Land, ReadConfig, Stop, Takeoff, UpdateParams, WriteConfig
+from support.rostest_support import Repeating, TopicRecorder, start_test_node, wait_connected, wait_until
 
 URIS = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://0/80/2M/E7E7E7E702"}
 PARAM = "ring.headlightEnable"

@@ -10,7 +10,6 @@ although the pilot's cmd_vel kept asking for thrust all along.
 """
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -25,9 +24,8 @@ from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float32
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
-from support.rostest_support import RosoutRecorder, TopicRecorder, start_test_node, wait_until  # noqa: E402
+from crazyflie_driver.sim.world_clock import WorldClock
+from support.rostest_support import RosoutRecorder, TopicRecorder, start_test_node, wait_until
 
 URI = "radio://0/80/2M/E7E7E7E701"
 THRUST = 42000            # counts: climbs (a hover needs about 36 300)

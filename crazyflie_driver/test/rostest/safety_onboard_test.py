@@ -17,7 +17,6 @@ Each Crazyflie flies by streamed ``cmd_position`` setpoints with the Kalman esti
 """
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -31,9 +30,7 @@ from geometry_msgs.msg import PointStamped
 from crazyflie_driver.msg import Position
 from crazyflie_driver.sim.world_clock import WorldClock
 from crazyflie_driver.srv import GoTo, RemoveCrazyflie, UpdateParams
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world  # noqa: E402
+from support.rostest_support import RosoutRecorder, TopicRecorder, wait_for_crazyflie, wait_until, world
 
 URIS = {"crazyflie1": "radio://0/80/2M/E7E7E7E701", "crazyflie2": "radio://1/90/2M/E7E7E7E702",
         "crazyflie3": "radio://1/90/2M/E7E7E7E703", "crazyflie4": "radio://0/80/2M/E7E7E7E704"}

@@ -4,7 +4,6 @@ and the stack sees them: the battery topic, the link statistics, the link state,
 the injected-faults entry of /diagnostics."""
 from __future__ import annotations
 
-import os
 import sys
 import time
 import unittest
@@ -16,9 +15,7 @@ from geometry_msgs.msg import TransformStamped
 from std_msgs.msg import Float32
 
 from crazyflie_driver.srv import InjectFault
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, start_test_node, wait_until, world_window  # noqa: E402
+from support.rostest_support import TopicRecorder, start_test_node, wait_until, world_window
 
 NAMES = ("crazyflie1", "crazyflie2")
 

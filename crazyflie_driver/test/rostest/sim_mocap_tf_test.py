@@ -2,7 +2,6 @@
 """crazyflie_sim_node's /tf and /diagnostics: see sim_mocap_tf.test."""
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -13,9 +12,8 @@ import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 from tf2_msgs.msg import TFMessage
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from crazyflie_driver.mocap.vrpn_client import VrpnClient  # noqa: E402
-from support.rostest_support import wait_until, world, world_window  # noqa: E402
+from crazyflie_driver.mocap.vrpn_client import VrpnClient
+from support.rostest_support import wait_until, world, world_window
 
 NAMES = ("cf1", "cf2", "cf3")
 CHILDREN = tuple("vicon/%s/%s" % (n, n) for n in NAMES) + NAMES

@@ -6,7 +6,6 @@ hovering, stops all on /emergency, and flies them again after /all/reboot."""
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import unittest
@@ -19,9 +18,7 @@ from geometry_msgs.msg import PoseStamped
 from std_srvs.srv import Empty, SetBool
 
 from crazyflie_driver.srv import GoTo, Land, Takeoff, UpdateParams
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, wait_until, world  # noqa: E402
+from support.rostest_support import RosoutRecorder, TopicRecorder, wait_until, world
 
 HEIGHT = 0.5
 TOL = 0.05          # m from the hover point

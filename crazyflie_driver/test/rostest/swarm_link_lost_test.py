@@ -9,7 +9,6 @@ ghost's Crazyflie goes stale and is landed."""
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import unittest
@@ -22,9 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from crazyflie_driver.server.swarm.heartbeat import PERIOD_S as KEEPALIVE_S  # the server's keep-alive period
 from crazyflie_driver.sim.air.faults import parse_command
 from crazyflie_driver.srv import Takeoff
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import RosoutRecorder, TopicRecorder, wait_until, world  # noqa: E402
+from support.rostest_support import RosoutRecorder, TopicRecorder, wait_until, world
 
 HEIGHT = 0.5
 TOL = 0.05              # m from the hover point

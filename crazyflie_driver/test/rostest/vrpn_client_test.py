@@ -4,7 +4,6 @@ converted to Z-up, tf, tracker name cleaning, staleness on /diagnostics, server 
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import unittest
@@ -16,9 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped
 
 from crazyflie_driver.mocap.vrpn_server import VrpnTestServer
-
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from support.rostest_support import TopicRecorder, wait_until  # noqa: E402
+from support.rostest_support import TopicRecorder, wait_until
 
 YAW = math.radians(40.0)
 TRUTH_Q = (0.0, 0.0, math.sin(YAW / 2), math.cos(YAW / 2))     # Z-up truth, streamed Y-up

@@ -7,8 +7,6 @@ wall second (both publish them from a 1 s ROS timer, which would stop without /c
 """
 from __future__ import annotations
 
-import os
-import sys
 import threading
 import time
 import unittest
@@ -17,10 +15,9 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from crazyflie_driver.clock import WALL  # noqa: E402
-from crazyflie_driver.nodes.ros_clock import ros_clock, uses_sim_time  # noqa: E402
-from support.rostest_support import start_test_node, wait_until  # noqa: E402
+from crazyflie_driver.clock import WALL
+from crazyflie_driver.nodes.ros_clock import ros_clock, uses_sim_time
+from support.rostest_support import start_test_node, wait_until
 
 SOURCES = {"server": "crazyflie_server: crazyflie1", "controller": "crazyflie1/controller: "}
 WINDOW_S = 5.0            # wall seconds over which the diagnostics are counted

@@ -10,7 +10,6 @@ Crazyflie flew again: never for the locked one (its later thrust does nothing), 
 """
 from __future__ import annotations
 
-import os
 import sys
 import unittest
 
@@ -20,9 +19,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Twist
 from rosgraph_msgs.msg import Log
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))  # test/: the support package
-from crazyflie_driver.sim.world_clock import WorldClock  # noqa: E402
-from support.rostest_support import (  # noqa: E402
+from crazyflie_driver.sim.world_clock import WorldClock
+from support.rostest_support import (
     Repeating,
     RosoutRecorder,
     TopicRecorder,

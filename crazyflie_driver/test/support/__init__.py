@@ -1,1 +1,1 @@
-"""What the tests of crazyflie_driver share: doubles, the cflib find patch, rostest helpers."""
+"""What the tests of every package share: doubles, the cflib find patch, rostest and flight helpers."""

@@ -1,19 +1,16 @@
 """Run by cflib's interpreter: cflib 0.1.34, unmodified, scans and connects usb://0, a simulated
-Crazyflie on the fake USB cable (in this process), and prints what it read as JSON."""
+Crazyflie on the fake USB cable (in this process), and prints what it read as JSON. Imports our
+package and ``support`` from the PYTHONPATH of the sourced devel space, which it inherits."""
 from __future__ import annotations
 
 import json
-import pathlib
 import sys
 import tempfile
 
-TEST = pathlib.Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(TEST.parent / "src"), str(TEST)]
-
-from crazyflie_driver.sim.air.dongle_timing import DongleTiming  # noqa: E402
-from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend  # noqa: E402
-from support.cflib_find_patch import install_find_patch  # noqa: E402
-from support.radio_rig import RadioRig  # noqa: E402
+from crazyflie_driver.sim.air.dongle_timing import DongleTiming
+from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
+from support.cflib_find_patch import install_find_patch
+from support.radio_rig import RadioRig
 
 
 def main() -> int:

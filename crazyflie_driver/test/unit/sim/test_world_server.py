@@ -21,7 +21,6 @@ URI2 = "radio://0/80/2M/E7E7E7E702"
 A1 = bytes.fromhex("E7E7E7E701")
 A2 = bytes.fromhex("E7E7E7E702")
 TEST = pathlib.Path(__file__).resolve().parents[2]        # crazyflie_driver/test
-SRC = TEST.parent / "src"
 
 
 @pytest.fixture
@@ -185,7 +184,6 @@ def test_cli_refuses_bad_arguments(capsys):
 
 _LAUNCHER = """
 import sys, types
-sys.path[:0] = [{src!r}, {test!r}]
 from support import sim_doubles
 mod = types.ModuleType("crazyflie_driver.sim.room.world")
 class World(sim_doubles.FakeWorld):
@@ -200,8 +198,7 @@ sys.exit(main(sys.argv[1:]))
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_cli_serves_and_stops_cleanly_on_signals(sig):
-    code = _LAUNCHER.format(src=str(SRC), test=str(TEST))
-    proc = subprocess.Popen([sys.executable, "-c", code, "--uri", URI1, "--uri", URI2, "--address", "127.0.0.1:0",
+    proc = subprocess.Popen([sys.executable, "-c", _LAUNCHER, "--uri", URI1, "--uri", URI2, "--address", "127.0.0.1:0",
                              "--udp", "--dongles", "2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

@@ -126,9 +126,8 @@ def test_schedstat_of_this_process_and_its_siblings_can_be_read():
     assert os.getpid() not in sibling_pids()
     node = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(10)"])     # a node of the launch
     try:
-        src = os.path.dirname(pacing.__file__.rsplit("/sim/", 1)[0])          # .../src
-        world = subprocess.run([sys.executable, "-c", "import sys; sys.path.insert(0, %r); from crazyflie_driver.sim."
-                                "room.pacing import sibling_pids; print(sibling_pids())" % src],
+        world = subprocess.run([sys.executable, "-c", "from crazyflie_driver.sim.room.pacing import sibling_pids; "
+                                "print(sibling_pids())"],
                                capture_output=True, text=True, timeout=20)
         assert node.pid in eval(world.stdout)          # the world sees the launch's other node as host
     finally:

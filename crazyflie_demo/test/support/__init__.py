@@ -1,1 +1,0 @@
-"""What the rostests of crazyflie_demo share: the world probe, tracks and waits."""
