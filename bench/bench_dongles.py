@@ -30,7 +30,7 @@ import struct
 import sys
 import threading
 import time
-from typing import List
+from typing import Dict, List, Tuple
 
 import bench_support as bs
 from bench_support import IdleVehicle
@@ -84,40 +84,13 @@ def channel_of(i: int, spread: bool) -> int:
 
 
 def run_case(model: str, n: int, spread: bool, seconds: float, clock) -> dict:
-    medium = LocalMedium(dongles=1, seed=1)
-    sims = []
-    for i in range(n):
-        cf = SimulatedCrazyflie(bytes([0xE7, 0xE7, 0xE7, 0xE7, i + 1]), IdleVehicle())
-        medium.add_crazyflie(cf, channel_of(i, spread), 2)
-        sims.append(cf)
-    backend = FakeUsbBackend(medium, dongles=1, model=model, clock=clock)
-    manager = RadioManager(backend=backend)
-    links = [RadioLink("radio://0/%d/2M/E7E7E7E7%02X" % (channel_of(i, spread), i + 1), manager) for i in range(n)]
-    for link in links:
-        link.open()
-    assert all(link.safelink for link in links), "safelink was not negotiated"
+    backend, links = open_links(model, n, spread, clock)
     counts: List[int] = [0] * n
     pings: List[List[float]] = [[] for _ in range(n)]
     phase = {"name": "throughput"}
     stop = threading.Event()
-
-    def worker(i: int) -> None:
-        link = links[i]
-        seq = 0
-        while not stop.is_set():
-            if phase["name"] == "throughput":
-                if link.send_bytes(SETPOINT):
-                    counts[i] += 1
-                continue
-            seq = (seq + 1) & 0xFFFF
-            tag = struct.pack("<HB", seq, i)
-            t0 = clock.time()
-            link.request(CRTPPacket(ECHO_PORT, 0, tag),
-                         lambda p, tag=tag: p.port == ECHO_PORT and p.channel == 0 and p.data == tag,
-                         timeout=1.0, what="echo")
-            pings[i].append(clock.time() - t0)
-
-    threads = [threading.Thread(target=worker, args=(i,), daemon=True) for i in range(n)]
+    threads = [threading.Thread(target=drive_link, args=(links[i], i, clock, phase, stop, counts, pings), daemon=True)
+               for i in range(n)]
     for t in threads:
         t.start()
     wait_for(clock, WARMUP_S)
@@ -136,12 +109,52 @@ def run_case(model: str, n: int, spread: bool, seconds: float, clock) -> dict:
         t.join(5.0)
     for link in links:
         link.close()
-    elapsed = t1 - t0
-    per_cf = [(b - a) / elapsed for a, b in zip(c0, c1)]
-    packets = sum(c1) - sum(c0)
-    all_pings = sorted(x for p in measured for x in p)
-    return {"rate_cf": sum(per_cf) / n, "rate_min": min(per_cf), "rate": packets / elapsed,
-            "ctrl_per_packet": (ctrl1 - ctrl0) / packets if packets else float("nan"),
+    return case_figures(c0, c1, t1 - t0, ctrl1 - ctrl0, measured)
+
+
+def open_links(model: str, n: int, spread: bool, clock) -> Tuple[FakeUsbBackend, List[RadioLink]]:
+    """``n`` simulated Crazyflies behind one fake dongle of ``model``, a safelink ``RadioLink`` open to each."""
+    medium = LocalMedium(dongles=1, seed=1)
+    for i in range(n):
+        cf = SimulatedCrazyflie(bytes([0xE7, 0xE7, 0xE7, 0xE7, i + 1]), IdleVehicle())
+        medium.add_crazyflie(cf, channel_of(i, spread), 2)
+    backend = FakeUsbBackend(medium, dongles=1, model=model, clock=clock)
+    manager = RadioManager(backend=backend)
+    links = [RadioLink("radio://0/%d/2M/E7E7E7E7%02X" % (channel_of(i, spread), i + 1), manager) for i in range(n)]
+    for link in links:
+        link.open()
+    assert all(link.safelink for link in links), "safelink was not negotiated"
+    return backend, links
+
+
+def drive_link(link: RadioLink, i: int, clock, phase: Dict[str, str], stop: threading.Event, counts: List[int],
+               pings: List[List[float]]) -> None:
+    """One Crazyflie's thread: setpoints as fast as the dongle takes them (counted in ``counts[i]``) while
+    ``phase`` is "throughput", then echo round trips (their times in ``pings[i]``), until ``stop``."""
+    seq = 0
+    while not stop.is_set():
+        if phase["name"] == "throughput":
+            if link.send_bytes(SETPOINT):
+                counts[i] += 1
+            continue
+        seq = (seq + 1) & 0xFFFF
+        tag = struct.pack("<HB", seq, i)
+        t0 = clock.time()
+        link.request(CRTPPacket(ECHO_PORT, 0, tag),
+                     lambda p, tag=tag: p.port == ECHO_PORT and p.channel == 0 and p.data == tag,
+                     timeout=1.0, what="echo")
+        pings[i].append(clock.time() - t0)
+
+
+def case_figures(before: List[int], after: List[int], elapsed: float, control_transfers: int,
+                 pings: List[List[float]]) -> dict:
+    """A case's row from the setpoint counts per Crazyflie at the start and the end of ``elapsed`` s, the
+    dongle's control transfers meanwhile, and the echo round trips (s) of each Crazyflie."""
+    per_cf = [(b - a) / elapsed for a, b in zip(before, after)]
+    packets = sum(after) - sum(before)
+    all_pings = sorted(x for p in pings for x in p)
+    return {"rate_cf": sum(per_cf) / len(per_cf), "rate_min": min(per_cf), "rate": packets / elapsed,
+            "ctrl_per_packet": control_transfers / packets if packets else float("nan"),
             "ping_ms": 1000.0 * statistics.median(all_pings) if all_pings else float("nan"),
             "ping_p90_ms": 1000.0 * all_pings[int(0.9 * (len(all_pings) - 1))] if all_pings else float("nan")}
 

@@ -21,24 +21,29 @@ First, the Crazyflie level, one Crazyflie, timing model off: host CPU per RPYT s
 ``Crazyflie.send_setpoint`` (value checks, packet building, ``RadioLink``, the dongle, the simulated
 firmware) beside Bitcraze's cflib doing the same in the same run (``bench_radio_cflib.py``, run with
 cflib's interpreter: ``.ws/cflib-venv``, or $CFLIB_PYTHON). Both count the setpoints the simulated
-commander received and the CPU time of the whole process.
+commander received and the CPU time of the whole process, on the same fake dongle and idle simulated
+Crazyflie with the timing model off, and start after connecting (cflib: once its parameter values are
+in). They alternate (``--rounds``, ours then cflib's in each), so that both see the same load of a
+shared machine; the medians are compared.
 
 The path measured is the real one from ``RadioLink.send_bytes`` down: safelink bits, ``SharedRadio``,
 ``Crazyradio`` (pyusb ``write``/``read``, vendor requests), the fake pyusb backend, ``LocalMedium`` and the
 simulated nRF + commander port of ``SimulatedCrazyflie`` (a vehicle that does nothing, so physics does
 not enter the figures), all in this process. Usage:
-    /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--modes none] [--out FILE]
+    /usr/bin/python3 bench/bench_radio.py [--seconds 2] [--rounds 3] [--modes none] [--out FILE]
 """
 from __future__ import annotations
 
 import json
+import math
 import os
+import statistics
 import struct
 import subprocess
 import sys
 import threading
 import time
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import bench_support as bs
 from bench_support import IdleVehicle
@@ -70,16 +75,17 @@ def crazyflie_level(seconds: float) -> dict:
         end = time.monotonic() + WARMUP_S
         while time.monotonic() < end:
             send(0.0, 0.0, 0.0, 0)
-        s0, cpu0, t0 = sim.state.setpoints, time.process_time(), time.monotonic()
+        s0, r0, cpu0, t0 = sim.state.setpoints, sim.state.rx_unicast, time.process_time(), time.monotonic()
         end = t0 + seconds
         while time.monotonic() < end:
             for _ in range(100):
                 send(0.0, 0.0, 0.0, 0)
-        s1, cpu1, t1 = sim.state.setpoints, time.process_time(), time.monotonic()
+        s1, r1, cpu1, t1 = sim.state.setpoints, sim.state.rx_unicast, time.process_time(), time.monotonic()
     finally:
         cf.close()
     setpoints = s1 - s0
-    return {"setpoints": setpoints, "seconds": t1 - t0, "cpu_us": 1e6 * (cpu1 - cpu0) / setpoints}
+    return {"setpoints": setpoints, "seconds": t1 - t0, "cpu_us": 1e6 * (cpu1 - cpu0) / setpoints,
+            "packets_per_setpoint": (r1 - r0) / setpoints}
 
 
 def cflib_level(seconds: float) -> Optional[dict]:
@@ -98,7 +104,49 @@ def cflib_level(seconds: float) -> Optional[dict]:
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
-def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
+def both_levels(seconds: float, rounds: int) -> Tuple[List[dict], List[dict]]:
+    """Ours and cflib's, one after the other ``rounds`` times, so that both see the same load of a
+    shared machine; cflib's list is empty when it could not be measured."""
+    ours: List[dict] = []
+    theirs: List[dict] = []
+    for _ in range(rounds):
+        ours.append(crazyflie_level(seconds))
+        one = cflib_level(seconds)
+        if one is None or not one.get("cpu_us"):
+            return ours, []
+        theirs.append(one)
+    return ours, theirs
+
+
+def level_lines(seconds: float, ours: List[dict], theirs: List[dict]) -> List[str]:
+    """The Crazyflie level's lines: the median round of each, the ratio of the medians and its range
+    over the rounds."""
+    mine = statistics.median(r["cpu_us"] for r in ours)
+    first = ours[0]
+    lines = ["Crazyflie level, one Crazyflie, timing model off, %d rounds of %.1f s after %.1f s warm-up, ours"
+             % (len(ours), seconds, WARMUP_S),
+             "then cflib's in each (host CPU per setpoint the simulated commander received, whole process;",
+             "median of the rounds, their range in brackets; radio packets per setpoint: all the simulated",
+             "Crazyflie received / setpoints):",
+             "  ours  Crazyflie.send_setpoint             %6.1f us/setpoint  [%.1f-%.1f]  (%d setpoints/s,"
+             " %.2f packets/setpoint)"
+             % (mine, min(r["cpu_us"] for r in ours), max(r["cpu_us"] for r in ours),
+                first["setpoints"] / first["seconds"], first["packets_per_setpoint"])]
+    if not theirs:
+        return lines + ["  cflib: not measured (see above)"]
+    cflib = statistics.median(r["cpu_us"] for r in theirs)
+    ratios = [a["cpu_us"] / b["cpu_us"] for a, b in zip(ours, theirs)]
+    one = theirs[0]
+    return lines + [
+        "  cflib %-6s commander.send_setpoint      %6.1f us/setpoint  [%.1f-%.1f]  (%d setpoints/s,"
+        " %.2f packets/setpoint, Python %s)"
+        % (one["cflib"], cflib, min(r["cpu_us"] for r in theirs), max(r["cpu_us"] for r in theirs),
+           one["setpoints"] / one["seconds"], one["packets_per_setpoint"], one["python"]),
+        "  ours / cflib = %.3f  [%.3f-%.3f over the rounds]" % (mine / cflib, min(ratios), max(ratios))]
+
+
+def _open_links(n: int, timing: DongleTiming) -> Tuple[FakeUsbBackend, List[SimulatedCrazyflie], List[RadioLink]]:
+    """``n`` simulated Crazyflies (addresses E7E7E7E701..) on one fake dongle, a safelink ``RadioLink`` to each."""
     medium = LocalMedium(dongles=1, seed=1)
     sims = []
     for i in range(n):
@@ -111,31 +159,31 @@ def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
     for link in links:
         link.open()
     assert all(link.safelink for link in links), "safelink was not negotiated"
-    counts: List[int] = [0] * n
-    failures: List[int] = [0] * n
-    stop = threading.Event()
+    return backend, sims, links
 
-    def one_link(i: int) -> None:
-        send = links[i].send_bytes
-        while not stop.is_set():
-            if send(SETPOINT):
-                counts[i] += 1
-            else:
-                failures[i] += 1
 
-    def round_robin() -> None:
-        sends = [link.send_bytes for link in links]
+def _senders(links: List[RadioLink], mode: str, counts: List[int], failures: List[int],
+             stop: threading.Event) -> List[threading.Thread]:
+    """The sending threads: one per link ("threads") or one for all in turn ("round-robin")."""
+    def send_until_stopped(indexes: List[int]) -> None:
+        sends = [(i, links[i].send_bytes) for i in indexes]
         while not stop.is_set():
-            for i, send in enumerate(sends):
+            for i, send in sends:
                 if send(SETPOINT):
                     counts[i] += 1
                 else:
                     failures[i] += 1
 
-    if mode == "threads":
-        threads = [threading.Thread(target=one_link, args=(i,), daemon=True) for i in range(n)]
-    else:
-        threads = [threading.Thread(target=round_robin, daemon=True)]
+    groups = [[i] for i in range(len(links))] if mode == "threads" else [list(range(len(links)))]
+    return [threading.Thread(target=send_until_stopped, args=(group,), daemon=True) for group in groups]
+
+
+def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
+    backend, sims, links = _open_links(n, timing)
+    counts: List[int] = [0] * n
+    failures: List[int] = [0] * n
+    stop = threading.Event()
+    threads = _senders(links, mode, counts, failures, stop)
     for t in threads:
         t.start()
     time.sleep(WARMUP_S)
@@ -151,35 +199,29 @@ def run_case(n: int, timing: DongleTiming, mode: str, seconds: float) -> dict:
     for link in links:
         link.close()
     elapsed = t1 - t0
-    per_cf = [(b - a) / elapsed for a, b in zip(c0, c1)]
     packets = sum(c1) - sum(c0)
-    delivered = sum(setp1) - sum(setp0)
-    ctrl_per_packet = (ctrl1 - ctrl0) / packets if packets else float("nan")
+    if not packets:
+        return {"n": n, "mode": mode, "rate": 0.0, "rate_min": 0.0, "cpu_us": math.nan,
+                "cpu_share": (cpu1 - cpu0) / elapsed, "ctrl_per_packet": math.nan, "modelled_rtt_ms": math.nan,
+                "capacity": math.nan, "failures": sum(failures), "delivered_ratio": 0.0}
+    ctrl_per_packet = (ctrl1 - ctrl0) / packets
     modelled_rtt = timing.bulk_round_trip_s + ctrl_per_packet * timing.control_transfer_s
-    return {"n": n, "mode": mode, "rate": packets / elapsed, "rate_min": min(per_cf),
-            "cpu_us": 1e6 * (cpu1 - cpu0) / packets if packets else float("nan"),
-            "cpu_share": (cpu1 - cpu0) / elapsed, "ctrl_per_packet": ctrl_per_packet,
-            "modelled_rtt_ms": 1000.0 * modelled_rtt,
+    return {"n": n, "mode": mode, "rate": packets / elapsed,
+            "rate_min": min((b - a) / elapsed for a, b in zip(c0, c1)),
+            "cpu_us": 1e6 * (cpu1 - cpu0) / packets, "cpu_share": (cpu1 - cpu0) / elapsed,
+            "ctrl_per_packet": ctrl_per_packet, "modelled_rtt_ms": 1000.0 * modelled_rtt,
             "capacity": 1.0 / modelled_rtt if modelled_rtt > 0 else float("inf"),
-            "failures": sum(failures), "delivered_ratio": delivered / packets if packets else 0.0}
+            "failures": sum(failures), "delivered_ratio": (sum(setp1) - sum(setp0)) / packets}
 
 
 def main() -> int:
     ap = bs.parser(__doc__, "radio.txt", 2.0, counts="1,2,4,8")
     ap.add_argument("--modes", default="threads,round-robin", help="link-level modes; none: only the Crazyflie level")
+    ap.add_argument("--rounds", type=int, default=3, help="Crazyflie level: rounds of ours then cflib's (median)")
     args = ap.parse_args()
     model = DongleTiming()
-    ours, theirs = crazyflie_level(args.seconds), cflib_level(args.seconds)
-    level = ["Crazyflie level, one Crazyflie, timing model off, %.1f s after %.1f s warm-up (host CPU per setpoint the"
-             % (args.seconds, WARMUP_S), "simulated commander received, whole process):",
-             "  ours  Crazyflie.send_setpoint             %6.1f us/setpoint  (%d setpoints/s)"
-             % (ours["cpu_us"], ours["setpoints"] / ours["seconds"])]
-    if theirs is not None and theirs.get("cpu_us"):
-        level += ["  cflib %-6s commander.send_setpoint      %6.1f us/setpoint  (%d setpoints/s, Python %s)"
-                  % (theirs["cflib"], theirs["cpu_us"], theirs["setpoints"] / theirs["seconds"], theirs["python"]),
-                  "  ours / cflib = %.2f" % (ours["cpu_us"] / theirs["cpu_us"])]
-    else:
-        level.append("  cflib: not measured (see above)")
+    ours, theirs = both_levels(args.seconds, args.rounds)
+    level = level_lines(args.seconds, ours, theirs)
     table = bs.Table(
         level + ["", "Link level: RPYT setpoints through one fake Crazyradio PA (RadioLink with safelink ->",
          "Crazyradio -> pyusb -> FakeUsbBackend -> LocalMedium -> simulated nRF + commander),",

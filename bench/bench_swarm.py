@@ -12,8 +12,12 @@ software's). The Crazyflies sit on the ground; the server streams their poses al
   with exactly those millimetres; median and p99 over the measured window, and the share of poses
   never sent (the server sends the newest pose when it falls behind, as it should).
 * radio load: broadcast and unicast packets per second on each fake Crazyradio, and the radio's
-  modelled busy share = (packets × bulk round trip + changes of address or ack mode × control
-  transfer) / time, from the fake dongle's timing model (``DongleTiming``).
+  modelled busy share = (unicast packets × bulk round trip + broadcast packets × their air time +
+  changes of address or ack mode × control transfer) / time, from the fake dongle's timing model
+  (``DongleTiming``); on a Crazyradio 2.0 in inline mode no control transfer and a broadcast packet
+  costs an inline round trip without ack wait.
+* mocap Hz per Crazyflie: how often each Crazyflie's id went out in a packed broadcast, per second
+  (the lowest and highest of the swarm).
 * connect: from the world accepting connections to every Crazyflie's services and the swarm-wide
   ``/takeoff`` being registered (the server offers it once all are connected and configured),
   for each size, with an empty TOC cache and again with the cache the first run left (``--connect``).
@@ -21,7 +25,7 @@ software's). The Crazyflies sit on the ground; the server streams their poses al
 
 Usage (takes the ROS lock on a shared machine):
     source tools/env.sh
-    flock /tmp/ros.lock bench/bench_swarm.py [--counts 1,16,49] [--seconds 10] [--connect]
+    flock /tmp/ros.lock bench/bench_swarm.py [--counts 1,16,49] [--seconds 10] [--connect] [--dongle-model 2.0]
 """
 from __future__ import annotations
 
@@ -44,7 +48,7 @@ MAX_LATENCY_S = 0.5
 SETTLE_S = 3.0
 
 
-def launch_text(swarm_file: str, sim_address: str, vrpn_port: int) -> str:
+def launch_text(swarm_file: str, sim_address: str, vrpn_port: int, dongle_model: str = "PA") -> str:
     return "\n".join([
         "<launch>",
         '  <node pkg="crazyflie_driver" type="crazyflie_server" name="crazyflie_server" required="true">',
@@ -57,7 +61,7 @@ def launch_text(swarm_file: str, sim_address: str, vrpn_port: int) -> str:
         '    <param name="address" value="%s" /><param name="swarm_file" value="%s" />' % (sim_address, swarm_file),
         '    <param name="mocap" value="none" /><param name="vrpn" value="true" />',
         '    <param name="vrpn_port" value="%d" /><param name="mocap_noise" value="%s" />' % (vrpn_port, VRPN_NOISE_M),
-        '    <param name="seed" value="1" />',
+        '    <param name="seed" value="1" /><param name="dongle_model" value="%s" />' % dongle_model,
         "  </group>",
         "</launch>", ""])
 
@@ -142,7 +146,17 @@ def pair(sent, air, ids: Dict[str, int], t0: float, t1: float) -> dict:
     return {"latencies": latencies, "missing": missing}
 
 
-def radio_load(air, t0: float, t1: float) -> Dict[int, Dict[str, float]]:
+def mocap_hz(air, t0: float, t1: float) -> List[float]:
+    """Packed-broadcast items per second of each Crazyflie id (by dongle and id) in [t0, t1)."""
+    count: Dict[Tuple[int, int], int] = {}
+    for t, dongle, _, ack, data in air:
+        if t0 <= t < t1 and not ack:
+            for item in packed_items(data):
+                count[(dongle, item[0])] = count.get((dongle, item[0]), 0) + 1
+    return [c / (t1 - t0) for c in count.values()]
+
+
+def radio_load(air, t0: float, t1: float, inline: bool = False) -> Dict[int, Dict[str, float]]:
     from crazyflie_driver.sim.air.dongle_timing import DongleTiming
     timing = DongleTiming()
     out: Dict[int, Dict[str, float]] = {}
@@ -159,7 +173,11 @@ def radio_load(air, t0: float, t1: float) -> Dict[int, Dict[str, float]]:
         last[dongle] = (address, ack)
     span = t1 - t0
     for d in out.values():
-        busy = (d["broadcast"] + d["unicast"]) * timing.bulk_round_trip_s + d["controls"] * timing.control_transfer_s
+        if inline:
+            busy = d["unicast"] * timing.bulk_round_trip_s + d["broadcast"] * timing.inline_no_ack_s
+        else:
+            busy = (d["unicast"] * timing.bulk_round_trip_s + d["broadcast"] * timing.no_ack_packet_s
+                    + d["controls"] * timing.control_transfer_s)
         d.update(broadcast_per_s=d["broadcast"] / span, unicast_per_s=d["unicast"] / span, busy=busy / span)
     return out
 
@@ -173,7 +191,8 @@ def server_pid() -> int:
     return int(xmlrpc.client.ServerProxy(uri).getPid("/bench_swarm")[2])
 
 
-def measure(taps: Taps, names: List[str], ids: Dict[str, int], seconds: float, result: dict) -> None:
+def measure(taps: Taps, names: List[str], ids: Dict[str, int], seconds: float, result: dict,
+            inline: bool = False) -> None:
     import rosgraph
     bs.wait_for_ros()
     master = rosgraph.Master("/bench_swarm")
@@ -197,12 +216,13 @@ def measure(taps: Taps, names: List[str], ids: Dict[str, int], seconds: float, r
     with taps.lock:
         sent, air = list(taps.sent), list(taps.air)
     result.update(pair(sent, air, ids, t0, t1))
-    result["radios"] = {str(k): v for k, v in radio_load(air, t0, t1).items()}
+    result["radios"] = {str(k): v for k, v in radio_load(air, t0, t1, inline).items()}
+    result["mocap_hz"] = mocap_hz(air, t0, t1)
     result["cpu_server"] = (cpu_server1 - cpu_server0) / (t1 - t0)
     result["cpu_world"] = (cpu_world1 - cpu_world0) / (t1 - t0)
 
 
-def child(out: str, n: int, seconds: float, toc_cache: str) -> None:
+def child(out: str, n: int, seconds: float, toc_cache: str, dongle_model: str = "PA") -> None:
     from crazyflie_demo.swarm_grid import swarm_file_text
     from crazyflie_driver.server.swarm.config import load_swarm_file
     work = tempfile.mkdtemp(prefix="cf_swarm_")
@@ -214,8 +234,9 @@ def child(out: str, n: int, seconds: float, toc_cache: str) -> None:
     ids = {cf.name: cf.id for cf in swarm.crazyflies}
     taps = Taps()
     taps.install()
-    text = launch_text(swarm_file, "127.0.0.1:%d" % bs.free_port(), bs.free_port())
-    bs.ros_graph_with_sim_node(text, lambda result, _: measure(taps, names, ids, seconds, result), out,
+    text = launch_text(swarm_file, "127.0.0.1:%d" % bs.free_port(), bs.free_port(), dongle_model)
+    inline = dongle_model == "2.0"
+    bs.ros_graph_with_sim_node(text, lambda result, _: measure(taps, names, ids, seconds, result, inline), out,
                                prefix="cf_swarm_", env={"CRAZYFLIE_TOC_CACHE": toc_cache} if toc_cache else None)
 
 
@@ -225,19 +246,22 @@ def main() -> int:
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--n", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--toc-cache", default="", help=argparse.SUPPRESS)
+    ap.add_argument("--dongle-model", default="PA", help="the simulated Crazyradio model (PA, PA-99.55, 2.0)")
     args = ap.parse_args()
     if args.child:
-        child(args.child, args.n, args.seconds, args.toc_cache)
+        child(args.child, args.n, args.seconds, args.toc_cache, args.dongle_model)
         return 0
     lines = ["swarm mode: world VRPN (100 Hz, poses stamped when sent) -> crazyflie_server -> packed broadcast "
-             "on the fake Crazyradios; Crazyflies on the ground, %.0f s measured per case" % args.seconds,
+             "on the fake Crazyradios (%s); Crazyflies on the ground, %.0f s measured per case"
+             % (args.dongle_model, args.seconds),
              bs.machine_line(), "",
-             "%4s %7s %12s %9s %10s %-44s %10s %10s %10s" % (
+             "%4s %7s %12s %9s %10s %-44s %12s %10s %10s %10s" % (
                  "CFs", "radios", "latency ms", "p99 ms", "unsent %", "per radio: broadcasts/s + unicast/s (busy)",
-                 "server CPU", "world CPU", "connect s")]
+                 "mocap Hz/CF", "server CPU", "world CPU", "connect s")]
     print("\n".join(lines), flush=True)
     for n in bs.counts_of(args.counts):
-        r = bs.run_child(__file__, ["--n", str(n), "--seconds", str(args.seconds)], timeout=args.seconds + 400)
+        r = bs.run_child(__file__, ["--n", str(n), "--seconds", str(args.seconds), "--dongle-model", args.dongle_model],
+                         timeout=args.seconds + 400)
         lines.append(row(n, r))
         print(lines[-1], flush=True)
     for n in bs.counts_of(args.counts) if args.connect else ():
@@ -251,8 +275,10 @@ def main() -> int:
             print(lines[-1], flush=True)
     lines += ["",
               "latency: world VRPN send -> first packed broadcast with that Crazyflie's id and millimetres on the air.",
-              "busy: (packets x %.1f ms bulk round trip + address/ack changes x %.1f ms control transfer) / time,"
-              % (0.8, 1.5) + " the fake dongle's timing model.",
+              "busy: (unicast packets x 0.8 ms bulk round trip + broadcast packets x 0.3 ms air time + address/ack",
+              "changes x 1.5 ms control transfer) / time, the fake dongle's timing model (a 2.0 in inline mode: no",
+              "control transfer, 0.6 ms a broadcast packet).",
+              "mocap Hz/CF: packed-broadcast poses per second of each Crazyflie on the air, lowest-highest.",
               "CPU: share of one core, user + system; server: crazyflie_server process; world: the simulated world",
               "node's process (physics, firmware, VRPN server, and this bench's taps)."]
     bs.write_lines(args.out, lines)
@@ -267,8 +293,10 @@ def row(n: int, r: dict) -> str:
     per = " ".join("%d+%d(%.0f%%)" % (v["broadcast_per_s"], v["unicast_per_s"], 100 * v["busy"])
                    for _, v in sorted(radios.items()))
     unsent = 100.0 * r["missing"] / (r["missing"] + len(lat))
-    return "%4d %7d %12.1f %9.1f %10.1f %-44s %9.0f%% %9.0f%% %10.1f" % (
+    hz = r.get("mocap_hz") or [float("nan")]
+    return "%4d %7d %12.1f %9.1f %10.1f %-44s %12s %9.0f%% %9.0f%% %10.1f" % (
         n, len(radios), 1000 * statistics.median(lat), 1000 * bs.percentile(lat, 99), unsent, per,
+        "%.0f-%.0f" % (min(hz), max(hz)),
         100 * r["cpu_server"], 100 * r["cpu_world"], r.get("connect_s", float("nan")))
 
 

@@ -9,14 +9,18 @@ its mean per Crazyflie; the swarm's mean of those, the worst Crazyflie's, and th
 error. CPU: the server's and the world's processes (/proc, user + system) from every Crazyflie
 connected to the end of the flight, as a share of one core.
 
+mocap Hz: the motion-capture rate the server's radio budget chose for each radio (its log), i.e. the
+poses per second each Crazyflie on that radio gets; ``--dongle-model`` plugs in another Crazyradio model.
+
 Usage (takes the ROS lock on a shared machine; about a minute per case):
     source tools/env.sh
-    flock /tmp/ros.lock bench/bench_swarm_flight.py [--counts 1,9,49]
+    flock /tmp/ros.lock bench/bench_swarm_flight.py [--counts 1,9,49] [--dongle-model PA|PA-99.55|2.0]
 """
 from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -37,7 +41,20 @@ def node_pids(master, names) -> Dict[str, int]:
     return out
 
 
-def run_case(n: int, timeout: float) -> dict:
+MOCAP_PLAN = re.compile(r"motion capture on radio (\d+) at (\d+) Hz")
+
+
+def mocap_rates(log_path: str) -> str:
+    """The motion-capture rate per radio the server logged (Hz, in radio order), e.g. "50/55/55"."""
+    try:
+        with open(log_path, errors="replace") as f:
+            found = dict(MOCAP_PLAN.findall(f.read()))
+    except OSError:
+        return "?"
+    return "/".join(found[k] for k in sorted(found, key=int)) or "?"
+
+
+def run_case(n: int, timeout: float, dongle_model: str = "PA") -> dict:
     import rosgraph
     work = tempfile.mkdtemp(prefix="cf_swarm_flight_")
     stats = os.path.join(work, "stats.json")
@@ -48,7 +65,8 @@ def run_case(n: int, timeout: float) -> dict:
     proc = subprocess.Popen(["roslaunch", "-p", str(port), "crazyflie_demo", "swarm.launch", "sim:=true",
                              "monitor:=true", "n:=%d" % n, "stats_file:=" + stats,
                              "plot:=" + os.path.join(work, "swarm.png"),
-                             "sim_address:=127.0.0.1:%d" % bs.free_port(), "vrpn_port:=%d" % bs.free_port()],
+                             "sim_address:=127.0.0.1:%d" % bs.free_port(), "vrpn_port:=%d" % bs.free_port(),
+                             "dongle_model:=" + dongle_model],
                             stdout=log, stderr=subprocess.STDOUT, env=env)
     result: dict = {"work": work}
     start: Optional[Dict[str, float]] = None
@@ -85,6 +103,9 @@ def run_case(n: int, timeout: float) -> dict:
     if os.path.exists(stats):
         with open(stats) as f:
             result.update(json.load(f))
+    logs = [os.path.join(root, name) for root, _, files in os.walk(work) for name in files
+            if name.endswith(".log") and "crazyflie_server" in name] + [os.path.join(work, "launch.log")]
+    result["mocap_hz"] = next((r for r in map(mocap_rates, logs) if r != "?"), "?")
     if start and last and t_last > t_start:
         result["cpu"] = {k: (last[k] - start[k]) / (t_last - t_start) for k in start if k in last}
     return result
@@ -92,16 +113,18 @@ def run_case(n: int, timeout: float) -> dict:
 
 def main() -> int:
     ap = bs.parser(__doc__, "swarm_flight.txt", 0.0, counts="1,9,49")
+    ap.add_argument("--dongle-model", default="PA", help="the simulated Crazyradio model (PA, PA-99.55, 2.0)")
     args = ap.parse_args()
     table = bs.Table(
         ["swarm demo flight (swarm.launch sim:=true): figure-8 2 x 1 m, 8 s, 0.76 m/s mean, 1.48 m/s top,",
          "started by one broadcast relative to each start; Mellinger controller, Kalman estimator fed by the",
          "server's packed broadcasts of the world's VRPN motion capture (100 Hz, 0.5 mm noise, 5 ms latency)",
-         bs.machine_line(), ""],
+         "Crazyradio model: %s" % args.dongle_model, bs.machine_line(), ""],
         [("CFs", "4d"), ("fig-8 mean cm", "14.2f"), ("worst CF cm", "14.2f"), ("max cm", "12.2f"),
-         ("server CPU", "10.0%"), ("world CPU", "11.0%"), ("connect s", "10.1f"), ("result", "8")])
+         ("server CPU", "10.0%"), ("world CPU", "11.0%"), ("connect s", "10.1f"), ("mocap Hz", "12"),
+         ("result", "8")])
     for n in bs.counts_of(args.counts):
-        r = run_case(n, timeout=300.0)
+        r = run_case(n, timeout=300.0, dongle_model=args.dongle_model)
         fig = (r.get("phases") or {}).get("figure8")
         cpu = r.get("cpu", {})
         if fig is None:
@@ -109,11 +132,12 @@ def main() -> int:
         else:
             table.row(n, 100 * fig["mean"], 100 * fig["worst_mean"], 100 * fig["max"],
                       cpu.get("/crazyflie_server", float("nan")), cpu.get("/crazyflie_sim", float("nan")),
-                      r.get("connect_s", float("nan")), r.get("result"))
+                      r.get("connect_s", float("nan")), r.get("mocap_hz", "?"), r.get("result"))
     table.write(args.out, [
         "fig-8 mean: the swarm's mean of each Crazyflie's mean error (true position - plan) over the",
         "figure-8 and its settling second; worst CF: the largest of those means; max: the largest single error.",
-        "CPU: share of one core from every Crazyflie connected to the end of the flight (user + system)."])
+        "CPU: share of one core from every Crazyflie connected to the end of the flight (user + system).",
+        "mocap Hz: the rate the radio budget chose per radio (the poses per second of each Crazyflie on it)."])
     return 0
 
 

@@ -99,26 +99,14 @@ def service_load(stop: threading.Event, counts: Dict[str, int]) -> None:
 
 
 def measure(taps: Taps, names: List[str], result: dict, load: bool) -> None:
-    import rosgraph
     import rospy
-    from rosgraph_msgs.msg import Log
 
     from crazyflie_driver.srv import UpdateParams
     bs.wait_for_ros()
-    placed: Dict[str, float] = {}
-
-    def on_log(msg: Log) -> None:
-        if "first seen at" in msg.msg:
-            name = msg.msg.split("swarm: ", 1)[-1].split(":", 1)[0]
-            placed.setdefault(name, time.monotonic())
-    rospy.Subscriber("/rosout_agg", Log, on_log, queue_size=1000)
-    master = rosgraph.Master("/bench_swarm_params")
-    deadline = time.monotonic() + 300.0
-    while "/takeoff" not in {s for s, _ in master.getSystemState()[2]}:
-        if time.monotonic() > deadline:
-            result["error"] = "/takeoff not registered within 300 s"
-            return
-        time.sleep(0.05)
+    placed = record_placements()
+    if not wait_for_service_registered("/takeoff", 300.0):
+        result["error"] = "/takeoff not registered within 300 s"
+        return
     ready = time.monotonic()
     for p in PARAMS:
         rospy.set_param("/allcfs/" + p, 3)
@@ -126,25 +114,8 @@ def measure(taps: Taps, names: List[str], result: dict, load: bool) -> None:
     calls = []
     stop, counts = threading.Event(), {}
     for label in ("early", "settled", "flying") if load else ("early", "settled"):
-        if label == "settled":
-            deadline = time.monotonic() + 300.0
-            while len(placed) < len(names) and time.monotonic() < deadline:
-                time.sleep(0.1)
-        if label == "flying":
-            from crazyflie_driver.srv import Takeoff
-            rospy.ServiceProxy("/takeoff", Takeoff)(0, 0.5, rospy.Duration(2.0))
-            time.sleep(3.0)
-            threading.Thread(target=service_load, args=(stop, counts), daemon=True).start()
-            time.sleep(5.0)
-        t0 = time.monotonic()
-        try:
-            call(list(PARAMS))
-            error = ""
-        except Exception as e:
-            error = str(e)[:300]
-        t1 = time.monotonic()
-        calls.append({"label": label, "seconds": t1 - t0, "error": error,
-                      "radios": {str(k): v for k, v in sorted(taps.since(t0, t1).items())}})
+        prepare(label, placed, names, stop, counts)
+        calls.append(timed_call(call, label, taps))
     stop.set()
     if load:
         from crazyflie_driver.srv import Land
@@ -153,6 +124,65 @@ def measure(taps: Taps, names: List[str], result: dict, load: bool) -> None:
     result["calls"] = calls
     result["placed"] = len(placed)
     result["placement_s"] = (max(placed.values()) - ready) if placed else float("nan")
+
+
+def record_placements() -> Dict[str, float]:
+    """Name -> when its estimator was placed (its ``first seen at`` line on rosout), filled as they come."""
+    import rospy
+    from rosgraph_msgs.msg import Log
+
+    placed: Dict[str, float] = {}
+
+    def on_log(msg: Log) -> None:
+        if "first seen at" in msg.msg:
+            name = msg.msg.split("swarm: ", 1)[-1].split(":", 1)[0]
+            placed.setdefault(name, time.monotonic())
+    rospy.Subscriber("/rosout_agg", Log, on_log, queue_size=1000)
+    return placed
+
+
+def wait_for_service_registered(service: str, timeout_s: float) -> bool:
+    """Whether the master lists ``service`` within ``timeout_s``."""
+    import rosgraph
+
+    master = rosgraph.Master("/bench_swarm_params")
+    deadline = time.monotonic() + timeout_s
+    while service not in {s for s, _ in master.getSystemState()[2]}:
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def prepare(label: str, placed: Dict[str, float], names: List[str], stop: threading.Event,
+            counts: Dict[str, int]) -> None:
+    """What comes before the call ``label``: nothing (early), every estimator placed (settled), or the
+    swarm in the air under the service load (flying)."""
+    import rospy
+
+    if label == "settled":
+        deadline = time.monotonic() + 300.0
+        while len(placed) < len(names) and time.monotonic() < deadline:
+            time.sleep(0.1)
+    if label == "flying":
+        from crazyflie_driver.srv import Takeoff
+        rospy.ServiceProxy("/takeoff", Takeoff)(0, 0.5, rospy.Duration(2.0))
+        time.sleep(3.0)
+        threading.Thread(target=service_load, args=(stop, counts), daemon=True).start()
+        time.sleep(5.0)
+
+
+def timed_call(call, label: str, taps: Taps) -> dict:
+    """One ``/update_params`` call: its duration, its error, and the parameter writes of each radio meanwhile."""
+    t0 = time.monotonic()
+    try:
+        call(list(PARAMS))
+        error = ""
+    except Exception as e:
+        error = str(e)[:300]
+    t1 = time.monotonic()
+    return {"label": label, "seconds": t1 - t0, "error": error,
+            "radios": {str(k): v for k, v in sorted(taps.since(t0, t1).items())}}
 
 
 def child(out: str, n: int, load: bool) -> None:

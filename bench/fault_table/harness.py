@@ -382,44 +382,9 @@ def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: floa
         out["does"] = "no truth: the world never answered"
         out["safe"] = None
         return out
-    motors_off = next((t for t, s in known if max(s["motors"]) == 0 and s["position"][2] >= FLOOR_Z_M), None)
-    floor = next((t for t, s in known if s["position"][2] < FLOOR_Z_M), None)
     max_dev = max(distance(s, goal) for _, s in known)
-    min_z = min(s["position"][2] for _, s in known)
-    final = known[-1][1]
-    # the final stretch the vehicle was safe in, and since when
-    safe_kind, safe_at = None, None
-    if floor_off(final):
-        k = len(known)
-        while k > 0 and floor_off(known[k - 1][1]):
-            k -= 1
-        safe_kind, safe_at = "floor", known[k][0]
-    elif hover_ok(final, goal):
-        k = len(known)
-        while k > 0 and hover_ok(known[k - 1][1], goal):
-            k -= 1
-        safe_kind, safe_at = "hover", (0.0 if k == 0 else known[k][0])
-    touchdown = None
-    if floor is not None:
-        before = [s for t, s in known if floor - 0.3 <= t <= floor]
-        touchdown = max(-s["velocity"][2] for s in before) if before else None
-    parts = []
-    if safe_kind == "hover" and safe_at == 0.0:
-        parts.append("keeps hovering (max %.3f m from the goal)" % max_dev)
-    elif safe_kind == "hover":
-        parts.append("leaves the hover (max %.2f m from the goal, down to z %.2f m), back under control" %
-                     (max_dev, min_z))
-    elif floor is not None:
-        how = "falls" if touchdown is not None and touchdown > FALL_SPEED_MS else "descends"
-        if motors_off is not None and motors_off <= floor:
-            parts.append("motors off at +%.2f s, %s: on the floor at +%.2f s (%.1f m/s)" %
-                         (motors_off, how, floor, touchdown or 0.0))
-        else:
-            parts.append("%s: on the floor at +%.2f s (%.1f m/s)%s" % (
-                how, floor, touchdown or 0.0, ", motors off after" if safe_kind == "floor" else ", motors on"))
-    else:
-        parts.append("still flying after %.0f s: %.2f m from the goal (max %.2f m), z %.2f m" %
-                     (t_end - t_fault, distance(final, goal), max_dev, final["position"][2]))
+    safe_kind, safe_at = safe_stretch(known, goal)
+    parts = [outcome(known, goal, safe_kind, safe_at, max_dev, t_end - t_fault)]
     if gap:
         parts.append("world gone %.1f-%.1f s" % out["world_gone_s"])
     out["does"] = "; ".join(parts)
@@ -429,6 +394,60 @@ def analyse(samples: List[Tuple[float, Optional[Dict[str, Any]]]], t_fault: floa
     out["safe_s"] = safe_at
     out["safe_kind"] = safe_kind
     return out
+
+
+Known = List[Tuple[float, Dict[str, Any]]]      # (s after the fault, truth sample)
+
+
+def safe_stretch(known: Known, goal: Tuple[float, float, float]) -> Tuple[Optional[str], Optional[float]]:
+    """The final stretch the vehicle was safe in and since when (s after the fault): ("floor", t) resting
+    with its motors off, ("hover", t) back at ``goal`` (t 0.0: it never left), or (None, None)."""
+    final = known[-1][1]
+    if floor_off(final):
+        k = len(known)
+        while k > 0 and floor_off(known[k - 1][1]):
+            k -= 1
+        return "floor", known[k][0]
+    if hover_ok(final, goal):
+        k = len(known)
+        while k > 0 and hover_ok(known[k - 1][1], goal):
+            k -= 1
+        return "hover", (0.0 if k == 0 else known[k][0])
+    return None, None
+
+
+def touchdown_speed(known: Known, floor: float) -> Optional[float]:
+    """The highest sink rate (m/s) in the 0.3 s before the vehicle reached the floor at ``floor`` s."""
+    before = [s for t, s in known if floor - 0.3 <= t <= floor]
+    return max(-s["velocity"][2] for s in before) if before else None
+
+
+def outcome(known: Known, goal: Tuple[float, float, float], safe_kind: Optional[str], safe_at: Optional[float],
+            max_dev: float, span_s: float) -> str:
+    """What the vehicle did in words: kept or regained the hover, came down (how, when), or still flies."""
+    floor = next((t for t, s in known if s["position"][2] < FLOOR_Z_M), None)
+    if safe_kind == "hover" and safe_at == 0.0:
+        return "keeps hovering (max %.3f m from the goal)" % max_dev
+    if safe_kind == "hover":
+        return "leaves the hover (max %.2f m from the goal, down to z %.2f m), back under control" % (
+            max_dev, min(s["position"][2] for _, s in known))
+    if floor is not None:
+        motors_off = next((t for t, s in known if max(s["motors"]) == 0 and s["position"][2] >= FLOOR_Z_M), None)
+        return landing_text(motors_off, floor, touchdown_speed(known, floor), safe_kind == "floor")
+    final = known[-1][1]
+    return "still flying after %.0f s: %.2f m from the goal (max %.2f m), z %.2f m" % (
+        span_s, distance(final, goal), max_dev, final["position"][2])
+
+
+def landing_text(motors_off: Optional[float], floor: float, touchdown: Optional[float], off_after: bool) -> str:
+    """How it came down: motors off in the air first (``motors_off`` s) or not, fell or descended (by the
+    ``touchdown`` speed), on the floor at ``floor`` s, its motors off after (``off_after``) or on."""
+    how = "falls" if touchdown is not None and touchdown > FALL_SPEED_MS else "descends"
+    if motors_off is not None and motors_off <= floor:
+        return "motors off at +%.2f s, %s: on the floor at +%.2f s (%.1f m/s)" % (
+            motors_off, how, floor, touchdown or 0.0)
+    return "%s: on the floor at +%.2f s (%.1f m/s)%s" % (
+        how, floor, touchdown or 0.0, ", motors off after" if off_after else ", motors on")
 
 
 def reports(rec: Recorder, t_fault: float, t_end: float) -> List[str]:

@@ -70,8 +70,10 @@ def remove_with_go_to(bench: Bench) -> None:
             try:
                 go_to(go_to_request(GOAL))
                 said.append("ok")
-            except (bench.rospy.ServiceException, bench.rospy.ROSException) as e:
-                said.append("refused" if "refused" in str(e) else "failed")
+            except bench.rospy.ServiceException:        # the server answered with an error: a refusal
+                said.append("refused")
+            except bench.rospy.ROSException:            # no answer at all
+                said.append("failed")
             time.sleep(GO_TO_PERIOD_S)
     thread = threading.Thread(target=meanwhile, daemon=True)
     thread.start()

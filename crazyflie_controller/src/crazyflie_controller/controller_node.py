@@ -86,6 +86,16 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
     pids = params.get("PIDs")
     if not isinstance(pids, dict):
         raise ConfigError("~PIDs is missing (load config/crazyflie2.yaml into the node's namespace)")
+    gains = _pid_gains(pids)
+    extra = {field: _extra_value(name, field, params[name]) for name, field in EXTRA_PARAMS.items() if name in params}
+    try:
+        return ControllerConfig(gains["x"], gains["y"], gains["z"], gains["yaw"], **extra)
+    except ValueError as e:
+        raise ConfigError(str(e)) from e
+
+
+def _pid_gains(pids: Dict[str, Any]) -> Dict[str, PidGains]:
+    """The gains of each axis from ``~PIDs`` (every axis required)."""
     gains = {}
     for field, axis in AXES:
         if not isinstance(pids.get(axis), dict):
@@ -94,23 +104,21 @@ def config_from_params(params: Dict[str, Any]) -> ControllerConfig:
             gains[field] = PidGains.from_params(pids[axis], axis)
         except ValueError as e:
             raise ConfigError("~PIDs/%s" % e) from e
-    extra = {}
-    for name, field in EXTRA_PARAMS.items():
-        if name in params:
-            value = params[name]
-            if field in BOOL_PARAMS:
-                if not isinstance(value, bool):
-                    raise ConfigError("~%s must be true or false, got %r" % (name, value))
-            elif field not in TEXT_PARAMS:
-                try:
-                    value = float(value)
-                except (TypeError, ValueError):
-                    raise ConfigError("~%s must be a number, got %r" % (name, value)) from None
-            extra[field] = value
+    return gains
+
+
+def _extra_value(name: str, field: str, value: Any) -> Any:
+    """The value of parameter ``~name`` for ControllerConfig's ``field``: a boolean, a text, or a number."""
+    if field in BOOL_PARAMS:
+        if not isinstance(value, bool):
+            raise ConfigError("~%s must be true or false, got %r" % (name, value))
+        return value
+    if field in TEXT_PARAMS:
+        return value
     try:
-        return ControllerConfig(gains["x"], gains["y"], gains["z"], gains["yaw"], **extra)
-    except ValueError as e:
-        raise ConfigError(str(e)) from e
+        return float(value)
+    except (TypeError, ValueError):
+        raise ConfigError("~%s must be a number, got %r" % (name, value)) from None
 
 
 def emergency_of(values) -> Optional[bool]:

@@ -61,6 +61,15 @@ HANDOVER_MODES = ("smooth", "original")
 MAX_HOVER_REFINEMENT = 2000.0
 GOAL_CHANGE_MODES = ("smooth", "step")
 Z_INTEGRATION_MODES = ("conditional", "always")
+# ControllerConfig's behaviour switches: (field, parameter name in messages, modes)
+_MODE_FIELDS = (("takeoff_handover", "takeoffHandover", HANDOVER_MODES),
+                ("derivative", "derivative", DERIVATIVE_MODES),
+                ("goal_change", "goalChange", GOAL_CHANGE_MODES),
+                ("z_integration", "zIntegration", Z_INTEGRATION_MODES))
+# ControllerConfig's fields that must be positive and finite
+_POSITIVE_FIELDS = ("takeoff_thrust_rate", "takeoff_height", "takeoff_max_thrust", "pose_timeout",
+                    "lost_pose_land_timeout", "lost_pose_descent_time", "handover_speed", "handover_accel",
+                    "goal_speed", "goal_accel")
 
 
 class State(enum.Enum):
@@ -162,22 +171,26 @@ class ControllerConfig:
     hover_refine_time: float = 1.5         # s of hover after the take-off glide fitted for the hover thrust (0: off)
 
     def __post_init__(self) -> None:
-        if self.takeoff_handover not in HANDOVER_MODES:
-            raise ValueError("takeoffHandover must be one of %s, got %r" % (HANDOVER_MODES, self.takeoff_handover))
-        if self.derivative not in DERIVATIVE_MODES:
-            raise ValueError("derivative must be one of %s, got %r" % (DERIVATIVE_MODES, self.derivative))
-        if self.goal_change not in GOAL_CHANGE_MODES:
-            raise ValueError("goalChange must be one of %s, got %r" % (GOAL_CHANGE_MODES, self.goal_change))
-        if self.z_integration not in Z_INTEGRATION_MODES:
-            raise ValueError("zIntegration must be one of %s, got %r" % (Z_INTEGRATION_MODES, self.z_integration))
+        self._check_modes()
+        self._check_positive()
+        self._check_ranges()
+
+    def _check_modes(self) -> None:
+        """Each behaviour switch is one of its modes (ValueError naming the parameter otherwise)."""
+        for field, param, modes in _MODE_FIELDS:
+            if getattr(self, field) not in modes:
+                raise ValueError("%s must be one of %s, got %r" % (param, modes, getattr(self, field)))
         if not isinstance(self.tilt_compensation, bool):
             raise ValueError("tiltCompensation must be true or false, got %r" % (self.tilt_compensation,))
-        for name in ("takeoff_thrust_rate", "takeoff_height", "takeoff_max_thrust", "pose_timeout",
-                     "lost_pose_land_timeout", "lost_pose_descent_time", "handover_speed", "handover_accel",
-                     "goal_speed", "goal_accel"):
+
+    def _check_positive(self) -> None:
+        for name in _POSITIVE_FIELDS:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value > 0 and value != float("inf")):
                 raise ValueError("%s must be a positive number, got %r" % (name, value))
+
+    def _check_ranges(self) -> None:
+        """The fields that may be 0, each within its range."""
         if not 0 <= self.liftoff_lag < 1.0:
             raise ValueError("liftoff_lag must be in [0, 1) s, got %r" % (self.liftoff_lag,))
         if not (isinstance(self.hover_refine_time, (int, float)) and 0 <= self.hover_refine_time < 60):
@@ -310,25 +323,46 @@ class PositionController:
         if self.state != State.AUTOMATIC:
             self._hover_fit = None
         if self.state == State.IDLE:
-            if self.safety not in (Safety.LANDED_BLIND, Safety.EMERGENCY):
-                self.safety = Safety.OK if self._fresh(now) else Safety.NO_POSE
-            return self._emit(ZERO)
+            return self._emit(self._idle(now))
+        command = self._untrusted_pose(now)
+        if command is None:
+            command = self._takeoff_ramp(now, dt)
+        if command is None:
+            command = self._closed_loop(now, dt)
+        return self._emit(command)
+
+    def _idle(self, now: float) -> Command:
+        """Idle: zero setpoints; the safety says whether a take-off would have a pose (unless a blind
+        landing or an emergency stop put it there)."""
+        if self.safety not in (Safety.LANDED_BLIND, Safety.EMERGENCY):
+            self.safety = Safety.OK if self._fresh(now) else Safety.NO_POSE
+        return ZERO
+
+    def _untrusted_pose(self, now: float) -> Optional[Command]:
+        """Airborne: the command while the pose cannot be trusted (old, or frozen), or zero when a pose
+        that came back finds the vehicle landed blind; None: closed-loop control may go on."""
         if not self._fresh(now):
-            return self._emit(self._stale_action(now, self._stale_reason(now)))
+            return self._stale_action(now, self._stale_reason(now))
         if self._frozen():
-            return self._emit(self._stale_action(now, "pose frozen: identical for %.2f s (limit %.2f s)" % (
-                self._seen_pose().stamp - self._values_since_frozen(), self.config.frozen_pose_timeout)))
+            return self._stale_action(now, "pose frozen: identical for %.2f s (limit %.2f s)" % (
+                self._seen_pose().stamp - self._values_since_frozen(), self.config.frozen_pose_timeout))
         if self._stale_since is not None:
             self._recover(now)
             if self.state == State.IDLE:
-                return self._emit(ZERO)
-        if self.state == State.TAKING_OFF:
-            if not self._lifted_off():
-                self.thrust += self.config.takeoff_thrust_rate * dt
-                self._liftoff.record_thrust(now, self.thrust)
-                return self._emit(Command(0.0, 0.0, self.thrust, 0.0))
-            self._handover(now)
-        return self._emit(self._closed_loop(now, dt))
+                return ZERO
+        return None
+
+    def _takeoff_ramp(self, now: float, dt: float) -> Optional[Command]:
+        """Taking off: the open-loop thrust ramp until lift-off, then the hand-over (None: closed loop
+        from this cycle on, as in every other state)."""
+        if self.state != State.TAKING_OFF:
+            return None
+        if not self._lifted_off():
+            self.thrust += self.config.takeoff_thrust_rate * dt
+            self._liftoff.record_thrust(now, self.thrust)
+            return Command(0.0, 0.0, self.thrust, 0.0)
+        self._handover(now)
+        return None
 
     @property
     def pose(self) -> Optional[PoseSample]:

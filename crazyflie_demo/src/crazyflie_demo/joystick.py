@@ -287,9 +287,7 @@ class Joystick:
         """Wait up to ``timeout`` s for events; the state to publish now, or None."""
         now = self._clock()
         if not self.device.is_open and not self._try_open(now):
-            wait = min(timeout, max(0.0, self._next_open_attempt - now))
-            if wait > 0:
-                time.sleep(wait)
+            self._wait_to_reopen(now, timeout)
             return None
         deadline = self._deadline(now, timeout)
         if self.device.wait_readable(deadline - now):
@@ -297,18 +295,34 @@ class Joystick:
                 events = self.device.read_events()
             except DeviceGone as exc:
                 return self._lost(exc)
-            urgency = PUBLISH_NONE
-            for event in events:
-                self.events += 1
-                urgency = max(urgency, self.model.apply(event))
-            now = self._clock()
-            if urgency == PUBLISH_NOW:
-                return self._publish(now, self.model.state)
-            if urgency == PUBLISH_SOON and self._pending_since is None:
-                self._pending_since = now
-                if self.coalesce_interval <= 0:
-                    return self._publish(now, self.model.state)
+            state = self._take_events(events)
+            if state is not None:
+                return state
+        return self._due_state(self._clock())
+
+    def _wait_to_reopen(self, now: float, timeout: float) -> None:
+        """Sleeps until the next open attempt, at most ``timeout`` s."""
+        wait = min(timeout, max(0.0, self._next_open_attempt - now))
+        if wait > 0:
+            time.sleep(wait)
+
+    def _take_events(self, events: List[JsEvent]) -> Optional[JoyState]:
+        """Applies ``events``; the state to publish at once (a button, or no coalescing), or None."""
+        urgency = PUBLISH_NONE
+        for event in events:
+            self.events += 1
+            urgency = max(urgency, self.model.apply(event))
         now = self._clock()
+        if urgency == PUBLISH_NOW:
+            return self._publish(now, self.model.state)
+        if urgency == PUBLISH_SOON and self._pending_since is None:
+            self._pending_since = now
+            if self.coalesce_interval <= 0:
+                return self._publish(now, self.model.state)
+        return None
+
+    def _due_state(self, now: float) -> Optional[JoyState]:
+        """The state whose time has come: coalesced axis changes, or the autorepeat; else None."""
         if self._pending_since is not None and now >= self._pending_since + self.coalesce_interval:
             return self._publish(now, self.model.state)
         if (self.autorepeat_interval is not None and self._last_publish is not None

@@ -91,63 +91,109 @@ def _lookup(buffer, world: str, frame: str) -> Optional[Tuple[Tuple[float, float
 
 def _fly(demo: Demo, world: str, frame: str, rate_hz: float, takeoff: bool, land_when_done: bool) -> bool:
     import rospy
-    import tf2_ros
-    from geometry_msgs.msg import PointStamped, PoseStamped
-    from std_msgs.msg import Bool, Int32
-    from std_srvs.srv import Empty
 
-    from crazyflie_demo.rosutil import make_goal, say_launch_note, take_off_when_ready, wait_for_service
-    from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
+    from crazyflie_demo.rosutil import say_launch_note, take_off_when_ready
 
     say_launch_note()
-    follower = follower_for(demo.goals)
-    rospy.set_param("~waypoints", demo.goals)       # for monitors, in the chapter's units
-    buffer = tf2_ros.Buffer()
-    tf2_ros.TransformListener(buffer)
-    goal_pub = rospy.Publisher("goal", PoseStamped, queue_size=1)
-    index_pub = rospy.Publisher("~waypoint", Int32, queue_size=1, latch=True)
-    reached_pub = rospy.Publisher("~reached", PointStamped, queue_size=len(demo.goals))
-    done_pub = rospy.Publisher("~finished", Bool, queue_size=1, latch=True)
-    done_pub.publish(Bool(False))
+    flight = _WaypointFlight(demo, world, land_when_done)
     if takeoff:
         take_off_when_ready(TAKEOFF_TIMEOUT_S)
     rate = rospy.Rate(rate_hz)
-    seq, last_index, done = 0, -1, False
     while not rospy.is_shutdown():
-        pose = _lookup(buffer, world, frame)
-        if pose is not None:
-            reached = len(follower.reached_times)
-            follower.update(rospy.get_time(), pose[0], pose[1])
-            if len(follower.reached_times) > reached:
-                point = PointStamped()
-                point.header.stamp, point.header.frame_id = pose[2], world
-                point.point.x, point.point.y, point.point.z = pose[0]
-                if not publish_unless_shutting_down(reached_pub, point):
-                    break
-        if follower.index != last_index:
-            last_index = demo.goalIndex = follower.index
-            if not publish_unless_shutting_down(index_pub, Int32(last_index)):
-                break
-            rospy.loginfo("waypoint %d/%d: %s", last_index + 1, len(demo.goals), demo.goals[last_index])
-        x, y, z, yaw, _sleep = demo.goals[follower.index]
-        seq += 1
-        if not publish_unless_shutting_down(goal_pub, make_goal(world, x, y, z, yaw, seq)):
+        if not flight.step(_lookup(flight.buffer, world, frame)):
             break
-        if follower.finished and not done:
-            done = True
-            if not publish_unless_shutting_down(done_pub, Bool(True)):
-                break
-            rospy.loginfo("all %d waypoints reached", len(demo.goals))
-            if land_when_done and wait_for_service("land", LAND_SERVICE_TIMEOUT_S):
-                try:
-                    rospy.ServiceProxy("land", Empty)()
-                except rospy.ServiceException as exc:
-                    rospy.logerr("land failed: %s", exc)
         try:
             rate.sleep()
         except rospy.ROSInterruptException:
             break
-    return done
+    return flight.done
+
+
+class _WaypointFlight:
+    """One flight through the waypoints: the follower, the tf buffer it reads the pose from, and the
+    topics that publish the goal and the progress. Every publish returns False once ROS shuts down."""
+
+    def __init__(self, demo: Demo, world: str, land_when_done: bool) -> None:
+        import rospy
+        import tf2_ros
+        from geometry_msgs.msg import PointStamped, PoseStamped
+        from std_msgs.msg import Bool, Int32
+
+        self.demo, self.world, self.land_when_done = demo, world, land_when_done
+        self.follower = follower_for(demo.goals)
+        rospy.set_param("~waypoints", demo.goals)       # for monitors, in the chapter's units
+        self.buffer = tf2_ros.Buffer()
+        tf2_ros.TransformListener(self.buffer)
+        self.goal_pub = rospy.Publisher("goal", PoseStamped, queue_size=1)
+        self.index_pub = rospy.Publisher("~waypoint", Int32, queue_size=1, latch=True)
+        self.reached_pub = rospy.Publisher("~reached", PointStamped, queue_size=len(demo.goals))
+        self.done_pub = rospy.Publisher("~finished", Bool, queue_size=1, latch=True)
+        self.done_pub.publish(Bool(False))
+        self.seq, self.last_index, self.done = 0, -1, False
+
+    def step(self, pose: Optional[Tuple[Tuple[float, float, float], float, object]]) -> bool:
+        """One cycle with the newest pose (None: none fresh); False once ROS shuts down."""
+        return self._note_pose(pose) and self._announce_waypoint() and self._send_goal() and self._finish()
+
+    def _note_pose(self, pose: Optional[Tuple[Tuple[float, float, float], float, object]]) -> bool:
+        """The follower sees the pose; a waypoint it counts as reached goes out on ``~reached``."""
+        import rospy
+        from geometry_msgs.msg import PointStamped
+
+        from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
+        if pose is None:
+            return True
+        reached = len(self.follower.reached_times)
+        self.follower.update(rospy.get_time(), pose[0], pose[1])
+        if len(self.follower.reached_times) == reached:
+            return True
+        point = PointStamped()
+        point.header.stamp, point.header.frame_id = pose[2], self.world
+        point.point.x, point.point.y, point.point.z = pose[0]
+        return publish_unless_shutting_down(self.reached_pub, point)
+
+    def _announce_waypoint(self) -> bool:
+        """A new waypoint to fly to goes out on ``~waypoint`` (and the log), once."""
+        import rospy
+        from std_msgs.msg import Int32
+
+        from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
+        if self.follower.index == self.last_index:
+            return True
+        self.last_index = self.demo.goalIndex = self.follower.index
+        if not publish_unless_shutting_down(self.index_pub, Int32(self.last_index)):
+            return False
+        rospy.loginfo("waypoint %d/%d: %s", self.last_index + 1, len(self.demo.goals), self.demo.goals[self.last_index])
+        return True
+
+    def _send_goal(self) -> bool:
+        """The current waypoint as the controller's goal (every cycle, also while it is held)."""
+        from crazyflie_demo.rosutil import make_goal
+        from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
+        x, y, z, yaw, _sleep = self.demo.goals[self.follower.index]
+        self.seq += 1
+        return publish_unless_shutting_down(self.goal_pub, make_goal(self.world, x, y, z, yaw, self.seq))
+
+    def _finish(self) -> bool:
+        """Once every waypoint is reached: ``~finished`` true, and the landing when asked for."""
+        import rospy
+        from std_msgs.msg import Bool
+        from std_srvs.srv import Empty
+
+        from crazyflie_demo.rosutil import wait_for_service
+        from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down
+        if not self.follower.finished or self.done:
+            return True
+        self.done = True
+        if not publish_unless_shutting_down(self.done_pub, Bool(True)):
+            return False
+        rospy.loginfo("all %d waypoints reached", len(self.demo.goals))
+        if self.land_when_done and wait_for_service("land", LAND_SERVICE_TIMEOUT_S):
+            try:
+                rospy.ServiceProxy("land", Empty)()
+            except rospy.ServiceException as exc:
+                rospy.logerr("land failed: %s", exc)
+        return True
 
 
 def main() -> None:

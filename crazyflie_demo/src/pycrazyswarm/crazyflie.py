@@ -2,10 +2,11 @@
 
 Names, argument names, defaults and units are Crazyswarm's documented ones (``pycrazyswarm``):
 heights and positions in metres, durations in seconds, yaw in radians (``goTo``, ``cmdPosition``,
-``cmdFullState``), yaw rates in degrees per second (``cmdVelocityWorld``, ``cmdVel``), body rates
-in rad/s. Each call checks its arguments, converts what the wire wants (``cmdPosition``'s yaw to the
-message's degrees, ``cmdFullState``'s yaw to a quaternion, a ``Trajectory`` to pieces) and hands
-plain values to a ``Backend``: the ROS adapter (``ros_backend``) or a test's fake. Nothing is sent
+``cmdFullState``), yaw rates in degrees per second (``cmdVelocityWorld``, ``cmdVel``, ``cmdHover``),
+body rates in rad/s; ``cmdHover`` (Crazyswarm2's) takes velocities in the Crazyflie's own frame.
+Each call checks its arguments, converts what the wire wants (``cmdPosition``'s yaw to the message's
+degrees, ``cmdFullState``'s yaw to a quaternion, a ``Trajectory`` to pieces) and hands plain values
+to a ``Backend``: the ROS adapter (``ros_backend``) or a test's fake. Nothing is sent
 when a check fails; features of Crazyswarm's own firmware fork raise ``NotSupported``.
 """
 from __future__ import annotations
@@ -43,6 +44,7 @@ class Backend(Protocol):
     def cmd_full_state(self, ns: str, pos: Vec3, vel: Vec3, acc: Vec3, quaternion: Tuple[float, float, float, float],
                        omega: Vec3) -> None: ...
     def cmd_velocity_world(self, ns: str, vel: Vec3, yaw_rate_deg: float) -> None: ...
+    def cmd_hover(self, ns: str, vx: float, vy: float, yaw_rate_deg: float, z_distance: float) -> None: ...
     def cmd_stop(self, ns: str) -> None: ...
     def cmd_vel(self, ns: str, roll_deg: float, pitch_deg: float, yawrate_deg: float, thrust: float) -> None: ...
     def cmd_position(self, ns: str, pos: Vec3, yaw_deg: float) -> None: ...
@@ -248,6 +250,14 @@ class Crazyflie:
     def cmdVelocityWorld(self, vel, yawRate: float) -> None:
         """Velocity in the world frame (m/s) and yaw rate (deg/s)."""
         self._backend.cmd_velocity_world(self.prefix, _vec3("vel", vel), finite("yawRate", yawRate))
+
+    def cmdHover(self, vx: float, vy: float, yawRate: float, zDistance: float) -> None:
+        """Crazyswarm2's hover setpoint: velocities in the Crazyflie's own frame (m/s: ``vx`` forward,
+        ``vy`` left, turning with it), yaw rate (deg/s, counterclockwise positive) and height (m,
+        absolute). The firmware's Mellinger controller flies no velocities (it holds the height
+        only): set ``stabilizer/controller`` 1 (PID) for the body velocities to act."""
+        self._backend.cmd_hover(self.prefix, finite("vx", vx), finite("vy", vy), finite("yawRate", yawRate),
+                                finite("zDistance", zDistance))
 
     def cmdStop(self) -> None:
         """Motors off (a stop setpoint); later setpoints or commands start them again."""

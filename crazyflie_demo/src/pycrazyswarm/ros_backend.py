@@ -4,8 +4,8 @@
 Swarm-wide: ``/takeoff``, ``/land``, ``/stop``, ``/go_to``, ``/start_trajectory``, ``/emergency``,
 ``/update_params``. Per Crazyflie under its namespace: the same high-level services plus
 ``upload_trajectory``, ``set_group_mask``, ``notify_setpoints_stop``, ``update_params`` and the
-streaming topics ``cmd_full_state``, ``cmd_velocity_world``, ``cmd_position``, ``cmd_stop``,
-``cmd_vel``. A service's refusal becomes ``CommandRejected`` with the server's reason.
+streaming topics ``cmd_full_state``, ``cmd_velocity_world``, ``cmd_hover``, ``cmd_position``,
+``cmd_stop``, ``cmd_vel``. A service's refusal becomes ``CommandRejected`` with the server's reason.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from std_msgs.msg import Empty as EmptyMsg
 from std_srvs.srv import Empty
 
 from crazyflie_driver.errors import CommandRejected, CrazyflieError
-from crazyflie_driver.msg import FullState, Position, TrajectoryPolynomialPiece, VelocityWorld
+from crazyflie_driver.msg import FullState, Hover, Position, TrajectoryPolynomialPiece, VelocityWorld
 from crazyflie_driver.nodes import ros_signals
 from crazyflie_driver.protocol.trajectory import Piece
 from crazyflie_driver.srv import (
@@ -86,7 +86,8 @@ class RosBackend:
         self._pubs: Dict[str, rospy.Publisher] = {}
         for ns in self.namespaces:
             for topic, kind in (("cmd_full_state", FullState), ("cmd_velocity_world", VelocityWorld),
-                                ("cmd_position", Position), ("cmd_stop", EmptyMsg), ("cmd_vel", Twist)):
+                                ("cmd_hover", Hover), ("cmd_position", Position), ("cmd_stop", EmptyMsg),
+                                ("cmd_vel", Twist)):
                 self._pubs["%s/%s" % (ns, topic)] = rospy.Publisher("%s/%s" % (ns, topic), kind, queue_size=1)
         self._poses: Dict[str, Tuple[float, Vec3]] = {}
         self._pose_lock = threading.Condition()
@@ -177,6 +178,12 @@ class RosBackend:
         m.header.stamp, m.header.frame_id = rospy.Time.now(), "world"
         (m.vel.x, m.vel.y, m.vel.z), m.yawRate = vel, yaw_rate_deg
         self._pubs[ns + "/cmd_velocity_world"].publish(m)
+
+    def cmd_hover(self, ns, vx, vy, yaw_rate_deg, z_distance) -> None:
+        m = Hover()
+        m.header.stamp, m.header.frame_id = rospy.Time.now(), ns.strip("/")     # the body frame's name
+        m.vx, m.vy, m.yawrate, m.zDistance = vx, vy, yaw_rate_deg, z_distance
+        self._pubs[ns + "/cmd_hover"].publish(m)
 
     def cmd_stop(self, ns) -> None:
         self._pubs[ns + "/cmd_stop"].publish(EmptyMsg())

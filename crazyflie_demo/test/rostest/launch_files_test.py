@@ -41,6 +41,18 @@ BASELINK = ["baselink_broadcaster"]     # the chapter's static tf mocap frame ->
 # launch file -> (expected nodes with sim:=true gui:=false, namespaces of Crazyflies, extra args)
 EXPECTED: Dict[str, Tuple[List[str], List[str], List[str]]] = {
     "customLogBlocks.launch": (SIM + ["/crazyflie/crazyflie_add"], ["crazyflie"], []),
+    "external_position_vicon.launch": (SIM + _ns("crazyflie", ["crazyflie_add", "pose"] + BASELINK),
+                                       ["crazyflie"], []),
+    "external_pose_vicon.launch": (SIM + _ns("crazyflie", ["crazyflie_add", "pose"] + BASELINK), ["crazyflie"], []),
+    "external_position_vrpn.launch": (SIM + _ns("crazyflie1", ["crazyflie_add", "pose", "vrpn_client_node"]),
+                                      ["crazyflie1"], ["port:=19938"]),
+    "swarm_external_position_vrpn.launch": (SIM + _ns("crazyflie1", ["crazyflie_add", "pose"])
+                                            + _ns("crazyflie2", ["crazyflie_add", "pose"])
+                                            + _ns("crazyflie3", ["crazyflie_add", "pose"]) + ["/vrpn_client_node"],
+                                            ["crazyflie1", "crazyflie2", "crazyflie3"], ["port:=19939"]),
+    "hover.launch": (SIM + _ns("cf1", ["crazyflie_add", "pose"]) + _ns("cf2", ["crazyflie_add", "pose"])
+                     + ["/crazyflie_demo_hover"], ["cf1", "cf2"], []),
+    "position.launch": (SIM + _ns("crazyflie", ["crazyflie_add", "pose", "crazyflie_demo_hover"]), ["crazyflie"], []),
     "hover_vicon.launch": (SIM + _ns("crazyflie", HOVER + BASELINK), ["crazyflie"], []),
     "hover_vrpn.launch": (SIM + _ns("crazyflie", HOVER), ["crazyflie"], []),
     "teleop_vicon.launch": (SIM + _ns("crazyflie", HOVER + BASELINK), ["crazyflie"], []),
@@ -65,8 +77,8 @@ EXPECTED: Dict[str, Tuple[List[str], List[str], List[str]]] = {
                            + ["/mission_monitor"], ["crazyflie1", "crazyflie2"], ["plot:={tmp}/mission.png"]),
     "swarm.launch": (SIM + ["/swarm_demo"], ["cf1", "cf2", "cf3", "cf4"], ["n:=4", "vrpn_port:=19936"]),
 }
-# nodes that finish by design once their work is done
-EXITS = {"crazyflie_add"}
+# nodes that finish by design once their work is done (HEAD's Hover.py and Position.py fly, then end)
+EXITS = {"crazyflie_add", "crazyflie_demo_hover"}
 # Ctrl-C must stop a launch within this many seconds (roslaunch sends SIGTERM after 15 s)
 CTRL_C_S = 10.0
 # after SIGINT, wait this long before killing roslaunch: past its own escalation (15 s SIGINT,
@@ -94,7 +106,7 @@ class LaunchFiles(unittest.TestCase):
     def setUpClass(cls):
         rospy.init_node("launch_files_test")
         cls.base_master = int(rospy.get_param("~master_port_base", 11700))
-        cls.base_sim = int(rospy.get_param("~sim_port_base", 19910))
+        cls.base_sim = int(rospy.get_param("~sim_port_base", 20010))
         cls.start_timeout = float(rospy.get_param("~start_timeout", 40.0))
         cls.tmp = tempfile.mkdtemp(prefix="cf_launch_")
         cls.failures: Dict[str, str] = {}

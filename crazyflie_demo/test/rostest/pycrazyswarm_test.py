@@ -2,7 +2,8 @@
 """Crazyswarm scripts run unchanged (test/pycrazyswarm_scripts/scripts, their YAML in ../launch):
 hello world and a figure-8 from a CSV, each as a user runs it, in a subprocess from its directory;
 against the running swarm also full-state and velocity streaming, group masks, a nice hover, one
-Crazyflie after the other, timed waypoints from a CSV and a two-group swap. Where a script waits for
+Crazyflie after the other, timed waypoints from a CSV and a two-group swap; in both, Crazyswarm2's
+hover setpoints (cmd_hover.py). Where a script waits for
 the operator's go-ahead, the test gives it (a line on the script's stdin) once the world shows what
 the script was to do before it.
 
@@ -15,6 +16,7 @@ Judged on the world's truth (the world server's vehicle state), never on what th
 """
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -46,6 +48,13 @@ SEPARATION_M = 0.5                # the swap's lanes keep the two this far apart
 PRESS_TIMEOUT_S = 60.0            # world s for what a script does before the operator's go-ahead
 HOLD_S = 3.0                      # world s a nice hover is held before the go-ahead (the script waits from ~2.5 s)
 LANDING_TIMEOUT_S = 10.0          # world s for a landing a script sent just before it ended
+HOVER_SETPOINT_Z_M = 0.8          # cmd_hover.py's height on hover setpoints (it takes off to 0.5 m)
+HOVER_SIDE_M = 0.5                # its square's side: 0.25 m/s forward for 2 s, then a quarter turn left
+HOVER_CORNER_BOUND_M = 0.10       # each corner passed this close (the sides' errors add up round the square)
+HOVER_MOVING_M_S = 0.15           # faster than this on a side (its 0.25 m/s), the motion shows the heading
+HOVER_HEADING_BOUND_DEG = 15.0    # the direction it moves in, off where it faces
+HOVER_TURN_DEG = 360.0            # four quarter turns, counterclockwise
+HOVER_TURN_BOUND_DEG = 15.0
 
 
 class Recording:
@@ -71,6 +80,17 @@ class Recording:
 
     def positions(self, name):
         return np.array([s["position"] for _, s, _ in self.track.samples[name]]) if self.track else np.zeros((0, 3))
+
+    def velocities(self, name):
+        """True velocity (m/s, world frame) of ``positions(name)``'s samples."""
+        samples = self.track.samples[name] if self.track else []
+        return np.array([s["velocity"] for _, s, _ in samples]).reshape(-1, 3)
+
+    def yaws_deg(self, name):
+        """True yaw (deg) of ``positions(name)``'s samples."""
+        from crazyflie_driver.mocap.frames import yaw_of
+        samples = self.track.samples[name] if self.track else []
+        return np.degrees([yaw_of(s["quaternion"]) for _, s, _ in samples])
 
     def times(self, name):
         """Monotonic stamps of ``positions(name)``."""
@@ -431,6 +451,46 @@ class PycrazyswarmScripts(unittest.TestCase):
         finally:
             stop_streaming.append(True)
 
+    def test_13_hover_setpoints(self):
+        """cmd_hover.py (Crazyswarm2's cmdHover): cf1 holds the absolute height of its hover setpoints and
+        flies a square by its own frame alone (forward, a quarter turn left, four times): each side goes
+        where it faces, the corners come in order, it turns a full circle; then it lands home. In both
+        modes (with --sim, in the script's own world)."""
+        code, rec = run_and_record("cmd_hover.py", *self.sim_args)
+        self.assertEqual(code, 0, "cmd_hover.py failed")
+        xyz, vel, yaw = rec.positions("cf1"), rec.velocities("cf1"), rec.yaws_deg("cf1")
+        high = np.abs(xyz[:, 2] - HOVER_SETPOINT_Z_M) < HOVER_BOUND_M
+        self.assertGreater(high.sum(), 100, "cf1 never held the hover setpoints' %.1f m: highest %.3f m"
+                           % (HOVER_SETPOINT_Z_M, xyz[:, 2].max()))
+        first = int(np.nonzero(high)[0][0])
+        corners = xyz[first, :2] + HOVER_SIDE_M * np.array([[1, 0], [1, 1], [0, 1], [0, 0]])     # (height: above)
+        start, reached = first, []
+        for corner in corners:              # each the first pass within the bound after the one before
+            d = np.linalg.norm(xyz[start:, :2] - corner, axis=1)
+            hits = np.nonzero(d < HOVER_CORNER_BOUND_M)[0]
+            self.assertTrue(len(hits), "cf1 missed the square's corner %s after the one before (closest %.3f m)"
+                            % (np.round(corner, 3), d.min() if len(d) else np.inf))
+            reached.append(float(d[hits].min()))
+            start += int(hits[0])
+        speed = np.linalg.norm(vel[:, :2], axis=1)
+        moving = high & (speed > HOVER_MOVING_M_S)
+        off_heading = (np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) - yaw + 180.0) % 360.0 - 180.0
+        turned = np.unwrap(np.radians(yaw[first:]))
+        turn_deg = math.degrees(turned.max() - turned[0])
+        print("hover setpoints: %d samples at %.3f m (mean; setpoint %.1f m); corners reached within %s m; moving "
+              "(%d samples) off its heading by at most %.1f deg; turned %.1f deg; landed at %s; cf2 highest %.3f m"
+              % (high.sum(), xyz[high, 2].mean(), HOVER_SETPOINT_Z_M, np.round(reached, 3), moving.sum(),
+                 np.abs(off_heading[moving]).max() if moving.any() else float("nan"), turn_deg,
+                 np.round(xyz[-1], 3), rec.positions("cf2")[:, 2].max()))
+        self.assertLess(np.abs(xyz[high, 2] - HOVER_SETPOINT_Z_M).mean(), HOVER_BOUND_M / 2)
+        self.assertGreater(moving.sum(), 20, "cf1 hardly moved on its hover setpoints")
+        self.assertLess(np.abs(off_heading[moving]).max(), HOVER_HEADING_BOUND_DEG,
+                        "cf1 moved other than where it faced (the hover setpoint's velocities are in its own frame)")
+        self.assertLess(abs(turn_deg - HOVER_TURN_DEG), HOVER_TURN_BOUND_DEG, "cf1 did not turn a full circle left")
+        self.check_landed_home(rec, names=("cf1",))
+        self.assertLess(rec.positions("cf2")[:, 2].max(), ON_GROUND_Z_M, "cf2 was not told to fly")
+        if self.mode == "sim":
+            self.assertTrue(self.world_gone(), "the world the script started is still running")
 
 if __name__ == "__main__":
     rostest.rosrun("crazyflie_demo", "pycrazyswarm", PycrazyswarmScripts, sys.argv)

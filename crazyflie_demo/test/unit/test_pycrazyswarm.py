@@ -207,12 +207,14 @@ def test_streaming_setpoints_convert_what_the_messages_carry(swarm):
     cf.cmdVelocityWorld([0.5, 0, 0], yawRate=10.0)
     cf.cmdVel(roll=1.0, pitch=-2.0, yawrate=3.0, thrust=40000)
     cf.cmdStop()
+    cf.cmdHover(0.2, -0.1, yawRate=30.0, zDistance=0.8)       # Crazyswarm2's: body frame, deg/s, absolute m
     name, ns, pos, yaw_deg = b.calls[0]
     assert (name, ns, pos) == ("cmd_position", "/cf1", (1.0, 2.0, 3.0)) and yaw_deg == pytest.approx(90.0)
     _, _, pos, vel, acc, quat, omega = b.calls[1]
     assert quat == pytest.approx((0, 0, 1, 0), abs=1e-12) and omega == (0.0, 0.0, 0.2)
     assert b.calls[2:] == [("cmd_velocity_world", "/cf1", (0.5, 0.0, 0.0), 10.0),
-                           ("cmd_vel", "/cf1", 1.0, -2.0, 3.0, 40000.0), ("cmd_stop", "/cf1")]
+                           ("cmd_vel", "/cf1", 1.0, -2.0, 3.0, 40000.0), ("cmd_stop", "/cf1"),
+                           ("cmd_hover", "/cf1", 0.2, -0.1, 30.0, 0.8)]
 
 
 def test_a_trajectory_is_uploaded_as_its_checked_pieces(swarm):
@@ -252,6 +254,8 @@ def test_parameters_go_through_the_ros_names_crazyswarm_uses(swarm):
     (lambda cf: cf.startTrajectory(0, timescale=0), "timescale"),
     (lambda cf: cf.notifySetpointsStop(-1), "remainValidMillisecs"),
     (lambda cf: cf.cmdVel(0, 0, 0, 70000), "thrust"),
+    (lambda cf: cf.cmdHover(0, 0, 0, float("inf")), "zDistance"),
+    (lambda cf: cf.cmdHover("fast", 0, 0, 0.5), "vx"),
     (lambda cf: cf.setLEDColor(2, 0, 0), "0..1"),
 ])
 def test_bad_arguments_send_nothing(swarm, call, message):

@@ -207,6 +207,15 @@ class Track:
             raise ValueError("no samples of %s yet" % name)
         return tuple(min(rows, key=lambda s: abs(s["time"] - world_t))["position"])
 
+    def world_gap(self, name: str, world_t: float) -> float:
+        """World seconds between the samples around ``world_t`` (inf where one side has none): what a
+        judgement by ``position_at_world_time`` was good to."""
+        with self._lock:
+            times = [r[1]["time"] for r in self.samples[name]]
+        before = [t for t in times if t <= world_t]
+        after = [t for t in times if t > world_t]
+        return min(after) - max(before) if before and after else float("inf")
+
     def between(self, name: str, t0: float, t1: float) -> List[Dict[str, Any]]:
         with self._lock:
             return [s for t, s, _ in self.samples[name] if t0 <= t <= t1]

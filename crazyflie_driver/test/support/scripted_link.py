@@ -162,54 +162,72 @@ class ScriptedFirmware:
             return []
         cmd = d[0]
         block = d[1] if len(d) > 1 else 0
+        return [CRTPPacket(5, 1, bytes([cmd, block, self._log_command(cmd, block, d)]))]
 
-        def result(code):
-            return [CRTPPacket(5, 1, bytes([cmd, block, code]))]
-
-        if cmd == 5:
+    def _log_command(self, cmd: int, block: int, d: bytes) -> int:
+        """The result code of log control command ``cmd`` on ``block``."""
+        if cmd == 5:                    # RESET
             self.blocks.clear()
             self.ops_used = 0
-            return result(0)
-        if cmd in (0, 6) or cmd in (1, 7):
-            v2cmd = cmd in (6, 7)
-            if v2cmd != self.v2:
-                return result(ENOEXEC)
-            if cmd in (0, 6):
-                if block in self.blocks:
-                    return result(EEXIST)
-                if len(self.blocks) >= self.max_blocks:
-                    return result(ENOMEM)
-                self.blocks[block] = {"vars": [], "period": 0, "running": False}
-            elif block not in self.blocks:
-                return result(ENOENT)
-            step = 3 if v2cmd else 2
-            items = d[2:]
-            for i in range(0, len(items), step):
-                ident = (items[i + 1] | (items[i + 2] << 8)) if v2cmd else items[i + 1]
-                if ident >= len(self.logs):
-                    return result(ENOENT)
-                size = sum(struct.calcsize(STRUCT[self.logs[j][2]])
-                           for j in self.blocks[block]["vars"])
-                if size + struct.calcsize(STRUCT[self.logs[ident][2]]) > 26:
-                    return result(E2BIG)
-                if self.ops_used >= self.max_ops:
-                    return result(ENOMEM)
-                self.ops_used += 1
-                self.blocks[block]["vars"].append(ident)
-            return result(0)
-        if cmd in (2, 3, 4, 8):
-            if block not in self.blocks:
-                return result(ENOENT)
-            if cmd == 2:
-                self.ops_used -= len(self.blocks.pop(block)["vars"])
-            elif cmd == 3:
-                self.blocks[block].update(period=d[2] * 10, running=True)
-            elif cmd == 8:
-                self.blocks[block].update(period=d[2] | (d[3] << 8), running=True)
-            else:
-                self.blocks[block]["running"] = False
-            return result(0)
-        return result(ENOEXEC)
+            return 0
+        if cmd in (0, 1, 6, 7):         # CREATE, APPEND (V1), CREATE, APPEND (V2)
+            return self._log_add(cmd, block, d)
+        if cmd in (2, 3, 4, 8):         # DELETE, START, STOP, START (V2)
+            return ENOENT if block not in self.blocks else self._log_block_command(cmd, block, d)
+        return ENOEXEC
+
+    def _log_add(self, cmd: int, block: int, d: bytes) -> int:
+        """CREATE makes the block, APPEND needs it; then the ops one by one (an error keeps the earlier ones)."""
+        v2cmd = cmd in (6, 7)
+        if v2cmd != self.v2:
+            return ENOEXEC
+        if cmd in (0, 6):
+            code = self._log_new_block(block)
+        else:
+            code = 0 if block in self.blocks else ENOENT
+        if code:
+            return code
+        step = 3 if v2cmd else 2
+        items = d[2:]
+        for i in range(0, len(items), step):
+            ident = (items[i + 1] | (items[i + 2] << 8)) if v2cmd else items[i + 1]
+            code = self._log_add_op(block, ident)
+            if code:
+                return code
+        return 0
+
+    def _log_new_block(self, block: int) -> int:
+        if block in self.blocks:
+            return EEXIST
+        if len(self.blocks) >= self.max_blocks:
+            return ENOMEM
+        self.blocks[block] = {"vars": [], "period": 0, "running": False}
+        return 0
+
+    def _log_add_op(self, block: int, ident: int) -> int:
+        """Variable ``ident`` into ``block`` within 26 bytes of values and ``max_ops`` ops in all."""
+        if ident >= len(self.logs):
+            return ENOENT
+        size = sum(struct.calcsize(STRUCT[self.logs[j][2]]) for j in self.blocks[block]["vars"])
+        if size + struct.calcsize(STRUCT[self.logs[ident][2]]) > 26:
+            return E2BIG
+        if self.ops_used >= self.max_ops:
+            return ENOMEM
+        self.ops_used += 1
+        self.blocks[block]["vars"].append(ident)
+        return 0
+
+    def _log_block_command(self, cmd: int, block: int, d: bytes) -> int:
+        """DELETE, START (period in 10 ms), START V2 (period in ms, u16) or STOP of an existing block."""
+        if cmd == 2:
+            self.ops_used -= len(self.blocks.pop(block)["vars"])
+        elif cmd == 3:
+            self.blocks[block].update(period=d[2] * 10, running=True)
+        elif cmd == 8:
+            self.blocks[block].update(period=d[2] | (d[3] << 8), running=True)
+        else:
+            self.blocks[block]["running"] = False
+        return 0
 
     def log_packet(self, block: int, timestamp_ms: int) -> CRTPPacket:
         """The data packet the firmware would send for ``block`` now."""

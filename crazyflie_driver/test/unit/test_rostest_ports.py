@@ -109,8 +109,9 @@ def test_every_listening_argument_of_an_included_launch_file_is_set(test_file):
     """A .test that left sim_address or vrpn_port at the launch file's default would share it."""
     missing = []
     for include in ET.parse(str(test_file)).getroot().iter("include"):
+        # the launch file's own arguments: its top-level <arg>s (those inside its <include>s are passed on)
         declared = {a.get("name"): a.get("default") for a in
-                    ET.parse(str(_resolve(include.get("file", "")))).getroot().iter("arg")}
+                    ET.parse(str(_resolve(include.get("file", "")))).getroot().findall("arg")}
         passed = {a.get("name"): a.get("value") for a in include.findall("arg")}
         serves_vrpn = str(passed.get("vrpn", declared.get("vrpn", "true"))).lower() != "false"
         missing += ["%s in %s" % (a, include.get("file")) for a in LISTENING_ARGS

@@ -3,7 +3,6 @@ process (the channel crazyflie_world_server and the sim node both serve)."""
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 
@@ -11,6 +10,7 @@ import pytest
 
 from crazyflie_driver.sim.room.world import World
 from crazyflie_driver.sim.world_server import WorldServer
+from support.ports import free_port
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
@@ -87,9 +87,7 @@ def test_bad_input_is_one_line_and_exit_1_and_changes_nothing(served, words, say
 
 
 def test_no_world_is_one_line_and_exit_1(served):
-    with socket.socket() as s:              # a port nobody listens on
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()                      # a port nobody listens on
     r = fault("127.0.0.1:%d" % port, "unplug", "0")
     assert r.returncode == 1 and len(r.stderr.splitlines()) == 1
     assert "no simulated world at 127.0.0.1:%d" % port in r.stderr

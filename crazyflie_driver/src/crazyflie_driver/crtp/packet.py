@@ -39,14 +39,15 @@ MOTOR_COMMAND_PORTS = frozenset((PORT_COMMANDER, PORT_GENERIC_SETPOINT, PORT_HIG
 LOCALIZATION_GENERIC_CHANNEL = 1       # carries the emergency stop on firmware without the supervisor port
 
 
+# every header byte of such a packet, whatever its link bits (one set lookup per packet on the air)
+_MOTOR_COMMAND_HEADERS = frozenset(h for h in range(256) if h >> 4 in MOTOR_COMMAND_PORTS or (
+    h >> 4 == PORT_LOCALIZATION and h & 0x03 == LOCALIZATION_GENERIC_CHANNEL))
+
+
 def is_motor_command(raw: bytes) -> bool:
     """Whether a raw packet (header byte first) steers the motors (see MOTOR_COMMAND_PORTS); such
     packets may go before polls on a shared dongle."""
-    if not raw:
-        return False
-    port = raw[0] >> 4
-    return port in MOTOR_COMMAND_PORTS or (port == PORT_LOCALIZATION
-                                           and raw[0] & 0x03 == LOCALIZATION_GENERIC_CHANNEL)
+    return raw[0] in _MOTOR_COMMAND_HEADERS if raw else False
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ the Crazyflie "not answer".
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Union
+from typing import List, Optional, Union
 
 from crazyflie_driver.errors import UriError
 
@@ -64,7 +64,7 @@ def parse_link_uri(text: str) -> LinkUri:
     if scheme.lower() != "usb" or not sep:
         return parse_uri(text)
     rest = rest[:-1] if rest.endswith("/") else rest
-    if not rest or not rest.isdigit() or not rest.isascii():
+    if not _is_decimal(rest):
         raise UriError("URI %r: %r is not a Crazyflie number (%s)" % (text, rest, _USB_FORMAT))
     return UsbUri(int(rest))
 
@@ -79,8 +79,15 @@ def parse_uri(text: str) -> RadioUri:
     """Parse a radio URI; raises UriError naming the malformed part."""
     if not isinstance(text, str):
         raise UriError("Crazyflie URI must be a string, got %r" % (text,))
-    uri = text.strip()
-    scheme, sep, rest = uri.partition("://")
+    parts = _radio_parts(text, _radio_path(text))
+    address = _parse_address(text, parts[3]) if len(parts) == 4 else DEFAULT_ADDRESS
+    return RadioUri(_parse_index(text, parts[0]), _parse_channel(text, parts[1]),
+                    _parse_datarate(text, parts[2]), address)
+
+
+def _radio_path(text: str) -> str:
+    """What follows ``radio://``, without a (harmless) trailing slash; refuses any other scheme."""
+    scheme, sep, rest = text.strip().partition("://")
     if not sep:
         raise UriError("malformed Crazyflie URI %r: expected %s" % (text, _FORMAT))
     scheme = scheme.lower()
@@ -92,9 +99,12 @@ def parse_uri(text: str) -> RadioUri:
         raise UriError("URI %r: unknown scheme %r, expected 'radio' (%s)" % (text, scheme, _FORMAT))
     if "?" in rest or "#" in rest:
         raise UriError("URI %r: query options are not supported (%s)" % (text, _FORMAT))
-    if rest.endswith("/"):
-        rest = rest[:-1]  # a trailing slash is harmless
-    parts = rest.split("/")
+    return rest[:-1] if rest.endswith("/") else rest
+
+
+def _radio_parts(text: str, path: str) -> List[str]:
+    """The path's 3 or 4 parts (dongle, channel, rate[, address]); refuses a missing or extra part."""
+    parts = path.split("/")
     if len(parts) > 4:
         raise UriError("URI %r: unexpected extra part %r after the address (%s)"
                        % (text, "/".join(parts[4:]), _FORMAT))
@@ -102,27 +112,35 @@ def parse_uri(text: str) -> RadioUri:
         raise UriError("URI %r: missing channel (%s)" % (text, _FORMAT))
     if len(parts) < 3 or parts[2] == "":
         raise UriError("URI %r: missing data rate, one of 250K, 1M, 2M (%s)" % (text, _FORMAT))
+    return parts
 
-    index_text, channel_text, rate_text = parts[0], parts[1], parts[2]
-    if not index_text.isdigit() or not index_text.isascii():
+
+def _is_decimal(digits: str) -> bool:
+    """ASCII digits only: ``str.isdigit`` alone also takes superscripts and other scripts' digits."""
+    return digits.isdigit() and digits.isascii()
+
+
+def _parse_index(text: str, index_text: str) -> int:
+    if not _is_decimal(index_text):
         raise UriError("URI %r: dongle index %r is not a number (the n-th Crazyradio, from 0)"
                        % (text, index_text))
-    index = int(index_text)
+    return int(index_text)
 
-    if not channel_text.isdigit() or not channel_text.isascii():
+
+def _parse_channel(text: str, channel_text: str) -> int:
+    if not _is_decimal(channel_text):
         raise UriError("URI %r: channel %r is not a number (0-125)" % (text, channel_text))
     channel = int(channel_text)
     if channel > MAX_CHANNEL:
         raise UriError("URI %r: channel %d is out of range 0-125" % (text, channel))
+    return channel
 
+
+def _parse_datarate(text: str, rate_text: str) -> int:
     datarate = _DATARATE_BY_NAME.get(rate_text.upper())
     if datarate is None:
         raise UriError("URI %r: data rate %r is not one of 250K, 1M, 2M" % (text, rate_text))
-
-    address = DEFAULT_ADDRESS
-    if len(parts) == 4:
-        address = _parse_address(text, parts[3])
-    return RadioUri(index, channel, datarate, address)
+    return datarate
 
 
 def _parse_address(text: str, digits: str) -> bytes:

@@ -20,7 +20,6 @@ import logging
 import math
 import os
 import threading
-import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import rospy
@@ -41,6 +40,7 @@ from crazyflie_driver.nodes.swarm_ros import start_swarm
 from crazyflie_driver.protocol.console import rosout_line
 from crazyflie_driver.server import memory_config, power_control, radio_budget
 from crazyflie_driver.server.add_config import ACCEPTED_SWITCHES, apply_topic_switches, check_config
+from crazyflie_driver.server.bring_down import bring_down
 from crazyflie_driver.server.diagnostic_thresholds import WORLD_FIGURE_STALE_S
 from crazyflie_driver.server.diagnostics import (
     UNKNOWN_BOTTLENECK,
@@ -93,9 +93,6 @@ GRAVITY = 9.81
 DEG_TO_RAD = math.pi / 180.0
 XMLRPC_INT_MAX = 2 ** 31 - 1
 DIAGNOSTICS_PERIOD = 1.0        # s between /diagnostics messages
-#: Wall seconds [s] the clock may stand still while the shutdown waits for landings: a simulated world
-#: that stopped publishing /clock (it was shut down first) lands nothing more.
-CLOCK_STALL_S = 2.0
 SIM_HARDWARE_ID = "crazyflie_sim"   # the simulated world's /diagnostics entries (nodes/sim_node.py)
 
 
@@ -684,24 +681,7 @@ class CrazyflieServer:
         """Land or descend those of ``workers`` in the air (the shutdown reaction), waiting up to their
         ``~safety/shutdown_timeout_s`` for it to end; their setpoints are refused from now on."""
         budget = max([w.safety.config.shutdown_timeout_s for w in workers] or [0.0])
-        flying = [w for w in workers if w.begin_safe_shutdown(budget, why)]
-        if not flying:
-            return
-        rospy.logwarn("crazyflie_server: %s: bringing down %s within %.1f s"
-                      % (why, ", ".join(w.uri for w in flying), budget))
-        deadline = self.clock.now() + budget
-        seen, moved_at = self.clock.now(), time.monotonic()     # wall clock: is the clock still moving?
-        while self.clock.now() < deadline and not all(w.safe_to_close() for w in flying):
-            time.sleep(self.clock.wall_bound(0.02))     # a slice at most: a stopped clock must not block here
-            if self.clock.now() != seen:
-                seen, moved_at = self.clock.now(), time.monotonic()
-            elif time.monotonic() - moved_at > CLOCK_STALL_S:
-                rospy.logerr("crazyflie_server: the clock stopped for %.0f s (the simulated world is gone?): "
-                             "not waiting for the landings any longer" % CLOCK_STALL_S)
-                break
-        left = [w.uri for w in flying if not w.safe_to_close()]
-        if left:
-            rospy.logerr("crazyflie_server: %s still descending when the shutdown budget ran out" % ", ".join(left))
+        bring_down(workers, why, budget, self.clock)
 
     def shutdown(self) -> None:
         self.land_all("shutdown")

@@ -27,7 +27,7 @@ from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shu
 from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.server import radio_budget
 from crazyflie_driver.server.swarm.commands import SwarmMember
-from crazyflie_driver.server.swarm.config import load_swarm_file
+from crazyflie_driver.server.swarm.config import LOG_SWITCHES, load_swarm_file
 from crazyflie_driver.server.swarm.options import options_from_params
 from crazyflie_driver.server.swarm.policy import REBOOT_ALL_SERVICE, SwarmPolicy, refusal_text
 from crazyflie_driver.server.worker import WorkerConfig
@@ -249,7 +249,7 @@ def start_swarm(server) -> Optional[RosSwarm]:
                                                     "stale_hold", "stale_land_duration", "broadcast_repeats",
                                                     "broadcast_interval", "enable_logging", "pose_period_ms",
                                                     "dongle_wait", "mocap_rate", "emergency_watchdog")
-              if rospy.has_param("~" + k)}
+              + LOG_SWITCHES if rospy.has_param("~" + k)}
     if not params.get("swarm_file"):
         return None
     options = options_from_params(params)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import numbers
 import struct
+from typing import Callable
 
 from crazyflie_driver.crtp.firmware_limits import MAX_RATE_DEG_S, MAX_THRUST
 from crazyflie_driver.crtp.packet import (
@@ -20,6 +21,7 @@ from crazyflie_driver.crtp.packet import (
     PORT_LOCALIZATION,
     PORT_SUPERVISOR,
     CRTPPacket,
+    make_header,
 )
 
 #: Protocol version from which the emergency stop lives on the supervisor port (9:1).
@@ -30,7 +32,9 @@ ESTOP_COMMAND = 3
 GENERIC_STOP = 0
 
 
-_RPYT = struct.Struct("<fffH")
+_RPYT = struct.Struct("<BfffH")       # header byte, roll, pitch, yaw rate, thrust
+#: Header byte of an RPYT setpoint (port 3, channel 0, link bits set).
+RPYT_HEADER = make_header(PORT_COMMANDER, 0)
 
 
 def _finite(name: str, value: float) -> float:
@@ -50,18 +54,24 @@ def _rate(value: float) -> float:
     return -MAX_RATE_DEG_S if value < -MAX_RATE_DEG_S else (MAX_RATE_DEG_S if value > MAX_RATE_DEG_S else value)
 
 
+def rpyt_bytes(roll: float, pitch: float, yawrate: float, thrust: float) -> bytes:
+    """The RPYT setpoint as a raw packet: header byte (3:0) and 14-byte payload; ValueError for a value
+    that is not a finite number."""
+    if (type(roll) is float and type(pitch) is float and type(yawrate) is float and type(thrust) is int
+            and -MAX_RATE_DEG_S <= roll <= MAX_RATE_DEG_S and -MAX_RATE_DEG_S <= pitch <= MAX_RATE_DEG_S
+            and -MAX_RATE_DEG_S <= yawrate <= MAX_RATE_DEG_S and 0 <= thrust <= MAX_THRUST):
+        # the common case: float rates within range (so finite), an int thrust within range: as given
+        return _RPYT.pack(RPYT_HEADER, roll, pitch, yawrate, thrust)
+    # anything else: the general checks, which name the value, then the clamps
+    roll, pitch, yawrate = _finite("roll", roll), _finite("pitch", pitch), _finite("yaw rate", yawrate)
+    thrust = _finite("thrust", thrust)
+    thrust_u16 = int(0 if thrust < 0 else (MAX_THRUST if thrust > MAX_THRUST else thrust))
+    return _RPYT.pack(RPYT_HEADER, _rate(roll), _rate(pitch), _rate(yawrate), thrust_u16)
+
+
 def rpyt_packet(roll: float, pitch: float, yawrate: float, thrust: float) -> CRTPPacket:
     """The 14-byte RPYT setpoint; ValueError for a value that is not a finite number."""
-    kind = type(thrust)
-    if not (type(roll) is float and type(pitch) is float and type(yawrate) is float
-            and roll - roll == 0.0 and pitch - pitch == 0.0 and yawrate - yawrate == 0.0
-            and ((kind is float and thrust - thrust == 0.0) or (kind is int and 0 <= thrust <= MAX_THRUST))):
-        # anything but finite floats and a finite float or in-range int thrust: the general checks,
-        # which name the value
-        roll, pitch, yawrate = _finite("roll", roll), _finite("pitch", pitch), _finite("yaw rate", yawrate)
-        thrust = _finite("thrust", thrust)
-    thrust_u16 = int(0 if thrust < 0 else (MAX_THRUST if thrust > MAX_THRUST else thrust))
-    return CRTPPacket(PORT_COMMANDER, 0, _RPYT.pack(_rate(roll), _rate(pitch), _rate(yawrate), thrust_u16))
+    return CRTPPacket(PORT_COMMANDER, 0, rpyt_bytes(roll, pitch, yawrate, thrust)[1:])
 
 
 def stop_packet(protocol_version: int) -> CRTPPacket:
@@ -84,9 +94,16 @@ class Commander:
     def __init__(self, link) -> None:
         self.link = link
         self.protocol_version = -1
+        # A link that takes raw packets (``RadioLink.send_bytes``) is handed the setpoint's bytes as
+        # built: no CRTPPacket to build and serialise again for each of 100 setpoints a second.
+        send_bytes = getattr(link, "send_bytes", None)
+        self._send_raw: Callable[[bytes], bool] = send_bytes if send_bytes is not None else self._send_packet
+
+    def _send_packet(self, raw: bytes) -> bool:
+        return self.link.send(CRTPPacket.from_bytes(raw))
 
     def send_setpoint(self, roll: float, pitch: float, yawrate: float, thrust: float) -> bool:
-        return self.link.send(rpyt_packet(roll, pitch, yawrate, thrust))
+        return self._send_raw(rpyt_bytes(roll, pitch, yawrate, thrust))
 
     def send_stop_setpoint(self) -> bool:
         return self.link.send(stop_packet(self.protocol_version))

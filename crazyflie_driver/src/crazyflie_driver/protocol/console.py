@@ -18,6 +18,9 @@ _LOG = logging.getLogger(__name__)
 ROSOUT_PREFIX = "CF Console: "
 #: Text kept for ``text()``; older text is dropped so a chatty firmware cannot fill memory.
 MAX_KEPT_CHARS = 65536
+#: Characters of text without a newline handed to the line callbacks as one line: text that never ends
+#: its line still reaches them, and the partial line cannot grow without bound.
+MAX_LINE_CHARS = 1024
 
 
 def rosout_line(name: str, line: str) -> str:
@@ -65,6 +68,9 @@ class Console:
             self._text = (self._text + chunk)[-MAX_KEPT_CHARS:]
             pending = self._partial_line + chunk
             *lines, self._partial_line = pending.split("\n")
+            while len(self._partial_line) > MAX_LINE_CHARS:
+                lines.append(self._partial_line[:MAX_LINE_CHARS])
+                self._partial_line = self._partial_line[MAX_LINE_CHARS:]
         for callback in list(self._text_callbacks):
             _safe_call(callback, chunk)
         for line in lines:

@@ -178,60 +178,99 @@ def request_all(link, requests: Sequence[Tuple[bytes, CRTPPacket]], port: int, c
 
     ``key_of(reply)`` names the request a downlink packet on ``port``/``channel`` answers (None: not
     an answer; b"": an error reply that names no request, raised as ProtocolError ``refused(key)`` of the
-oldest unanswered request, since the firmware answers in order). A
+    oldest unanswered request, since the firmware answers in order). A
     request unanswered for PIPELINE_RESEND_S is sent again (the answers are idempotent reads);
     LinkTimeout when nothing at all arrives for ``timeout`` s. Returns the answers by key.
     """
-    answers: Dict[bytes, CRTPPacket] = {}
-    wanted = {key for key, _ in requests} | {b""}
-    lock = threading.Lock()
-
-    def on_packet(packet: CRTPPacket) -> None:
-        key = key_of(packet)
-        if key in wanted:
-            with lock:
-                answers.setdefault(key, packet)
-
-    clock = getattr(getattr(link, "clock", None), "now", time.monotonic)
-    unsubscribe = link.subscribe(port, channel, on_packet)
+    pipeline = _Pipeline(link, requests, key_of, timeout, what, refused, depth)
+    unsubscribe = link.subscribe(port, channel, pipeline.on_packet)
     try:
-        pending = list(requests)
-        pending.reverse()
-        in_flight: Dict[bytes, List] = {}     # key -> [packet, time sent]
-        last_progress = clock()
-        seen = len(answers), getattr(link, "downlink_packets", 0)
-        while pending or in_flight:
-            now = clock()
-            with lock:
-                for key in [k for k in in_flight if k in answers]:
-                    del in_flight[key]
-            if b"" in answers:
-                key = next(iter(in_flight), b"")
-                raise ProtocolError("%s: %s" % (link.uri, refused(key) if refused else "a request was refused"))
-            progress = len(answers), getattr(link, "downlink_packets", 0)
-            if progress != seen:
-                seen, last_progress = progress, now
-            elif now - last_progress >= timeout:
-                key = next(iter(in_flight)) if in_flight else pending[-1][0]
-                raise LinkTimeout("%s: no answer to %s within %.2f s (%d of %d answered)"
-                                  % (link.uri, what(key), now - last_progress, len(answers), len(requests)))
-            if pending and len(in_flight) < depth:
-                key, packet = pending.pop()
-                if key not in answers:
-                    in_flight[key] = [packet, now]
-                    link.send(packet)
-                continue
-            if not in_flight:
-                continue
-            oldest = min(in_flight, key=lambda k: in_flight[k][1])
-            if now - in_flight[oldest][1] >= PIPELINE_RESEND_S:
-                in_flight[oldest][1] = now
-                link.send(in_flight[oldest][0])
-            else:
-                link.poll()
-        return answers
+        return pipeline.run()
     finally:
         unsubscribe()
+
+
+class _Pipeline:
+    """One ``request_all``: the requests still to send, those in flight with the time each was sent,
+    the answers (filled from the link's receive path, hence the lock) and the time of the last progress."""
+
+    def __init__(self, link, requests: Sequence[Tuple[bytes, CRTPPacket]],
+                 key_of: Callable[[CRTPPacket], Optional[bytes]], timeout: float, what: Callable[[bytes], str],
+                 refused: Optional[Callable[[bytes], str]], depth: int) -> None:
+        self.link = link
+        self.requests = requests
+        self.key_of = key_of
+        self.timeout = timeout
+        self.what = what
+        self.refused = refused
+        self.depth = depth
+        self.answers: Dict[bytes, CRTPPacket] = {}
+        self._wanted = {key for key, _ in requests} | {b""}
+        self._lock = threading.Lock()
+        self._clock: Callable[[], float] = getattr(getattr(link, "clock", None), "now", time.monotonic)
+        self._pending = list(reversed(requests))       # the next to send last
+        self._in_flight: Dict[bytes, List] = {}      # key -> [packet, time sent]
+        self._last_progress = 0.0
+        self._seen: Tuple[int, int] = (0, 0)
+
+    def on_packet(self, packet: CRTPPacket) -> None:
+        key = self.key_of(packet)
+        if key in self._wanted:
+            with self._lock:
+                self.answers.setdefault(key, packet)
+
+    def run(self) -> Dict[bytes, CRTPPacket]:
+        self._last_progress = self._clock()
+        self._seen = self._progress()
+        while self._pending or self._in_flight:
+            now = self._clock()
+            self._drop_answered()
+            self._raise_if_refused()
+            self._raise_if_stalled(now)
+            if self._pending and len(self._in_flight) < self.depth:
+                self._send_next(now)
+            elif self._in_flight:
+                self._resend_oldest_or_poll(now)
+        return self.answers
+
+    def _progress(self) -> Tuple[int, int]:
+        """Answers so far and downlink packets so far: either moving counts as progress."""
+        return len(self.answers), getattr(self.link, "downlink_packets", 0)
+
+    def _drop_answered(self) -> None:
+        with self._lock:
+            for key in [k for k in self._in_flight if k in self.answers]:
+                del self._in_flight[key]
+
+    def _raise_if_refused(self) -> None:
+        if b"" in self.answers:
+            key = next(iter(self._in_flight), b"")
+            raise ProtocolError("%s: %s" % (self.link.uri,
+                                             self.refused(key) if self.refused else "a request was refused"))
+
+    def _raise_if_stalled(self, now: float) -> None:
+        progress = self._progress()
+        if progress != self._seen:
+            self._seen, self._last_progress = progress, now
+        elif now - self._last_progress >= self.timeout:
+            key = next(iter(self._in_flight)) if self._in_flight else self._pending[-1][0]
+            raise LinkTimeout("%s: no answer to %s within %.2f s (%d of %d answered)"
+                              % (self.link.uri, self.what(key), now - self._last_progress, len(self.answers),
+                                 len(self.requests)))
+
+    def _send_next(self, now: float) -> None:
+        key, packet = self._pending.pop()
+        if key not in self.answers:
+            self._in_flight[key] = [packet, now]
+            self.link.send(packet)
+
+    def _resend_oldest_or_poll(self, now: float) -> None:
+        oldest = min(self._in_flight, key=lambda k: self._in_flight[k][1])
+        if now - self._in_flight[oldest][1] >= PIPELINE_RESEND_S:
+            self._in_flight[oldest][1] = now
+            self.link.send(self._in_flight[oldest][0])
+        else:
+            self.link.poll()
 
 
 class TocFetcher:

@@ -6,7 +6,8 @@ packet to the latter is never acknowledged, so nothing comes back and nothing is
 ``send_all``) is one turn of the dongle's FIFO, the way one unicast round trip is, and by default it
 goes before the polls waiting there, as setpoints do; a stream of bursts (motion capture) only while
 it leaves the unicast links their reserve of the dongle's time (``shared_radio.UNICAST_RESERVE``).
-Where the dongle takes two packets per USB transfer, consecutive packets of the same length go out in pairs.
+Where the dongle takes two packets per USB transfer, consecutive packets of the same length go out in pairs;
+a Crazyradio 2.0 in inline mode gets each packet with the broadcast address and acks off in its header.
 Idempotent commands are sent several times (``send_repeated``) because a broadcast can be lost.
 """
 from __future__ import annotations
@@ -36,9 +37,11 @@ def _raw(packet: Packet) -> bytes:
     return data
 
 
-def pair_transfers(packets: Sequence[bytes], two_per_transfer: bool) -> List[bytes]:
+def pair_transfers(packets: Sequence[bytes], two_per_transfer: bool,
+                   max_pair_bytes: int = 2 * MAX_RADIO_PACKET) -> List[bytes]:
     """The USB transfers for ``packets`` in order: consecutive packets of equal length joined in
-    pairs when the dongle splits such transfers, else one packet per transfer.
+    pairs (of at most ``max_pair_bytes``) when the dongle splits such transfers, else one packet per
+    transfer.
 
     The splitting dongle firmware halves only a transfer longer than one radio packet (32 bytes), so
     two packets of 16 bytes or less joined would go out as one 32-byte packet: those stay single.
@@ -49,7 +52,7 @@ def pair_transfers(packets: Sequence[bytes], two_per_transfer: bool) -> List[byt
     i = 0
     while i < len(packets):
         if (i + 1 < len(packets) and len(packets[i]) == len(packets[i + 1])
-                and 2 * len(packets[i]) > MAX_RADIO_PACKET):
+                and MAX_RADIO_PACKET < 2 * len(packets[i]) <= max_pair_bytes):
             transfers.append(packets[i] + packets[i + 1])
             i += 2
         else:
@@ -100,6 +103,14 @@ class BroadcastLink:
     def is_open(self) -> bool:
         return self._shared is not None
 
+    @property
+    def sends_inline(self) -> bool:
+        """True when its dongle is a Crazyradio 2.0 with inline mode: the unicast links on it send inline,
+        so its bursts go inline too and cost no control transfer (the radio budget plans with that)."""
+        shared = self._shared
+        radio = shared.radio if shared is not None else None
+        return bool(radio is not None and radio.inline_capable)
+
     def open(self) -> None:
         """Take the dongle (opened if no other link uses it). Idempotent."""
         with self._lock:
@@ -139,10 +150,12 @@ class BroadcastLink:
         channel, datarate = self.channel, self.datarate
 
         def burst(radio: Crazyradio) -> int:
+            if radio.in_inline_mode:
+                return self._inline_burst(radio, raw)
             if channel != radio.channel or datarate != radio.datarate or radio.address != BROADCAST_ADDRESS:
                 radio.configure(channel, datarate, BROADCAST_ADDRESS)
             taken = 0
-            for transfer in pair_transfers(raw, radio.two_per_transfer):
+            for transfer in pair_transfers(raw, radio.two_per_transfer, radio.max_pair_bytes):
                 if radio.send_no_ack(transfer):
                     taken += 1
                 else:
@@ -153,6 +166,14 @@ class BroadcastLink:
         self.stats.packets += len(raw)
         self.stats.transfers += taken
         return taken
+
+    def _inline_burst(self, radio: Crazyradio, raw: Sequence[bytes]) -> int:
+        """A burst on a Crazyradio 2.0 in inline mode (its unicast packets went inline): each packet
+        carries the broadcast address with its ack flag off, so no control transfer leaves or re-enters
+        inline mode; one packet per transfer, each answered by the firmware."""
+        for packet in raw:
+            radio.send_inline(self.channel, self.datarate, BROADCAST_ADDRESS, packet, ack=False)
+        return len(raw)
 
     def send_repeated(self, packet: Packet, repeats: int = DEFAULT_REPEATS,
                       interval_s: float = DEFAULT_REPEAT_INTERVAL_S) -> int:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import array
 import errno
-from typing import List, NamedTuple, Optional
+from typing import Any, List, NamedTuple, Optional
 
 import usb.core
 import usb.util
@@ -35,6 +35,12 @@ DEFAULT_ADDRESS = b"\xe7\xe7\xe7\xe7\xe7"
 #: Crazyradio PA firmware from which a bulk OUT of 33-64 bytes with acks off goes out as two
 #: radio packets of half its length each (the "99.55" image; 0.53 drops the bytes past 32).
 TWO_PER_TRANSFER_FROM = 99.55
+#: Crazyradio 2.0 firmware versions (all of them: releases from 1.0 on, PA versions being 0.x and
+#: 99.x) whose legacy path splits an unacked OUT of more than 32 bytes the same way.
+CRAZYRADIO_2_FROM = 1.0
+#: The 2.0 waits for more data after an OUT of exactly 64 bytes (its endpoint size), so a pair there
+#: stays below it: two packets of at most 31 bytes.
+CRAZYRADIO_2_MAX_PAIR = 63
 MAX_RADIO_PACKET = 32
 #: Crazyradio 2.0 firmware from which SET_INLINE_MODE exists: each bulk OUT then carries its own
 #: rate, ack flag, channel and address (docs/protocol.md, "Inline mode"). PA firmware versions are
@@ -95,6 +101,39 @@ def parse_inline_reply(reply: bytes, arc: int) -> RadioAck:
         return RadioAck(False, False, arc, b"")
     status = reply[1]
     return RadioAck(True, bool(status & 2), status >> 4, bytes(reply[2:reply[0]]))
+
+
+class _DeviceBulk:
+    """Bulk transfers through pyusb's public ``Device.write``/``read``, shaped as a backend's
+    ``bulk_write``/``bulk_read`` (what ``bulk_io`` falls back to)."""
+
+    __slots__ = ("_dev",)
+
+    def __init__(self, dev) -> None:
+        self._dev = dev
+
+    def bulk_write(self, handle: Any, ep: int, intf: int, data, timeout: int) -> int:
+        return self._dev.write(ep, data, timeout)
+
+    def bulk_read(self, handle: Any, ep: int, intf: int, buff, timeout: int) -> int:
+        return self._dev.read(ep, buff, timeout)
+
+
+def bulk_io(dev) -> tuple:
+    """``(backend, handle)`` for the bulk transfers of a configured pyusb device whose interface 0 is
+    claimed: ``backend.bulk_write(handle, ep, 0, array, timeout_ms)`` and ``bulk_read`` likewise.
+
+    pyusb's ``Device.write``/``read`` look the interface and endpoint up again, re-check the claim and
+    build their dispatch table on every call (about 3 us of host CPU per packet, a fifth of a
+    setpoint's cost on the fake dongle) and then make exactly this backend call on the device's open
+    handle (pyusb 1.0 to 1.2). Where pyusb keeps the handle elsewhere, the public calls.
+    """
+    ctx = getattr(dev, "_ctx", None)
+    backend, handle = getattr(ctx, "backend", None), getattr(ctx, "handle", None)
+    if handle is None or not callable(getattr(backend, "bulk_write", None)) \
+            or not callable(getattr(backend, "bulk_read", None)):
+        return _DeviceBulk(dev), None
+    return backend, handle
 
 
 def _find(backend) -> list:
@@ -181,6 +220,7 @@ class Crazyradio:
             if exc.errno == errno.EBUSY:
                 raise RadioInUse(_IN_USE % (index, exc.strerror or exc)) from exc
             raise self._usb_error(exc, "opening") from exc
+        self._bulk, self._handle = bulk_io(self._dev)
         # Known state whatever the last user left behind (the order cflib uses, ``cflib/drivers/crazyradio.py``).
         self.set_data_rate(DR_2MPS)
         self.set_channel(2)
@@ -324,22 +364,25 @@ class Crazyradio:
         self._inline = bool(on)
 
     # -- packets ---------------------------------------------------------------------------------
-    def send_inline(self, channel: int, datarate: int, address: bytes, data: bytes) -> RadioAck:
-        """One acked radio packet to (channel, datarate, address) in inline mode: no control transfer,
-        whatever the previous packet's settings (one SET_INLINE_MODE when the mode was off)."""
-        dev = self._dev
-        if dev is None:
+    def send_inline(self, channel: int, datarate: int, address: bytes, data: bytes, ack: bool = True) -> RadioAck:
+        """One radio packet to (channel, datarate, address) in inline mode: no control transfer,
+        whatever the previous packet's settings (one SET_INLINE_MODE when the mode was off). With
+        ``ack`` false (a broadcast) the radio sends it once without waiting for an ack; the firmware
+        still answers each OUT, so the reply is read (and says "not acked")."""
+        if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         if not 0 < len(data) <= MAX_RADIO_PACKET:
             raise ValueError("a radio packet has 1-32 bytes, got %d" % len(data))
         if not self._inline:
             self.set_inline_mode(True)
+        bulk, handle, timeout = self._bulk, self._handle, self.usb_timeout_ms
         try:
-            dev.write(_EP_OUT, inline_frame(channel, datarate, address, data), self.usb_timeout_ms)
-            # The firmware keeps the packet's settings (and acks on) once it has taken the OUT.
-            self._channel, self._datarate, self._address, self.ack_enabled = channel, datarate, address, True
+            bulk.bulk_write(handle, _EP_OUT, 0, array.array("B", inline_frame(channel, datarate, address, data, ack)),
+                            timeout)
+            # The firmware keeps the packet's settings (and its ack flag) once it has taken the OUT.
+            self._channel, self._datarate, self._address, self.ack_enabled = channel, datarate, address, ack
             buf = self._buffer
-            n = dev.read(_EP_IN, buf, self.usb_timeout_ms)
+            n = bulk.bulk_read(handle, _EP_IN, 0, buf, timeout)
         except usb.core.USBTimeoutError:
             return RadioAck(False, False, self.arc, b"")
         except usb.core.USBError as exc:
@@ -348,17 +391,17 @@ class Crazyradio:
 
     def send_packet(self, data: bytes) -> RadioAck:
         """One radio packet (1-32 bytes) and its ack. A USB timeout counts as an unacked packet."""
-        dev = self._dev
-        if dev is None:
+        if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         if not 0 < len(data) <= 32:
             raise ValueError("a radio packet has 1-32 bytes, got %d" % len(data))
+        bulk, handle, timeout = self._bulk, self._handle, self.usb_timeout_ms
         try:
-            dev.write(_EP_OUT, data, self.usb_timeout_ms)
+            bulk.bulk_write(handle, _EP_OUT, 0, array.array("B", data), timeout)
             if not self.ack_enabled:
                 return _NO_ACK
             buf = self._buffer
-            n = dev.read(_EP_IN, buf, self.usb_timeout_ms)
+            n = bulk.bulk_read(handle, _EP_IN, 0, buf, timeout)
         except usb.core.USBTimeoutError:
             return RadioAck(False, False, self.arc, b"")
         except usb.core.USBError as exc:
@@ -369,25 +412,40 @@ class Crazyradio:
         return RadioAck(False, False, self.arc, b"")
 
     @property
+    def is_crazyradio_2(self) -> bool:
+        return CRAZYRADIO_2_FROM <= self.version < INLINE_MODE_BELOW
+
+    @property
     def two_per_transfer(self) -> bool:
         """True when one no-ack transfer may carry two packets of the same length."""
-        return self.version >= TWO_PER_TRANSFER_FROM
+        return self.version >= TWO_PER_TRANSFER_FROM or self.is_crazyradio_2
+
+    @property
+    def max_pair_bytes(self) -> int:
+        """Longest no-ack transfer of two packets (0: the firmware sends one packet per transfer)."""
+        if not self.two_per_transfer:
+            return 0
+        return CRAZYRADIO_2_MAX_PAIR if self.is_crazyradio_2 else 2 * MAX_RADIO_PACKET
+
+    @property
+    def in_inline_mode(self) -> bool:
+        """True while the firmware is in inline mode (a unicast packet went last, inline)."""
+        return self._inline
 
     def send_no_ack(self, data: bytes) -> bool:
         """One no-ack transfer (acks are switched off first if they are on): one packet of 1-32 bytes,
         or, where ``two_per_transfer``, two packets of the same length back to back. Nothing comes
         back; False when the USB write timed out."""
-        dev = self._dev
-        if dev is None:
+        if self._dev is None:
             raise RadioUnplugged("Crazyradio %d is closed" % self.index)
         n = len(data)
-        if not (0 < n <= MAX_RADIO_PACKET or (self.two_per_transfer and n <= 2 * MAX_RADIO_PACKET and n % 2 == 0)):
+        if not (0 < n <= MAX_RADIO_PACKET or (n <= self.max_pair_bytes and n % 2 == 0)):
             raise ValueError("a no-ack transfer has 1-32 bytes%s, got %d" % (
                 " or two packets of equal length" if self.two_per_transfer else "", n))
         if self.ack_enabled:
             self.set_ack_enable(False)
         try:
-            dev.write(_EP_OUT, data, self.usb_timeout_ms)
+            self._bulk.bulk_write(self._handle, _EP_OUT, 0, array.array("B", data), self.usb_timeout_ms)
         except usb.core.USBTimeoutError:
             return False
         except usb.core.USBError as exc:

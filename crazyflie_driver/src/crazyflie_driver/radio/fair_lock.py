@@ -67,7 +67,11 @@ class FairLock:
                 background: bool = False) -> bool:
         with self._mutex:
             if not self._held:
-                self._grant(capped and urgent)
+                if capped and urgent:
+                    self._grant(True)
+                else:                       # _grant(False), written out: every round trip comes here
+                    self._held = True
+                    self._holder_capped = False
                 return True
             if not blocking:
                 return False

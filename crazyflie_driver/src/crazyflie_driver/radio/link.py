@@ -239,29 +239,36 @@ class RadioLink:
         port = header >> 4
         subs = self._subs.get(port)
         waiter = self._waiter
-        if subs is None and waiter is None:
-            if self._unclaimed is not None:
-                self._hand_unclaimed(CRTPPacket(port, header & 0x03, payload[1:]))
+        if subs is None and waiter is None and self._unclaimed is None:
             return
-        channel = header & 0x03
-        packet = CRTPPacket(port, channel, payload[1:])
-        claimed = False
-        if waiter is not None and waiter.result is None:
-            try:
-                if waiter.match(packet):
-                    waiter.result = packet
-                    claimed = True
-            except Exception as exc:   # the requester's bug: re-raised in its own thread
-                waiter.error = exc
-        if not subs and not claimed and self._unclaimed is not None:
-            self._hand_unclaimed(packet)
+        packet = CRTPPacket(port, header & 0x03, payload[1:])
+        claimed = waiter is not None and self._offer(waiter, packet)
         if subs:
-            for want, callback in subs:
-                if want is None or want == channel:
-                    try:
-                        callback(packet)
-                    except Exception:
-                        _log.exception("%s: downlink callback %r failed on %r", self.uri, callback, packet)
+            self._hand_subscribers(subs, packet)
+        elif not claimed:
+            self._hand_unclaimed(packet)
+
+    @staticmethod
+    def _offer(waiter: _Waiter, packet: CRTPPacket) -> bool:
+        """Whether the waiting request takes ``packet`` (its answer)."""
+        if waiter.result is not None:
+            return False
+        try:
+            if waiter.match(packet):
+                waiter.result = packet
+                return True
+        except Exception as exc:   # the requester's bug: re-raised in its own thread
+            waiter.error = exc
+        return False
+
+    def _hand_subscribers(self, subs: Tuple[Tuple[Optional[int], Callback], ...], packet: CRTPPacket) -> None:
+        channel = packet.channel
+        for want, callback in subs:
+            if want is None or want == channel:
+                try:
+                    callback(packet)
+                except Exception:
+                    _log.exception("%s: downlink callback %r failed on %r", self.uri, callback, packet)
 
     def on_unclaimed(self, callback: Optional[Callback]) -> None:
         """Call ``callback(packet)`` for each downlink packet no subscriber and no request took (the

@@ -52,15 +52,26 @@ class SharedRadio:
         Setpoints and stops go before the other Crazyflies' waiting polls (see ``is_motor_command``);
         ``background`` ones (idle keep-alives) after every other waiting round trip (FairLock).
         """
-        def trip(radio: Crazyradio) -> RadioAck:
-            if radio.inline_capable:
-                return radio.send_inline(channel, datarate, address, data)   # settings travel with the packet
-            if channel != radio._channel or datarate != radio._datarate or address != radio._address:
-                radio.configure(channel, datarate, address)
-            if not radio.ack_enabled:
-                radio.set_ack_enable(True)   # a broadcast switched acks off
-            return radio.send_packet(data)
-        return self.run(trip, urgent=is_motor_command(data), background=background)
+        # ``run`` written out for the one use every packet makes of it (no closure, no extra call)
+        lock = self.lock
+        lock.acquire(True, -1, is_motor_command(data), False, background)
+        try:
+            radio = self.radio
+            if radio is None:
+                radio = self._reopen()
+            try:
+                if radio.inline_capable:
+                    return radio.send_inline(channel, datarate, address, data)   # settings travel with it
+                if channel != radio._channel or datarate != radio._datarate or address != radio._address:
+                    radio.configure(channel, datarate, address)
+                if not radio.ack_enabled:
+                    radio.set_ack_enable(True)   # a broadcast switched acks off
+                return radio.send_packet(data)
+            except RadioUnplugged:
+                self._drop()
+                raise
+        finally:
+            lock.release()
 
     def run(self, use: Callable[[Crazyradio], _T], urgent: bool = False, capped: bool = False,
             background: bool = False) -> _T:

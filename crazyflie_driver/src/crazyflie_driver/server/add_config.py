@@ -15,6 +15,8 @@ from typing import Any, Dict, List, Mapping, Tuple
 from crazyflie_driver.crtp.uri import parse_link_uri
 from crazyflie_driver.errors import UriError
 from crazyflie_driver.server.log_plan import (
+    PACKETS_SWITCH,
+    POSE_SWITCH,
     TOPIC_SWITCHES,
     LogBlockSpec,
     check_custom_log_limits,
@@ -130,8 +132,6 @@ def log_blocks_from_params(params: Mapping[str, Any]) -> Tuple[LogBlockSpec, ...
 #: ms between the ``pose`` topic's log packets with ``enable_logging_pose`` (the original driver's period).
 HEAD_POSE_PERIOD_MS = 10
 
-#: The original driver's switch of the ``packets`` topic (raw CRTP the server does not read; default true).
-PACKETS_SWITCH = "enable_logging_packets"
 #: The original driver's switches read beside the topic switches: the ``packets`` topic's, and
 #: ``use_ros_time``, accepted but changing nothing (every stamp is already ROS time; the reason is in
 #: docs/coming_from_crazyswarm.md).
@@ -177,7 +177,7 @@ def config_from_params(params: Mapping[str, Any]) -> WorkerConfig:
         log_blocks=log_blocks_from_params(params),
     )
     config = apply_topic_switches(config, params)
-    if _as_bool("enable_logging_pose", params.get("enable_logging_pose", False)):
+    if _as_bool(POSE_SWITCH, params.get(POSE_SWITCH, False)):
         # the original's onboard pose topic rides in the chapter's request as a custom block the server knows
         config = replace(config, log_blocks=config.log_blocks + (pose_block(HEAD_POSE_PERIOD_MS),))
     return check_config(config, allow_empty_tf_prefix=True)

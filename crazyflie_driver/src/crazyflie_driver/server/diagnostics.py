@@ -221,11 +221,28 @@ def ack_ratio_tolerance(ratio: float, samples: int, sigmas: float = 4.0) -> floa
 def link_entry(f: LinkFigures) -> Entry:
     """Ack ratio, round-trip time and log receive ratio against their thresholds."""
     level, why = OK, []
-    ack, rtt, rx = f.ack_ratio, f.mean_round_trip_s, f.log_receive_ratio
     if f.state != "running":
         level = worst([level, ERROR if f.state in ("lost", "failed", "restarting") else STALE])
         why.append("link %s" % f.state)
+    for grade, reason in _link_grades(f):
+        if grade != OK:
+            level = worst([level, grade])
+            why.append(reason)
+    if f.round_trips == 0 and f.span_s > 0 and f.state == "running":
+        level = worst([level, WARN])
+        why.append("no round trips")
+    summary = _link_summary(f)
+    message = "; ".join(why) if why else summary
+    if why:
+        message += " (%s)" % summary
+    return Entry("link", level, message, _link_values(f))
+
+
+def _link_grades(f: LinkFigures) -> List[Tuple[int, str]]:
+    """(level, reason) of each link figure with enough samples to judge: ack ratio and round trip once
+    ``MIN_ROUND_TRIPS`` counted, log receive ratio once ``MIN_LOG_PACKETS`` were due."""
     grades = []
+    ack, rtt, rx = f.ack_ratio, f.mean_round_trip_s, f.log_receive_ratio
     if f.round_trips >= T.MIN_ROUND_TRIPS:
         if ack is not None:
             grades.append(graded(ack, T.ACK_RATIO_WARN, T.ACK_RATIO_ERROR, "ack ratio %(value).2f < %(limit).2f"))
@@ -235,22 +252,22 @@ def link_entry(f: LinkFigures) -> Entry:
     if rx is not None and f.log_packets + f.log_lost >= T.MIN_LOG_PACKETS:
         grades.append(graded(rx, T.LOG_RECEIVE_RATIO_WARN, T.LOG_RECEIVE_RATIO_ERROR,
                              "log packets received %(value).2f < %(limit).2f"))
-    for grade, reason in grades:
-        if grade != OK:
-            level = worst([level, grade])
-            why.append(reason)
-    if f.round_trips == 0 and f.span_s > 0 and f.state == "running":
-        level = worst([level, WARN])
-        why.append("no round trips")
-    if ack is None:
-        summary = "no round trips counted yet"
-    else:
-        summary = "ack %.2f, %.0f round trips/s, %.1f ms" % (ack, f.per_s(f.round_trips), (rtt or 0.0) * 1e3)
-    message = "; ".join(why) if why else summary
-    if why:
-        message += " (%s)" % summary
+    return grades
+
+
+def _link_summary(f: LinkFigures) -> str:
+    """The link in one phrase: ack ratio, round trips per second, mean round trip."""
+    if f.ack_ratio is None:
+        return "no round trips counted yet"
+    return "ack %.2f, %.0f round trips/s, %.1f ms" % (f.ack_ratio, f.per_s(f.round_trips),
+                                                       (f.mean_round_trip_s or 0.0) * 1e3)
+
+
+def _link_values(f: LinkFigures) -> Values:
+    """The link's figures for ``/diagnostics``, ``n/a`` where there is nothing to divide."""
+    ack, rtt, rx = f.ack_ratio, f.mean_round_trip_s, f.log_receive_ratio
     na = "n/a"
-    values = _values((
+    return _values((
         ("ack ratio", "%.3f" % ack if ack is not None else na),
         ("round trips", f.round_trips),
         ("window [s]", "%.2f" % f.span_s),
@@ -263,7 +280,6 @@ def link_entry(f: LinkFigures) -> Entry:
         ("log packets lost", f.log_lost),
         ("log receive ratio", "%.3f" % rx if rx is not None else na),
     ))
-    return Entry("link", level, message, values)
 
 
 def battery_entry(vbat: Optional[float], pm_state: Optional[int], age_s: Optional[float],

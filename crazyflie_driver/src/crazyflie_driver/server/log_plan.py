@@ -49,6 +49,10 @@ TOPIC_SWITCHES: Tuple[Tuple[str, str], ...] = (
     ("enable_logging_pressure", PRESSURE_TOPIC),
     ("enable_logging_battery", BATTERY_TOPIC),
 )
+#: The original driver's switch of the onboard ``pose`` topic (crazyflie_add default false).
+POSE_SWITCH = "enable_logging_pose"
+#: The original driver's switch of the ``packets`` topic (downlink packets nothing in the server reads).
+PACKETS_SWITCH = "enable_logging_packets"
 
 
 def fixed_log_topics(disabled: AbstractSet[str]) -> List[Tuple[str, int, Tuple[str, ...]]]:

@@ -32,7 +32,7 @@ import math
 import threading
 from collections import deque
 from dataclasses import dataclass, fields
-from typing import Any, Callable, Deque, List, NamedTuple, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, List, NamedTuple, Optional, Tuple
 
 from crazyflie_driver.crtp.firmware_limits import MAX_THRUST
 from crazyflie_driver.errors import CommandValueError
@@ -288,57 +288,73 @@ class SafetyMonitor:
         for the stop type). False when a reaction holds the Crazyflie and the setpoint is dropped; a
         motors-off setpoint (zero thrust, stop) ends a reaction and goes out."""
         with self._lock:
-            if self.reaction == Reaction.HOLD:
-                self._resume(now)
-            if self.reaction in (Reaction.DESCENT, Reaction.LANDING) and \
-                    (stop or (thrust is not None and thrust < MIN_FLYING_THRUST)):
-                self._down(now, "motors off by the user's setpoint")    # always honoured, as emergency is
-                self._offs_left, self._offs_sent = 0, True
-            if self.reaction in (Reaction.DESCENT, Reaction.LANDING):
-                self.ignored_setpoints += 1
-                if not self._said_ignored:
-                    self._said_ignored = True
-                    LOG.warning("%s: setpoints ignored until the safety %s is over (%s)",
-                                self.label, self.reaction, self.reason)
+            if not self._admit_setpoint(now, thrust, stop):
                 return False
-            if self._shutdown:
-                # the server is going away: nothing may send a Crazyflie up again, e.g. a controller
-                # whose integrator wound up while the reaction brought its Crazyflie down
-                self.ignored_setpoints += 1
-                return False
-            if self.reaction == Reaction.DOWN:
-                if self.battery.level == ERROR and (thrust is None or thrust >= MIN_FLYING_THRUST) and not stop:
-                    self.ignored_setpoints += 1
-                    return False        # no new take-off on a critical battery
-                if thrust is not None and thrust >= MIN_FLYING_THRUST:
-                    # as the firmware's thrust lock: a new RPYT flight starts from zero thrust, so a
-                    # controller wound up while its setpoints were ignored cannot send it up at once
-                    self.ignored_setpoints += 1
-                    if not self._said_ignored:
-                        self._said_ignored = True
-                        LOG.warning("%s: thrust setpoints ignored after the safety reaction until one with zero "
-                                    "thrust (a controller that kept running is wound up)", self.label)
-                    return False
-                self.reaction = Reaction.NONE
-                self._offs_left, self._offs_sent = 0, True
-            self._last_setpoint_at = now
-            if thrust is None:
-                self._stream = "generic"
-                self._flying = not stop
-            else:
-                self._stream = "rpyt"
-                self._flying = thrust >= MIN_FLYING_THRUST
-                if self._flying:
-                    self._thrusts.append((now, int(thrust)))
-                while self._thrusts and self._thrusts[0][0] < now - HOVER_WINDOW_S:
-                    self._thrusts.popleft()
-            if self._flying:
-                self._motors_off_by = ""
-            # a low-level setpoint takes the priority: the firmware's planner stops and forgets its plan
-            # (a land command's landing included)
-            self._hl_flying = False
-            self._land_until = 0.0
+            self._record_setpoint(now, thrust, stop)
             return True
+
+    def _admit_setpoint(self, now: float, thrust: Optional[int], stop: bool) -> bool:
+        """Whether the user's setpoint goes out, given the reaction under way (which a new setpoint ends
+        in hold, and a motors-off setpoint ends anyway)."""
+        if self.reaction == Reaction.HOLD:
+            self._resume(now)
+        if self.reaction in (Reaction.DESCENT, Reaction.LANDING):
+            if not (stop or (thrust is not None and thrust < MIN_FLYING_THRUST)):
+                return self._drop_setpoint("%s: setpoints ignored until the safety %s is over (%s)",
+                                           self.reaction, self.reason)
+            self._down(now, "motors off by the user's setpoint")    # always honoured, as emergency is
+            self._offs_left, self._offs_sent = 0, True
+        if self._shutdown:
+            # the server is going away: nothing may send a Crazyflie up again, e.g. a controller
+            # whose integrator wound up while the reaction brought its Crazyflie down
+            self.ignored_setpoints += 1
+            return False
+        if self.reaction == Reaction.DOWN:
+            return self._admit_after_reaction(thrust, stop)
+        return True
+
+    def _admit_after_reaction(self, thrust: Optional[int], stop: bool) -> bool:
+        """After a reaction ended with the motors off: only a motors-off setpoint (then any) goes out, and
+        none that flies on a critical battery."""
+        if self.battery.level == ERROR and (thrust is None or thrust >= MIN_FLYING_THRUST) and not stop:
+            self.ignored_setpoints += 1
+            return False        # no new take-off on a critical battery
+        if thrust is not None and thrust >= MIN_FLYING_THRUST:
+            # as the firmware's thrust lock: a new RPYT flight starts from zero thrust, so a
+            # controller wound up while its setpoints were ignored cannot send it up at once
+            return self._drop_setpoint("%s: thrust setpoints ignored after the safety reaction until one with zero "
+                                       "thrust (a controller that kept running is wound up)")
+        self.reaction = Reaction.NONE
+        self._offs_left, self._offs_sent = 0, True
+        return True
+
+    def _drop_setpoint(self, warning: str, *args: Any) -> bool:
+        """Counts a dropped setpoint and logs ``warning`` (the label, then ``args``) once per reaction."""
+        self.ignored_setpoints += 1
+        if not self._said_ignored:
+            self._said_ignored = True
+            LOG.warning(warning, self.label, *args)
+        return False
+
+    def _record_setpoint(self, now: float, thrust: Optional[int], stop: bool) -> None:
+        """The stream, and whether it flies, from a setpoint that goes out."""
+        self._last_setpoint_at = now
+        if thrust is None:
+            self._stream = "generic"
+            self._flying = not stop
+        else:
+            self._stream = "rpyt"
+            self._flying = thrust >= MIN_FLYING_THRUST
+            if self._flying:
+                self._thrusts.append((now, int(thrust)))
+            while self._thrusts and self._thrusts[0][0] < now - HOVER_WINDOW_S:
+                self._thrusts.popleft()
+        if self._flying:
+            self._motors_off_by = ""
+        # a low-level setpoint takes the priority: the firmware's planner stops and forgets its plan
+        # (a land command's landing included)
+        self._hl_flying = False
+        self._land_until = 0.0
 
     def note_stream_released(self, now: float) -> None:
         """The low-level stream handed control to the high-level commander (notify-setpoints-stop).
@@ -576,37 +592,52 @@ class SafetyMonitor:
         return int(round(sum(t for _, t in self._thrusts) / len(self._thrusts)))
 
     def _act(self, now: float) -> Optional[Action]:
-        if self.reaction == Reaction.LANDING:
-            if self._pending_land is not None:
-                duration, self._pending_land = self._pending_land, None
-                return Action("land", duration=duration, distance=self._land_distance)
-            if not self._own_landing:
-                if now >= self._land_until + LAND_OVER_AFTER_S:
-                    self._down(now, "landing over", offs=0)      # the firmware's planner stopped the motors
-                return None
-            if now >= self._deadline or self._landed(now):
-                self._down(now, "landed" if now < self._deadline else "shutdown budget spent")
-                return Action("hl_stop")
+        step = self._STEPS.get(self.reaction)
+        return None if step is None else step(self, now)
+
+    def _landing_step(self, now: float) -> Optional[Action]:
+        """Onboard landing: the land command once, then the motors off when it is over."""
+        if self._pending_land is not None:
+            duration, self._pending_land = self._pending_land, None
+            return Action("land", duration=duration, distance=self._land_distance)
+        if not self._own_landing:
+            if now >= self._land_until + LAND_OVER_AFTER_S:
+                self._down(now, "landing over", offs=0)      # the firmware's planner stopped the motors
             return None
-        if self.reaction == Reaction.DOWN:
-            if self._offs_left > 0:
-                self._offs_left -= 1
-                return Action("off")
-            self._offs_sent = True      # polled again: the last one went out
-            return None
-        if self.reaction in (Reaction.HOLD, Reaction.DESCENT):
-            t = now - self._started_at
-            if self._plan is None:
-                self._down(now, "no descent possible")
-                return self._act(now)
-            if self.reaction == Reaction.HOLD and t >= self._plan.hold_s:
-                self.reaction = Reaction.DESCENT
-            thrust = self._plan.thrust_at(t) if now < self._deadline else None
-            if thrust is None:
-                self._down(now, "descent over" if now < self._deadline else "shutdown budget spent")
-                return self._act(now)
-            return Action("thrust", thrust=thrust)
+        if now >= self._deadline or self._landed(now):
+            self._down(now, "landed" if now < self._deadline else "shutdown budget spent")
+            return Action("hl_stop")
         return None
+
+    def _down_step(self, now: float) -> Optional[Action]:
+        """Reaction over: the zero-thrust setpoints still to send."""
+        if self._offs_left > 0:
+            self._offs_left -= 1
+            return Action("off")
+        self._offs_sent = True      # polled again: the last one went out
+        return None
+
+    def _descent_step(self, now: float) -> Optional[Action]:
+        """Hold, then open-loop descent: the plan's thrust, then the motors off."""
+        t = now - self._started_at
+        if self._plan is None:
+            self._down(now, "no descent possible")
+            return self._act(now)
+        if self.reaction == Reaction.HOLD and t >= self._plan.hold_s:
+            self.reaction = Reaction.DESCENT
+        thrust = self._plan.thrust_at(t) if now < self._deadline else None
+        if thrust is None:
+            self._down(now, "descent over" if now < self._deadline else "shutdown budget spent")
+            return self._act(now)
+        return Action("thrust", thrust=thrust)
+
+    #: What each reaction sends this round trip (no entry: the user's stream).
+    _STEPS: Dict[str, Callable[[SafetyMonitor, float], Optional[Action]]] = {
+        Reaction.LANDING: _landing_step,
+        Reaction.DOWN: _down_step,
+        Reaction.HOLD: _descent_step,
+        Reaction.DESCENT: _descent_step,
+    }
 
     def _landed(self, now: float) -> bool:
         """The reaction's own landing is over: its plan ended and the Crazyflie rests on the floor."""

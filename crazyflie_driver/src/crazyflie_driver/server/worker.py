@@ -99,8 +99,9 @@ class WorkerConfig:
     # s between polls when nothing is queued, with sparse pacing, polls behind the other round trips waiting
     # for the dongle (swarm mode); 0: the server's period, eager pacing
     keepalive_period: float = 0.0
-    # ms between battery samples logged for the safety monitor alone when enable_logging is off (swarm
-    # mode); 0: none, so no battery reaction without enable_logging
+    # ms between battery samples logged for the safety monitor alone when no battery topic is logged
+    # (enable_logging off, or the battery topic switched off; swarm mode); 0: none, so no battery
+    # reaction without the battery topic
     battery_watch_ms: int = 0
     # the original driver's enable_logging_packets: packets nothing in the server reads go to on_packet
     log_packets: bool = False
@@ -643,7 +644,10 @@ class CrazyflieWorker:
                 if host_periods and all(v in types for v in variables):
                     topics.append((name, host_periods[0], variables))
             plan.extend(plan_log_blocks(topics, types, share=True))
-        elif cfg.battery_watch_ms and BATTERY_TOPIC not in cfg.disabled_topics and BATTERY_VARIABLE in types:
+        # the safety monitor's battery, when no battery topic brings it (sensor topics off, or the
+        # battery topic switched off): the switch turns a topic off, not the supervision
+        if (cfg.battery_watch_ms and not any(t == BATTERY_TOPIC for t, _, _ in topics)
+                and BATTERY_VARIABLE in types):
             plan.extend(plan_log_blocks([(BATTERY_TOPIC, cfg.battery_watch_ms, (BATTERY_VARIABLE,))], types,
                                         share=True))
         custom = [(b.topic_name, b.period_ms, b.variables) for b in cfg.log_blocks]
@@ -767,40 +771,59 @@ class CrazyflieWorker:
         next_due = self._clock()
         while True:
             with self._cond:
-                while not self._stopping:
-                    now = self._clock()
-                    lost = self.state in (WorkerState.LOST, WorkerState.POWERED_OFF)
-                    if self._pending is not None and not lost:
-                        break
-                    wait = next_due - now
-                    if wait <= 0:
-                        break
-                    self._cond.wait(self.clock.wall_bound(wait))
-                if self._stopping:
+                if not self._await_turn(next_due):
                     return
                 setpoint = self._pending
                 self._pending = None
-            setpoint = self._safety_step(setpoint)
-            downlink_before = self._downlink_packets
-            fetched_before = self._fetched_packets()
-            acked = self._round_trip(setpoint)
+            next_due = self._one_round(setpoint)
+
+    def _await_turn(self, next_due: float) -> bool:
+        """Waits (holding ``_cond``) until a setpoint is pending on a live link or ``next_due`` has come;
+        False when the worker stops."""
+        while not self._stopping:
             now = self._clock()
-            if self.state in (WorkerState.LOST, WorkerState.POWERED_OFF):
-                next_due = now + self.lost_retry_period
-            else:
-                logged = self._downlink_packets - downlink_before
-                next_due = now + self._pacer.after_round_trip(
-                    logged, now, max(0, self._fetched_packets() - fetched_before - logged))
-            if acked is not None:
-                self._after_round_trip(acked, now)
-                if acked and self._downlink_packets == downlink_before:
-                    self._onboard_clock.drained()
-            silent = self.watchdog.due(now)
-            if not self._emergency and silent is not None:
-                self._say_watchdog_cut(now, silent)
-            if self.safety.config.emergency_watchdog and now >= self._watchdog_due:
-                self._watchdog_due = now + safety_actions.WATCHDOG_KEEPALIVE_PERIOD_S
-                safety_actions.send_watchdog_keepalive(self.cf)
+            lost = self.state in (WorkerState.LOST, WorkerState.POWERED_OFF)
+            if self._pending is not None and not lost:
+                break
+            wait = next_due - now
+            if wait <= 0:
+                break
+            self._cond.wait(self.clock.wall_bound(wait))
+        return not self._stopping
+
+    def _one_round(self, setpoint: Optional[StreamedSetpoint]) -> float:
+        """One round trip (the setpoint, a safety reaction's, or a keep-alive) and what follows it;
+        returns when the next one is due."""
+        setpoint = self._safety_step(setpoint)
+        downlink_before = self._downlink_packets
+        fetched_before = self._fetched_packets()
+        acked = self._round_trip(setpoint)
+        now = self._clock()
+        next_due = self._next_due(now, downlink_before, fetched_before)
+        if acked is not None:
+            self._after_round_trip(acked, now)
+            if acked and self._downlink_packets == downlink_before:
+                self._onboard_clock.drained()
+        self._watchdog_duties(now)
+        return next_due
+
+    def _next_due(self, now: float, downlink_before: int, fetched_before: int) -> float:
+        """When the next round trip is due: the lost-link retry period, else the pacer's choice from the
+        log data and other answers this round trip brought down."""
+        if self.state in (WorkerState.LOST, WorkerState.POWERED_OFF):
+            return now + self.lost_retry_period
+        logged = self._downlink_packets - downlink_before
+        return now + self._pacer.after_round_trip(
+            logged, now, max(0, self._fetched_packets() - fetched_before - logged))
+
+    def _watchdog_duties(self, now: float) -> None:
+        """The emergency-stop watchdog: say once that it cut the motors, send its keep-alive when due."""
+        silent = self.watchdog.due(now)
+        if not self._emergency and silent is not None:
+            self._say_watchdog_cut(now, silent)
+        if self.safety.config.emergency_watchdog and now >= self._watchdog_due:
+            self._watchdog_due = now + safety_actions.WATCHDOG_KEEPALIVE_PERIOD_S
+            safety_actions.send_watchdog_keepalive(self.cf)
 
     def _fetched_packets(self) -> int:
         """Packets the Crazyflie's queue gave up so far: log data and every other answer (parameter,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import UriError
@@ -91,8 +91,32 @@ def _decks(where: str, decks: Any) -> tuple:
     return tuple(decks)
 
 
+_VEHICLE_KEYS = frozenset({"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform", "decks"})
+
+
 def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
     """``~vehicles`` (or ``~uri``/``~name``) checked; names must be valid ROS names, URIs unique."""
+    out: List[VehicleSpec] = []
+    seen_names: Set[str] = set()
+    seen_uris: Set[str] = set()
+    for i, item in enumerate(_vehicle_items(params)):
+        where = "~vehicles[%d]" % i
+        _check_vehicle_keys(where, item)
+        uri = _vehicle_uri(where, item)
+        name = _vehicle_name(where, item, i)
+        position = _vehicle_position(where, item)
+        _check_unique(where, name, seen_names, "name %r" % name)
+        _check_unique(where, uri, seen_uris, "URI %s" % uri)
+        platform = _vehicle_platform(where, item)
+        out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
+                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform,
+                               _decks(where, item.get("decks", []))))
+    return out
+
+
+def _vehicle_items(params: Mapping[str, Any]) -> list:
+    """The raw vehicle entries: ``~vehicles`` as a list, a YAML text or file (a list, or a mapping with
+    ``vehicles``), else the one vehicle of ``~uri``, ``~name`` and ``~x``/``~y``/``~z``."""
     raw = params.get("vehicles")
     if isinstance(raw, str) and raw.strip():
         raw = _parse_vehicles_text(raw)
@@ -105,44 +129,56 @@ def vehicles_from_params(params: Mapping[str, Any]) -> List[VehicleSpec]:
         raw = raw["vehicles"]
     if not isinstance(raw, list):
         raise SimConfigError("~vehicles must be a list of {uri, name, x, y, z}, got %r" % (raw,))
-    out: List[VehicleSpec] = []
-    seen_names, seen_uris = set(), set()
-    for i, item in enumerate(raw):
-        where = "~vehicles[%d]" % i
-        if not isinstance(item, dict) or "uri" not in item:
-            raise SimConfigError("%s needs at least a 'uri' (got %r)" % (where, item))
-        unknown = set(item) - {"uri", "name", "x", "y", "z", "position", "yaw", "firmware", "frame", "platform",
-                                 "decks"}
-        if unknown:
-            raise SimConfigError("%s has unknown keys %s" % (where, ", ".join(sorted(unknown))))
-        try:
-            uri = str(parse_uri(str(item["uri"])))
-        except UriError as e:
-            raise SimConfigError("%s: %s" % (where, e)) from None
-        name = str(item.get("name") or "crazyflie%d" % (i + 1))
-        if not (name[0].isalpha() and all(c.isalnum() or c == "_" for c in name)):
-            raise SimConfigError("%s: name %r is not a valid ROS name (letters, digits, '_')" % (where, name))
-        if "position" in item:
-            pos = item["position"]
-            if not isinstance(pos, (list, tuple)) or len(pos) != 3:
-                raise SimConfigError("%s: position must be [x, y, z], got %r" % (where, pos))
-            position = tuple(_number(where + ".position", v) for v in pos)
-        else:
-            position = tuple(_number("%s.%s" % (where, k), item.get(k, 0.0)) for k in ("x", "y", "z"))
-        if name in seen_names:
-            raise SimConfigError("%s: name %r is used twice" % (where, name))
-        if uri in seen_uris:
-            raise SimConfigError("%s: URI %s is used twice" % (where, uri))
-        seen_names.add(name)
-        seen_uris.add(uri)
-        platform = item.get("platform", PLATFORM_CF2)
-        if platform not in PLATFORMS:
-            raise SimConfigError("%s: platform must be one of %s (brushless: armed before its motors spin), got %r"
-                                 % (where, ", ".join(PLATFORMS), platform))
-        out.append(VehicleSpec(uri, name, position, _number(where + ".yaw", item.get("yaw", 0.0)),
-                               str(item.get("firmware", "current")), _frame(where, item.get("frame")), platform,
-                               _decks(where, item.get("decks", []))))
-    return out
+    return raw
+
+
+def _check_vehicle_keys(where: str, item: Any) -> None:
+    if not isinstance(item, dict) or "uri" not in item:
+        raise SimConfigError("%s needs at least a 'uri' (got %r)" % (where, item))
+    unknown = set(item) - _VEHICLE_KEYS
+    if unknown:
+        raise SimConfigError("%s has unknown keys %s" % (where, ", ".join(sorted(unknown))))
+
+
+def _vehicle_uri(where: str, item: Mapping[str, Any]) -> str:
+    """The radio URI in its canonical form, so two spellings of one Crazyflie count as the same."""
+    try:
+        return str(parse_uri(str(item["uri"])))
+    except UriError as e:
+        raise SimConfigError("%s: %s" % (where, e)) from None
+
+
+def _vehicle_name(where: str, item: Mapping[str, Any], i: int) -> str:
+    """The given name (a valid ROS name), or crazyflie<i + 1>."""
+    name = str(item.get("name") or "crazyflie%d" % (i + 1))
+    if not (name[0].isalpha() and all(c.isalnum() or c == "_" for c in name)):
+        raise SimConfigError("%s: name %r is not a valid ROS name (letters, digits, '_')" % (where, name))
+    return name
+
+
+def _vehicle_position(where: str, item: Mapping[str, Any]) -> tuple:
+    """``position: [x, y, z]``, else ``x``, ``y``, ``z`` (each 0 when not given), in m."""
+    if "position" not in item:
+        return tuple(_number("%s.%s" % (where, k), item.get(k, 0.0)) for k in ("x", "y", "z"))
+    pos = item["position"]
+    if not isinstance(pos, (list, tuple)) or len(pos) != 3:
+        raise SimConfigError("%s: position must be [x, y, z], got %r" % (where, pos))
+    return tuple(_number(where + ".position", v) for v in pos)
+
+
+def _check_unique(where: str, value: str, seen: Set[str], what: str) -> None:
+    """Refuses ``value`` (described as ``what``) when an earlier vehicle has it; else remembers it."""
+    if value in seen:
+        raise SimConfigError("%s: %s is used twice" % (where, what))
+    seen.add(value)
+
+
+def _vehicle_platform(where: str, item: Mapping[str, Any]) -> str:
+    platform = item.get("platform", PLATFORM_CF2)
+    if platform not in PLATFORMS:
+        raise SimConfigError("%s: platform must be one of %s (brushless: armed before its motors spin), got %r"
+                             % (where, ", ".join(PLATFORMS), platform))
+    return platform
 
 
 def vehicles_from_swarm(path: str, crazyflies: Sequence[Any]) -> List[VehicleSpec]:

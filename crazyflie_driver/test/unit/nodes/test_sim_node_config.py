@@ -28,6 +28,12 @@ def test_vehicle_list_and_single_vehicle():
     assert single[0].uri == "radio://0/80/2M/E7E7E7E7E7" and single[0].name == "crazyflie"
 
 
+def test_vehicle_names_default_by_place_and_a_mapping_holds_its_list():
+    v = vehicles_from_params({"vehicles": {"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701"},
+                                                        {"uri": "radio://0/80/2M/E7E7E7E702", "name": ""}]}})
+    assert [x.name for x in v] == ["crazyflie1", "crazyflie2"]
+
+
 @pytest.mark.parametrize("params,message", [
     ({}, "no vehicles"),
     ({"vehicles": [{"name": "a"}]}, "needs at least a 'uri'"),
@@ -36,6 +42,15 @@ def test_vehicle_list_and_single_vehicle():
     ({"vehicles": [{"uri": "radio://0/80/2M", "name": "a"}, {"uri": "radio://0/80/2M", "name": "b"}]}, "twice"),
     ({"vehicles": [{"uri": "radio://0/80/2M", "colour": "red"}]}, "unknown keys colour"),
     ({"vehicles": [{"uri": "radio://0/80/2M", "platform": "quad"}]}, "platform must be one of cf2, brushless"),
+    ({"vehicles": [{"uri": "radio://0/80/2M/E7E7E7E701", "name": "a"},
+                   {"uri": "radio://0/80/2M/E7E7E7E702", "name": "a"}]},
+     r"~vehicles\[1\]: name 'a' is used twice"),
+    ({"vehicles": [{"uri": "radio://0/80/2M"}, {"uri": "radio://0/80/2m/e7e7e7e7e7/"}]},
+     r"~vehicles\[1\]: URI radio://0/80/2M/E7E7E7E7E7 is used twice"),     # one Crazyflie, two spellings
+    ({"vehicles": [{"uri": "radio://0/80/2M", "position": [0, 1]}]}, r"position must be \[x, y, z\]"),
+    ({"vehicles": [{"uri": "radio://0/80/2M", "position": [0, "a", 1]}]}, r"\.position must be a number"),
+    ({"vehicles": [{"uri": "radio://0/80/2M", "y": "north"}]}, r"~vehicles\[0\]\.y must be a number"),
+    ({"vehicles": {"uri": "radio://0/80/2M"}}, "must be a list"),
 ])
 def test_vehicle_errors(params, message):
     with pytest.raises(SimConfigError, match=message):

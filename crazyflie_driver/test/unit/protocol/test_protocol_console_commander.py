@@ -9,6 +9,7 @@ import pytest
 from crazyflie_driver.crtp.firmware_limits import MAX_RATE_DEG_S
 from crazyflie_driver.crtp.packet import CRTPPacket
 from crazyflie_driver.errors import LinkTimeout
+from crazyflie_driver.protocol.commander import Commander, rpyt_bytes, rpyt_packet
 from support.scripted_link import make_crazyflie
 
 
@@ -42,6 +43,25 @@ def test_rpyt_setpoint_bytes():
     assert packet.to_bytes()[0] == 0x3C
     assert packet.data == struct.pack("<fffH", 1.5, -2.0, 30.0, 40000)
     assert len(packet.data) == 14
+
+
+@pytest.mark.parametrize("values", [(1.5, -2.0, 30.0, 40000), (0.0, -0.0, 0.0, 0), (1e39, -1e30, 1999.5, 70000),
+                                    (1, True, np.float64(-3.0), 12345.9), (0.0, 0.0, 0.0, np.int64(1234))])
+def test_a_link_that_takes_raw_packets_gets_the_same_bytes(values):
+    class RawLink:
+        def __init__(self):
+            self.sent = []
+
+        def send_bytes(self, raw):
+            self.sent.append(raw)
+            return True
+
+    link = RawLink()
+    assert Commander(link).send_setpoint(*values)
+    assert link.sent == [rpyt_packet(*values).to_bytes()] == [rpyt_bytes(*values)]
+    cf, scripted, fw = make_crazyflie(12)           # a link with only send(CRTPPacket)
+    cf.send_setpoint(*values)
+    assert scripted.sent[-1] == rpyt_packet(*values)
 
 
 @pytest.mark.parametrize("thrust, wire", [(-5, 0), (0, 0), (60000, 60000), (70000, 60000),
@@ -132,3 +152,16 @@ def test_a_worker_hands_each_console_line_to_its_listener_and_the_server_logs_it
     assert listener.lines == ["SYS: Crazyflie 2.1 is up and running!\r", "IMU: ok"]
     assert rosout_line("cf1", listener.lines[0]) == "CF Console: [cf1] SYS: Crazyflie 2.1 is up and running!"
     assert rosout_line("cf1", "a\x1b[0mb") == "CF Console: [cf1] a\\x1b[0mb"      # no terminal escapes in the log
+
+
+def test_console_line_without_newline_is_cut_at_the_bound():
+    from crazyflie_driver.protocol.console import MAX_LINE_CHARS
+
+    cf, link, fw = make_crazyflie(12)
+    lines = []
+    cf.console.on_line(lines.append)
+    text = b"x" * (MAX_LINE_CHARS + 40)
+    link.push(*(CRTPPacket(0, 0, text[i:i + 30]) for i in range(0, len(text), 30)))
+    link.push(CRTPPacket(0, 0, b"y\n"))
+    link.drain()
+    assert lines == ["x" * MAX_LINE_CHARS, "x" * 40 + "y"]

@@ -80,8 +80,11 @@ class RecordingRadio:
 
     def __init__(self, version):
         self.version = version
-        self.two_per_transfer = version >= 99.55
+        is_2 = 1.0 <= version < 99.0
+        self.two_per_transfer = version >= 99.55 or is_2
+        self.max_pair_bytes = (63 if is_2 else 64) if self.two_per_transfer else 0
         self.inline_capable = False
+        self.in_inline_mode = False
         self._channel, self._datarate, self._address = 2, 2, b"\xe7" * 5
         self.ack_enabled = True
         self.transfers = []
@@ -106,7 +109,7 @@ class RecordingRadio:
 
 
 @pytest.mark.parametrize("version, expected", [(99.55, [58, 58, 15]), (0.53, [29, 29, 29, 29, 15]),
-                                               (5.4, [29, 29, 29, 29, 15])])
+                                               (5.4, [58, 58, 15]), (5.0, [58, 58, 15])])
 def test_packed_mocap_goes_two_packets_per_transfer_where_the_dongle_splits_them(version, expected):
     radio = RecordingRadio(version)
     manager = RadioManager(radio_factory=lambda i: radio)

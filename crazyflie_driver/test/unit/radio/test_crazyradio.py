@@ -10,6 +10,7 @@ import usb.core
 
 from crazyflie_driver import usb_choice as usb_backend
 from crazyflie_driver.errors import CrazyflieError, RadioAccessDenied, RadioNotFound, RadioUnplugged
+from crazyflie_driver.radio import crazyradio
 from crazyflie_driver.radio.crazyradio import Crazyradio, RadioAck, inline_frame, list_radios, parse_inline_reply
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
@@ -92,7 +93,41 @@ def test_bad_arguments_are_refused_before_any_traffic(backend, call):
     assert len(backend.dongles[0].vendor_requests) == before
 
 
-def test_send_packet_decodes_the_status_byte(backend, medium):
+@pytest.fixture(params=["backend", "pyusb"])
+def transfers(request, monkeypatch):
+    """Bulk transfers straight through the pyusb backend on the open handle (what the radio picks), or
+    through pyusb's public ``Device.write``/``read`` (its fallback): the same bytes either way."""
+    if request.param == "pyusb":
+        monkeypatch.setattr(crazyradio, "bulk_io", lambda dev: (crazyradio._DeviceBulk(dev), None))
+    return request.param
+
+
+def test_bulk_transfers_go_to_the_backend_on_the_devices_open_handle(backend):
+    radio = Crazyradio(0, backend)
+    bulk, handle = crazyradio.bulk_io(radio.device)
+    assert bulk is backend
+    assert handle is radio.device._ctx.handle and handle.dongle is backend.dongles[0]
+    radio.close()
+
+
+def test_bulk_transfers_fall_back_to_pyusbs_public_calls():
+    class Device:
+        def write(self, ep, data, timeout):
+            self.wrote = (ep, bytes(data), timeout)
+            return len(data)
+
+        def read(self, ep, buff, timeout):
+            buff[:2] = crazyradio.array.array("B", b"\x01\xf3")
+            return 2
+
+    dev = Device()
+    bulk, handle = crazyradio.bulk_io(dev)
+    assert bulk.bulk_write(handle, 0x01, 0, b"\x3c\x00", 1000) == 2 and dev.wrote == (0x01, b"\x3c\x00", 1000)
+    buff = crazyradio.array.array("B", bytes(4))
+    assert bulk.bulk_read(handle, 0x81, 0, buff, 1000) == 2 and buff[:2].tobytes() == b"\x01\xf3"
+
+
+def test_send_packet_decodes_the_status_byte(backend, medium, transfers):
     radio = Crazyradio(0, backend)
     medium.push(AirReply(True, b"\x2c\x00\x07", retries=3, power_detector=True),
                 AirReply(True, b"", retries=0, power_detector=False),
@@ -104,7 +139,7 @@ def test_send_packet_decodes_the_status_byte(backend, medium):
     assert [t.data for t in medium.transmits] == [b"\x2c\x00", b"\xff", b"\xff"]
 
 
-def test_send_with_acks_disabled_does_not_wait_for_a_reply(medium):
+def test_send_with_acks_disabled_does_not_wait_for_a_reply(medium, transfers):
     clock = FakeClock()
     backend = FakeUsbBackend(medium, timing=DongleTiming.instant(), clock=clock)
     radio = Crazyradio(0, backend)
@@ -115,7 +150,7 @@ def test_send_with_acks_disabled_does_not_wait_for_a_reply(medium):
     assert medium.transmits[-1].ack_enabled is False
 
 
-def test_usb_timeout_counts_as_unacked(medium):
+def test_usb_timeout_counts_as_unacked(medium, transfers):
     clock = FakeClock()
     backend = FakeUsbBackend(medium, timing=DongleTiming.instant(), clock=clock)
     radio = Crazyradio(0, backend, usb_timeout_ms=50)
@@ -123,7 +158,7 @@ def test_usb_timeout_counts_as_unacked(medium):
     assert radio.send_packet(b"\xff") == RadioAck(False, False, 3, b"")
 
 
-def test_unplug_during_use(backend, medium):
+def test_unplug_during_use(backend, medium, transfers):
     radio = Crazyradio(0, backend)
     backend.unplug(0)
     with pytest.raises(RadioUnplugged, match="Crazyradio 0 was unplugged"):
@@ -272,7 +307,7 @@ def test_inline_mode_is_chosen_by_firmware_version(medium, model, capable):
     radio.close()
 
 
-def test_inline_packets_to_two_crazyflies_need_no_vendor_request_between_them(medium):
+def test_inline_packets_to_two_crazyflies_need_no_vendor_request_between_them(medium, transfers):
     backend = WireBackend(medium, model="2.0", timing=DongleTiming.instant())
     radio = Crazyradio(0, backend)
     a, b = b"\xe7\xe7\xe7\xe7\x01", b"\xe7\xe7\xe7\xe7\x02"

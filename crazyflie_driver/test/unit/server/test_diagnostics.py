@@ -300,6 +300,17 @@ def test_with_the_sensor_topics_off_a_battery_watch_still_feeds_the_safety_monit
         assert worker.log_topics == ["battery"]          # its block was created on the Crazyflie
     finally:
         worker.stop()
+    switched = CrazyflieWorker(WorkerConfig(str(rig.uri), "cf1", enable_logging=True, enable_parameters=False,
+                                            battery_watch_ms=100, disabled_topics=frozenset({"battery", "imu"})),
+                               Crazyflie(rig.uri, radio_manager=rig.manager, timeout=1.0))
+    switched.start()      # the battery topic switched off: the watch still logs it, alone in its block
+    try:
+        switched.wait_ready(10.0)
+        topics = [[t[0] for t in b.topics] for b in switched._log_plan]
+        assert ["battery"] in topics and not any("imu" in t for t in topics)
+        assert sum(t.count("battery") for t in topics) == 1
+    finally:
+        switched.stop()
     plain = CrazyflieWorker(WorkerConfig(str(rig.uri), "cf1", enable_logging=False, enable_parameters=False),
                             Crazyflie(rig.uri, radio_manager=rig.manager, timeout=1.0))
     plain.start()

@@ -28,10 +28,10 @@ class VirtualClock:
         self.t += max(0.0, s)
 
 
-def dongle_with(uris):
+def dongle_with(uris, model="PA"):
     clock = VirtualClock()
     medium = LocalMedium(dongles=1, seed=3)
-    backend = FakeUsbBackend(medium, dongles=1, timing=DongleTiming(), clock=clock)
+    backend = FakeUsbBackend(medium, dongles=1, model=model, timing=DongleTiming(), clock=clock)
     for u in uris:
         p = parse_uri(u)
         medium.add_crazyflie(SimulatedCrazyflie(p.address, FakeVehicle()), p.channel, p.datarate)
@@ -59,6 +59,8 @@ def test_model_figures_are_the_fake_dongles():
     t = DongleTiming()
     assert rb.BULK_ROUND_TRIP_S == t.bulk_round_trip_s
     assert rb.CONTROL_TRANSFER_S == t.control_transfer_s
+    assert rb.NO_ACK_PACKET_S == t.no_ack_packet_s
+    assert rb.INLINE_NO_ACK_S == pytest.approx(t.inline_no_ack_s)
 
 
 @pytest.mark.parametrize("uris", [
@@ -82,24 +84,35 @@ def test_capacity_figures():
     assert rb.capacity_per_s(two) == pytest.approx(1 / 0.0023)       # ~435/s
 
 
-def test_broadcast_burst_cost_matches_the_fake_dongle():
-    uri = "radio://0/80/2M/E7E7E7E701"
-    clock, manager = dongle_with([uri])
-    link = open_link(uri, manager)
+@pytest.mark.parametrize("model, uris, packets, inline", [
+    ("PA", ["radio://0/80/2M/E7E7E7E701"], [bytes([0x60]) + bytes(20)] * 3, False),       # one per transfer
+    ("PA", ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702"], [bytes([0x60]) + bytes(20)] * 3, False),
+    ("PA-99.55", ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702"], [bytes([0x60]) + bytes(23)] * 4,
+     False),                                                                            # two pairs
+    ("2.0", ["radio://0/80/2M/E7E7E7E701", "radio://0/80/2M/E7E7E7E702"], [bytes([0x60]) + bytes(23)] * 4, True),
+])
+def test_broadcast_burst_cost_matches_the_fake_dongle(model, uris, packets, inline):
+    """A unicast round trip, a burst, the next Crazyflie's round trip: the dongle's time is the burst's
+    modelled cost (switches, air time) plus that round trip's, for each kind of dongle."""
+    clock, manager = dongle_with(uris, model)
+    links = [open_link(u, manager) for u in uris]
     bc = BroadcastLink(0, 80, 2, manager)
     bc.open()
     try:
-        link.poll()
+        for link in links:
+            link.poll()
         t0 = clock.time()
-        bc.send_all([bytes([0x60]) + bytes(20)] * 3)     # 3 packets, not paired (PA 0.53 takes one per transfer)
-        link.poll()
+        bc.send_all(packets)
+        links[0].poll()
         spent = clock.time() - t0
-        modelled = (rb.BROADCAST_SWITCHES * rb.CONTROL_TRANSFER_S + 3 * rb.BULK_ROUND_TRIP_S
-                    + rb.round_trip_cost_s([parse_uri(uri)]))
+        parsed = [parse_uri(u) for u in uris]
+        assert bc.sends_inline == inline
+        modelled = rb.burst_s(len(packets), parsed, inline) + rb.round_trip_cost_s(parsed, inline)
         assert spent == pytest.approx(modelled, rel=1e-6)
     finally:
         bc.close()
-        link.close()
+        for link in links:
+            link.close()
 
 
 def demand(name, uri, setpoint_hz=0.0, pose_hz=0.0, log_hz=0.0):
@@ -140,19 +153,24 @@ def test_unicast_mocap_advice_and_broadcast_cost():
     assert any("broadcast" in a for a in b.advice)
     assert any("high-level commander" in a for a in b.advice)
     # poses by broadcast instead, flown by the high-level commander: a burst of 2 packets per frame,
-    # whose switches (4 x 1.5 ms) dominate: 100 frames/s are 83 % of the dongle, 50 frames/s 45 %
+    # whose switches (3 x 1.5 ms) dominate its 2 x 0.3 ms of air time: 100 frames/s are 58 % of the
+    # dongle, 150 frames/s 83 %
     ds = [demand("cf%d" % i, "radio://0/80/2M/E7E7E7E70%d" % i, 0, 0, 0) for i in range(1, 4)]
-    for rate, load, level in ((100.0, 0.829, 1), (50.0, 0.449, 0)):
+    for rate, load, level in ((150.0, 0.834, 1), (100.0, 0.579, 0)):
         bc = rb.mocap_broadcast(0, 3, rate)
         assert bc.packets == 2
         (b,) = rb.check_budget(ds, [bc])
         assert b.broadcast_packets_hz == pytest.approx(2 * rate)
-        assert b.load == pytest.approx(3 * rb.KEEPALIVE_FLOOR_HZ * 0.0023 + rate * (4 * 0.0015 + 2 * 0.0008))
+        assert b.load == pytest.approx(3 * rb.KEEPALIVE_FLOOR_HZ * 0.0023 + rate * (3 * 0.0015 + 2 * 0.0003))
         assert b.load == pytest.approx(load, abs=0.001)
         assert b.level == level
         assert bool(b.advice) == bool(level)
-    (b,) = rb.check_budget(ds, [rb.mocap_broadcast(0, 3, 100.0)])
-    assert "broadcast less often or from a Crazyradio of its own" in b.message()
+    (b,) = rb.check_budget(ds, [rb.mocap_broadcast(0, 3, 150.0)])
+    assert "broadcast less often or from a Crazyradio of its own, or a Crazyradio 2.0" in b.message()
+    # the same on a Crazyradio 2.0 in inline mode: no switch, 0.6 ms a packet, 0.8 ms a keep-alive
+    (b,) = rb.check_budget(ds, [rb.mocap_broadcast(0, 3, 150.0, inline=True)])
+    assert b.load == pytest.approx(3 * rb.KEEPALIVE_FLOOR_HZ * 0.0008 + 150 * 2 * 0.0006)
+    assert b.level == 0
 
 
 def test_log_estimate_before_connecting():
@@ -175,18 +193,34 @@ def test_mocap_rate_is_the_wanted_one_where_the_dongle_carries_it():
 
 
 def test_mocap_rate_leaves_the_keepalives_and_the_unicast_reserve_free():
-    """17 Crazyflies on one dongle (49 on three): 9 pose packets a frame cost 13.2 ms, so 100 Hz would
-    need 132 % of the dongle; the rate is what remains beside 17 keep-alives at the floor rate (2.3 ms
-    each, address switches included) and the reserve kept for requests."""
+    """17 Crazyflies on one PA (49 on three): 9 pose packets a frame cost 3 switches x 1.5 ms + 9 x 0.3 ms
+    of air time = 7.2 ms, so 100 Hz would need 72 % of the dongle; the rate is what remains beside 17
+    keep-alives at the floor rate (2.3 ms each, address switches included) and the reserve kept for
+    requests: 50 Hz."""
     members = grid(17)
     rate = rb.mocap_rate_hz(members, 100.0)
-    burst = rb.burst_s(9)
-    assert burst == pytest.approx(0.0132)
+    burst = rb.burst_s(9, [m.uri for m in members])
+    assert burst == pytest.approx(0.0072)
     keepalives = 17 * rb.KEEPALIVE_FLOOR_HZ * 0.0023
     assert rate == pytest.approx((1.0 - rb.UNICAST_RESERVE - keepalives) / burst)
+    assert rate == pytest.approx(49.9, abs=0.1)
     budget = rb.check_budget(members, [rb.mocap_broadcast(0, 17, rate)])[0]
     assert budget.load == pytest.approx(1.0 - rb.UNICAST_RESERVE)
     assert rb.mocap_rate_hz(members, 100.0, full_pose=False) > rate          # 5 position packets a frame
+
+
+def test_49_on_three_radios():
+    """49 Crazyflies on three dongles (17 / 16 / 16): the PA's control transfers hold each radio to
+    50-55 Hz; a Crazyradio 2.0 in inline mode carries the room's 100 Hz within the 75 % bursts may take."""
+    swarm = [demand("cf%d" % i, "radio://%d/80/2M/E7E7E7E7%02X" % (i % 3, i)) for i in range(49)]
+    pa = rb.mocap_plan(swarm, 100.0)
+    assert [b.packets for b in pa] == [9, 8, 8]
+    assert [round(b.frames_hz, 1) for b in pa] == [49.9, 55.4, 55.4]
+    two = rb.mocap_plan(swarm, 100.0, inline_dongles={0, 1, 2})
+    assert [b.frames_hz for b in two] == [100.0] * 3 and all(b.inline for b in two)
+    for b in rb.check_budget(swarm, two):
+        assert b.load <= 1.0 - rb.UNICAST_RESERVE and b.level == 0
+    assert rb.check_budget(swarm, two)[0].load == pytest.approx(17 * 10 * 0.0008 + 100 * 9 * 0.0006)
 
 
 def test_mocap_rate_never_below_its_floor():

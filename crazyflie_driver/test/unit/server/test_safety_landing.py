@@ -4,7 +4,6 @@ over fake dongles, judged on the packets that go out (none, where a command is r
 from __future__ import annotations
 
 import logging
-import time
 
 import pytest
 
@@ -23,7 +22,7 @@ from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from support.radio_doubles import AirReply, FakeClock, ScriptedMedium
 from support.swarm_doubles import FirmwareDouble, LinkDouble
-from support.worker_doubles import FakeCrazyflie, started
+from support.worker_doubles import FakeCrazyflie, started, wait_for
 from support.worker_doubles import poll_actions as run
 
 CURRENT_FW = 12
@@ -276,10 +275,10 @@ def test_a_group_mask_written_by_update_params_is_the_one_the_swarm_follows():
 def test_worker_emergency_clears_what_the_shutdown_reaction_trusts():
     w, cf, _ = started(cf=FakeCrazyflie(), safety=SafetyConfig())
     try:
-        for _ in range(20):
+        def hovering():           # a setpoint at hover thrust until the worker has sent one
             w.cmd_vel(0.0, 0.0, float(HOVER), 0.0)
-            time.sleep(0.01)
-        assert w.safety.flying
+            return w.safety.flying
+        assert wait_for(hovering, 5.0)
         w.emergency()
         assert not w.begin_safe_shutdown(5.0)           # the server says nothing about bringing it down
         assert w.safe_to_close() and not w.safety.flying

@@ -205,8 +205,21 @@ class MocapStream:
     def send_frame(self, frame: Mapping[str, Tuple[float, Position, Optional[Quaternion]]]) -> int:
         """Send one frame now (the sender thread calls this; tests may too). Returns USB transfers.
         A pose the packed format cannot carry is left out (and logged), never the whole frame."""
-        poses: Dict[str, tuple] = {}
-        positions: Dict[str, tuple] = {}
+        frame = self._packable(frame)
+        if not frame:
+            return 0
+        taken = self._broadcast(frame)
+        if taken is None:
+            return 0
+        self._count(frame, taken)
+        if self._on_pose is not None:
+            for name, (received, _, _) in frame.items():
+                self._on_pose(name, received)
+        return taken
+
+    def _packable(self, frame: Mapping[str, Tuple[float, Position, Optional[Quaternion]]]
+                  ) -> Dict[str, Tuple[float, Position, Optional[Quaternion]]]:
+        """The frame's poses the packed format can carry; the others are refused (counted, logged)."""
         good = {}
         for name, item in frame.items():
             try:
@@ -215,9 +228,13 @@ class MocapStream:
                 self._refuse(name, str(e))
                 continue
             good[name] = item
-        frame = good
-        if not frame:
-            return 0
+        return good
+
+    def _broadcast(self, frame: Mapping[str, Tuple[float, Position, Optional[Quaternion]]]) -> Optional[int]:
+        """The frame's full poses and positions on the air; the USB transfers, None when a dongle failed
+        (logged; the next frame tries again)."""
+        poses: Dict[str, tuple] = {}
+        positions: Dict[str, tuple] = {}
         for name, (_, p, q) in frame.items():
             if self.position_only or q is None:
                 positions[self.uris[name]] = p
@@ -233,7 +250,11 @@ class MocapStream:
             self.send_errors += 1
             if self.send_errors == 1 or self.send_errors % 1000 == 0:
                 LOG.error("motion capture broadcast failed (%d times so far): %s", self.send_errors, e)
-            return 0
+            return None
+        return taken
+
+    def _count(self, frame: Mapping[str, Tuple[float, Position, Optional[Quaternion]]], taken: int) -> None:
+        """The statistics of a frame sent: frames, transfers, poses per Crazyflie, latencies."""
         sent_at = self._clock()
         with self._stats_lock:
             self.frames += 1
@@ -244,10 +265,6 @@ class MocapStream:
             self.latencies.extend(sent_at - t for t, _, _ in frame.values())
             if len(self.latencies) > LATENCY_SAMPLES:
                 del self.latencies[:-LATENCY_SAMPLES]
-        if self._on_pose is not None:
-            for name, (received, _, _) in frame.items():
-                self._on_pose(name, received)
-        return taken
 
     def _refuse(self, name: str, why: str) -> None:
         """Count and log a pose of ``name`` the packed format cannot carry (throttled per Crazyflie)."""

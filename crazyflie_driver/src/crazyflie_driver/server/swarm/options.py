@@ -11,6 +11,7 @@ from typing import Any, Mapping, Optional
 
 from crazyflie_driver.errors import SwarmConfigError
 from crazyflie_driver.radio.broadcast import DEFAULT_REPEAT_INTERVAL_S, DEFAULT_REPEATS
+from crazyflie_driver.server.swarm.config import LOG_SWITCHES, Switches
 from crazyflie_driver.server.swarm.watch import DEFAULT_HOLD_S, DEFAULT_STALE_AFTER_S
 
 MOCAP_SOURCES = ("vrpn", "tf", "topic", "none")
@@ -38,6 +39,7 @@ class SwarmOptions:
     dongle_wait: float = 30.0
     mocap_rate: float = 100.0       # Hz, the motion capture's frame rate: the most the stream sends
     emergency_watchdog: bool = True     # broadcast the emergency-stop watchdog keep-alive (swarm.heartbeat)
+    switches: Switches = ()             # HEAD's logging switches given as parameters (the swarm file's win)
 
 
 def _bool(name: str, v: Any) -> bool:
@@ -101,4 +103,5 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
         dongle_wait=_number("dongle_wait", params.get("dongle_wait", 30.0), 0),
         mocap_rate=_number("mocap_rate", params.get("mocap_rate", 100.0), 0, strict=True),
         emergency_watchdog=_bool("emergency_watchdog", params.get("emergency_watchdog", True)),
+        switches=tuple((n, _bool(n, params[n])) for n in LOG_SWITCHES if n in params),
     )

@@ -20,6 +20,7 @@ from crazyflie_driver.clock import Clock
 from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import CommandRejected, CommandValueError, CrazyflieError
 from crazyflie_driver.server import radio_budget
+from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.param_names import Lookup
 from crazyflie_driver.server.swarm import estimator_placement
@@ -103,11 +104,18 @@ def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int
     connect: reading every parameter of 49 Crazyflies one by one takes
     ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types.
     Polls at the keep-alive floor: nothing streams setpoints, and 17 Crazyflies polling every 10 ms
-    would fill their radio."""
-    blocks = (pose_block(pose_period_ms),) if pose_period_ms else ()
+    would fill their radio. crazyflie_ros HEAD's logging switches: the Crazyflie's (its own, then its
+    type's), else the server's parameter, else on, except ``packets`` (off, as the sensor topics are in
+    swarm mode: one publisher fewer per Crazyflie); ``enable_logging_pose: false`` drops the pose block.
+    ``enable_logging_battery: false`` drops the battery topic, not the safety monitor's battery watch."""
+    switches = dict(options.switches)
+    switches.update(cf.switches)
+    blocks = (pose_block(pose_period_ms),) if pose_period_ms and switches.get(POSE_SWITCH, True) else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
                         enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S,
-                        battery_watch_ms=BATTERY_WATCH_MS)
+                        battery_watch_ms=BATTERY_WATCH_MS,
+                        disabled_topics=frozenset(t for n, t in TOPIC_SWITCHES if not switches.get(n, True)),
+                        log_packets=switches.get(PACKETS_SWITCH, False))
 
 
 def initial_position_params(position: Sequence[float]) -> Dict[str, Any]:
@@ -402,10 +410,13 @@ class SwarmPolicy:
     # -- motion capture ---------------------------------------------------------------------------
     def mocap_plan(self) -> List[radio_budget.BroadcastDemand]:
         """Each radio's motion-capture bursts at the rate its budget allows beside its Crazyflies' unicast
-        needs and the reserve for requests (``radio_budget.mocap_rate_hz``)."""
+        needs and the reserve for requests (``radio_budget.mocap_rate_hz``); a Crazyradio 2.0 with inline
+        mode is planned without control transfers."""
         demands = [radio_budget.CrazyflieDemand(m.name, parse_uri(m.uri), 0.0, 0.0, m.worker.log_packet_rate)
                    for m in self.members]
-        return radio_budget.mocap_plan(demands, self.options.mocap_rate, not self.options.position_only)
+        links = self.broadcaster.links if self.broadcaster is not None else {}
+        inline = {key[0] for key, link in links.items() if link.sends_inline}
+        return radio_budget.mocap_plan(demands, self.options.mocap_rate, not self.options.position_only, inline)
 
     def start_stream(self) -> Optional[MocapStream]:
         """The pose stream to the members' estimators, planned on the radio budget (None without motion

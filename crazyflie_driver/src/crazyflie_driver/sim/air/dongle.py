@@ -30,7 +30,7 @@ from crazyflie_driver.radio.crazyradio import (
     SET_RADIO_POWER,
 )
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
-from crazyflie_driver.sim.air.usb_descriptors import PA_9955, PA_MODELS, DongleModel
+from crazyflie_driver.sim.air.usb_descriptors import PA_MODELS, DongleModel
 
 BOOTLOADER_PRODUCT_ID = 0x0101
 # Requests the host driver does not use
@@ -120,51 +120,87 @@ class DongleFirmware:
         self.fault_request = fault_request
 
     def vendor_out(self, d: FakeDongle, req: int, wValue: int, wIndex: int, data: bytes) -> int:
-        is_v2 = d.model.is_crazyradio_2
-        if req == SET_RADIO_CHANNEL:
-            if wValue <= 125:
-                d.channel = wValue
-            d.inline_mode = 0            # the 2.0 leaves inline mode on channel, address, rate, ack
-        elif req == SET_RADIO_ADDRESS:
-            if is_v2:
-                if len(data) == 5:
-                    d.address = data
-                    d.inline_mode = 0
-            elif 3 <= len(data) <= 5:
-                d.address = data + d.address[len(data):]
-            else:
-                raise stall("SET_RADIO_ADDRESS with %d bytes" % len(data))
-        elif req == SET_DATA_RATE:
-            if wValue < 3:
-                d.datarate = wValue
-                d.inline_mode = 0
-        elif req == SET_INLINE_MODE and wValue <= d.model.inline_modes:
-            d.inline_mode = wValue
-        elif req == SET_RADIO_POWER:
-            d.power = min(wValue, 3) if is_v2 else wValue & 3
-        elif req == SET_RADIO_ARD:
-            if not is_v2:
-                d.ard = wValue & 0xFF
-        elif req == SET_RADIO_ARC:
-            d.arc = wValue & 0x0F
-        elif req == ACK_ENABLE:
-            d.ack_enabled = wValue != 0
-            d.inline_mode = 0
-        elif req == SET_CONT_CARRIER:
-            d.cont_carrier = wValue != 0
-        elif req == SCAN_CHANNELS:
-            if not data:
-                raise stall("START_SCAN_CHANNELS without a packet")
-            self.scan(d, wValue, min(wIndex, 125), data)
-        elif req == SET_PACKET_LOSS_SIMULATION and (is_v2 or self.fault_request):
-            if len(data) != 2 or data[0] > 100 or data[1] > 100:
-                raise stall("SET_PACKET_LOSS_SIMULATION needs 2 bytes of percent (0-100)")
-            self.medium.set_dongle_faults(d.ident, packet_loss=float(data[0]), ack_loss=float(data[1]))
-        elif req == LAUNCH_BOOTLOADER:
-            d.bootloader_requested = True
-        else:
+        """One vendor OUT request; the bytes taken. A request the firmware does not know stalls."""
+        handler = self._VENDOR_OUT.get(req)
+        if handler is None or not handler(self, d, wValue, wIndex, data):
             raise stall("unknown vendor request 0x%02X" % req)
         return len(data)
+
+    # Each handler returns False where the firmware treats the request as unknown (it stalls).
+    def _set_channel(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if wValue <= 125:
+            d.channel = wValue
+        d.inline_mode = 0            # the 2.0 leaves inline mode on channel, address, rate, ack
+        return True
+
+    def _set_address(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if d.model.is_crazyradio_2:
+            if len(data) == 5:
+                d.address = data
+                d.inline_mode = 0
+        elif 3 <= len(data) <= 5:
+            d.address = data + d.address[len(data):]
+        else:
+            raise stall("SET_RADIO_ADDRESS with %d bytes" % len(data))
+        return True
+
+    def _set_data_rate(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if wValue < 3:
+            d.datarate = wValue
+            d.inline_mode = 0
+        return True
+
+    def _set_inline_mode(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if wValue > d.model.inline_modes:
+            return False
+        d.inline_mode = wValue
+        return True
+
+    def _set_power(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        d.power = min(wValue, 3) if d.model.is_crazyradio_2 else wValue & 3
+        return True
+
+    def _set_ard(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if not d.model.is_crazyradio_2:
+            d.ard = wValue & 0xFF
+        return True
+
+    def _set_arc(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        d.arc = wValue & 0x0F
+        return True
+
+    def _ack_enable(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        d.ack_enabled = wValue != 0
+        d.inline_mode = 0
+        return True
+
+    def _cont_carrier(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        d.cont_carrier = wValue != 0
+        return True
+
+    def _scan_channels(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if not data:
+            raise stall("START_SCAN_CHANNELS without a packet")
+        self.scan(d, wValue, min(wIndex, 125), data)
+        return True
+
+    def _packet_loss(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        if not (d.model.is_crazyradio_2 or self.fault_request):
+            return False
+        if len(data) != 2 or data[0] > 100 or data[1] > 100:
+            raise stall("SET_PACKET_LOSS_SIMULATION needs 2 bytes of percent (0-100)")
+        self.medium.set_dongle_faults(d.ident, packet_loss=float(data[0]), ack_loss=float(data[1]))
+        return True
+
+    def _launch_bootloader(self, d: FakeDongle, wValue: int, wIndex: int, data: bytes) -> bool:
+        d.bootloader_requested = True
+        return True
+
+    _VENDOR_OUT = {SET_RADIO_CHANNEL: _set_channel, SET_RADIO_ADDRESS: _set_address, SET_DATA_RATE: _set_data_rate,
+                   SET_INLINE_MODE: _set_inline_mode, SET_RADIO_POWER: _set_power, SET_RADIO_ARD: _set_ard,
+                   SET_RADIO_ARC: _set_arc, ACK_ENABLE: _ack_enable, SET_CONT_CARRIER: _cont_carrier,
+                   SCAN_CHANNELS: _scan_channels, SET_PACKET_LOSS_SIMULATION: _packet_loss,
+                   LAUNCH_BOOTLOADER: _launch_bootloader}
 
     def vendor_in(self, d: FakeDongle, req: int, wValue: int, wIndex: int, data) -> int:
         if req == SCAN_CHANNELS:
@@ -216,20 +252,7 @@ class DongleFirmware:
             d.reply_ready_at = start + self.timing.bulk_round_trip_s
             return
         if not d.ack_enabled:
-            # No IN reply; the dongle still needs the air time of each packet before the next OUT.
-            # The 99.55 firmware sends a longer OUT as two packets of half its length.
-            half = len(data) // 2
-            packets = [data[:half].tobytes(), data[half:2 * half].tobytes()] \
-                if d.model is PA_9955 and len(data) > MAX_RADIO_PAYLOAD else [packet]
-            busy = 0.0
-            for one in packets:
-                reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, one, False, d.arc)
-                if reply.unplugged:
-                    d.pulled_out()
-                    raise no_device()
-                busy += self.timing.bulk_round_trip_s + reply.latency_s
-            if busy > 0:
-                self.clock.sleep(busy)
+            self.send_no_ack(d, data, packet)
             return
         reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, packet,
                                      d.ack_enabled, d.arc)
@@ -245,6 +268,26 @@ class DongleFirmware:
         else:
             d.reply = b"\x00"
         d.reply_ready_at = start + self.air_time(d, reply)
+
+    def send_no_ack(self, d: FakeDongle, data, packet: bytes) -> None:
+        """A bulk OUT with acks off on the legacy path: no IN reply, no ack wait. The firmware takes the
+        next OUT while its radio sends (the PA re-arms its OUT endpoint before sending, the 2.0 queues
+        OUTs), so each radio packet holds the dongle for its air time. A PA with the 99.55 image and
+        every 2.0 send an OUT longer than 32 bytes as two packets of half its length each."""
+        if d.model.splits_long_no_ack and len(data) > MAX_RADIO_PAYLOAD:
+            half = len(data) // 2
+            packets = [data[:half].tobytes(), data[half:2 * half].tobytes()]
+        else:
+            packets = [packet]
+        busy = 0.0
+        for one in packets:
+            reply = self.medium.transmit(d.ident, d.channel, d.datarate, d.address, one, False, d.arc)
+            if reply.unplugged:
+                d.pulled_out()
+                raise no_device()
+            busy += self.timing.no_ack_packet_s + reply.latency_s
+        if busy > 0:
+            self.clock.sleep(busy)
 
     def send_inline(self, d: FakeDongle, data, start: float) -> None:
         """One bulk OUT in the 2.0's inline mode: an 8-byte header [total length, rate | ack << 4,
@@ -277,7 +320,7 @@ class DongleFirmware:
             status = (d.arc & 0x0F) << 4    # the 2.0 reports the retries it spent on a lost packet
         rssi = (b"\x28" if reply.power_detector else b"\x50") if head == 3 else b""
         d.reply = bytes((head + len(payload), status)) + rssi + payload
-        busy = self.air_time(d, reply) if d.ack_enabled else self.timing.bulk_round_trip_s + reply.latency_s
+        busy = self.air_time(d, reply) if d.ack_enabled else self.timing.inline_no_ack_s + reply.latency_s
         d.reply_ready_at = start + busy
 
 

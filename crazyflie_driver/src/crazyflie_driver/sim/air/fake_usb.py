@@ -270,23 +270,9 @@ class FakeUsbBackend(usb.backend.IBackend):
                           data) -> int:
         if rtype == 0x80 and req == _GET_DESCRIPTOR:
             dtype, index = wValue >> 8, wValue & 0xFF
-            raw: Optional[bytes]
             if isinstance(d, FakeCableCrazyflie):
-                raw = self._cable_descriptor(d, dtype, index, wValue)
-            elif dtype == DESC_DEVICE:
-                raw = device_descriptor_bytes(d.model, d.product_id)
-            elif dtype == DESC_CONFIG and index == 0:
-                raw = config_descriptor_bytes(d.model)
-            elif dtype == DESC_STRING:
-                raw = string_descriptor(d.model, d.serial, index)
-                if raw is None:
-                    raise stall("no string descriptor %d" % index)
-                if index == d.model.serial_index and d.model in PA_MODELS and len(data) < len(raw):
-                    # The PA always sends the full 22-byte serial descriptor: the host overflows.
-                    raise usb.core.USBError("Overflow", -8, errno.EOVERFLOW)
-            else:
-                raise stall("descriptor 0x%04X not available" % wValue)
-            return fill(data, raw)
+                return fill(data, self._cable_descriptor(d, dtype, index, wValue))
+            return fill(data, self._dongle_descriptor(d, dtype, index, wValue, len(data)))
         if rtype == 0x80 and req == _GET_STATUS:
             return fill(data, b"\x00\x00")  # bus powered, no remote wakeup
         if rtype == 0x80 and req == _GET_CONFIGURATION:
@@ -295,6 +281,22 @@ class FakeUsbBackend(usb.backend.IBackend):
             d.configuration = wValue
             return 0
         raise stall("standard request 0x%02X/0x%02X not supported" % (rtype, req))
+
+    def _dongle_descriptor(self, d: FakeDongle, dtype: int, index: int, wValue: int, room: int) -> bytes:
+        """A Crazyradio's descriptor for GET_DESCRIPTOR into a ``room``-byte buffer; STALL if it has none."""
+        if dtype == DESC_DEVICE:
+            return device_descriptor_bytes(d.model, d.product_id)
+        if dtype == DESC_CONFIG and index == 0:
+            return config_descriptor_bytes(d.model)
+        if dtype != DESC_STRING:
+            raise stall("descriptor 0x%04X not available" % wValue)
+        raw = string_descriptor(d.model, d.serial, index)
+        if raw is None:
+            raise stall("no string descriptor %d" % index)
+        if index == d.model.serial_index and d.model in PA_MODELS and room < len(raw):
+            # The PA always sends the full 22-byte serial descriptor: the host overflows.
+            raise usb.core.USBError("Overflow", -8, errno.EOVERFLOW)
+        return raw
 
     def _cable_descriptor(self, cf: FakeCableCrazyflie, dtype: int, index: int, wValue: int) -> bytes:
         raw = None
@@ -352,8 +354,10 @@ class FakeUsbBackend(usb.backend.IBackend):
                 raise no_device()
             d.reply = None
             d.bulk_in += 1
-            n = min(len(reply), len(buff))
-            buff[:n] = array.array("B", reply[:n])
+            n = len(reply)
+            if n > len(buff):
+                n, reply = len(buff), reply[:len(buff)]
+            buff[:n] = array.array("B", reply)
             return n
 
     def _cable_write(self, cf: FakeCableCrazyflie, ep: int, data) -> int:

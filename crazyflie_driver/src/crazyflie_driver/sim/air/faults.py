@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import shlex
-from typing import Any, Dict, List, Mapping, NoReturn, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, NoReturn, Optional, Sequence, Tuple, Union
 
 MAX_RADIO_LATENCY_S = 1.0        # more than this is not a radio any more: a unit mistake
 #: Motion-capture faults of one body (``mocap VEHICLE ...``), bounded to what a tracking system can do:
@@ -250,36 +250,73 @@ def parse_command(words: Union[str, Sequence[str]]) -> Tuple[str, Dict[str, Any]
     if not words:
         raise FaultError("say which fault: list, clear, unplug, replug, loss, latency, power, battery or mocap")
     a = _build_parser().parse_args(words)
-    if a.what == "list":
-        return "faults", {}
-    if a.what == "clear":
-        if a.target is None:
-            return "clear_faults", {}
-        if a.target.isdigit():
-            return "clear_faults", {"dongle": int(a.target)}
-        return "clear_faults", {"uri": a.target}
-    if a.what in ("unplug", "replug"):
-        return "set_dongle_faults", {"dongle": _dongle(a.dongle), "unplugged": a.what == "unplug"}
-    if a.what == "loss":
-        if a.packet is None and a.ack is None:
-            raise FaultError("loss: give --packet P and/or --ack P (a fraction 0..1 or a percentage)")
-        args: Dict[str, Any] = {"dongle": _dongle(a.dongle)}
-        if a.packet is not None:
-            args["packet_loss"] = fraction("packet loss", a.packet) * 100.0
-        if a.ack is not None:
-            args["ack_loss"] = fraction("ack loss", a.ack) * 100.0
-        return "set_dongle_faults", args
-    if a.what == "latency":
-        delay = duration("latency", a.delay)
-        if delay > MAX_RADIO_LATENCY_S:
-            raise FaultError("latency %r is over %g s: give a unit, e.g. %sms" % (a.delay, MAX_RADIO_LATENCY_S,
-                                                                                  a.delay))
-        return "set_dongle_faults", {"dongle": _dongle(a.dongle), "latency_s": delay}
-    if a.what == "power":
-        return "power", {"uri": a.vehicle, "on": a.state == "on"}
-    if a.what == "battery":
-        return "set_battery", dict(battery_level(a.level), uri=a.vehicle)
+    return _COMMANDS[a.what](a)
+
+
+_Command = Tuple[str, Dict[str, Any]]
+
+
+def _list_command(a: argparse.Namespace) -> _Command:
+    return "faults", {}
+
+
+def _clear_command(a: argparse.Namespace) -> _Command:
+    """``clear``: every fault, one dongle's (a number) or one vehicle's (a name or URI)."""
+    if a.target is None:
+        return "clear_faults", {}
+    if a.target.isdigit():
+        return "clear_faults", {"dongle": int(a.target)}
+    return "clear_faults", {"uri": a.target}
+
+
+def _plug_command(a: argparse.Namespace) -> _Command:
+    return "set_dongle_faults", {"dongle": _dongle(a.dongle), "unplugged": a.what == "unplug"}
+
+
+def _loss_command(a: argparse.Namespace) -> _Command:
+    """``loss``: fractions on input, percent for the medium."""
+    if a.packet is None and a.ack is None:
+        raise FaultError("loss: give --packet P and/or --ack P (a fraction 0..1 or a percentage)")
+    args: Dict[str, Any] = {"dongle": _dongle(a.dongle)}
+    if a.packet is not None:
+        args["packet_loss"] = fraction("packet loss", a.packet) * 100.0
+    if a.ack is not None:
+        args["ack_loss"] = fraction("ack loss", a.ack) * 100.0
+    return "set_dongle_faults", args
+
+
+def _latency_command(a: argparse.Namespace) -> _Command:
+    delay = duration("latency", a.delay)
+    if delay > MAX_RADIO_LATENCY_S:
+        raise FaultError("latency %r is over %g s: give a unit, e.g. %sms" % (a.delay, MAX_RADIO_LATENCY_S,
+                                                                              a.delay))
+    return "set_dongle_faults", {"dongle": _dongle(a.dongle), "latency_s": delay}
+
+
+def _power_command(a: argparse.Namespace) -> _Command:
+    return "power", {"uri": a.vehicle, "on": a.state == "on"}
+
+
+def _battery_command(a: argparse.Namespace) -> _Command:
+    return "set_battery", dict(battery_level(a.level), uri=a.vehicle)
+
+
+def _mocap_command(a: argparse.Namespace) -> _Command:
     return "set_mocap_faults", _mocap_args(a)
+
+
+#: The parser's sub-command -> the control operation and its arguments.
+_COMMANDS: Dict[str, Callable[[argparse.Namespace], _Command]] = {
+    "list": _list_command,
+    "clear": _clear_command,
+    "unplug": _plug_command,
+    "replug": _plug_command,
+    "loss": _loss_command,
+    "latency": _latency_command,
+    "power": _power_command,
+    "battery": _battery_command,
+    "mocap": _mocap_command,
+}
 
 
 def _mocap_args(a: argparse.Namespace) -> Dict[str, Any]:

@@ -214,7 +214,7 @@ class LocalMedium:
     # --- the air -----------------------------------------------------------------------------
     def transmit(self, dongle: int, channel: int, datarate: int, address: bytes,
                  data: bytes, ack_enabled: bool = True, arc: int = 3) -> AirReply:
-        key = (channel, datarate, bytes(address))
+        key = (channel, datarate, address if type(address) is bytes else bytes(address))
         with self._lock:
             self.round_trips += 1
             if not 0 <= dongle < len(self._faults):
@@ -236,7 +236,7 @@ class LocalMedium:
             if cf is not None:
                 model = self._rssi[key]
                 rssi_dbm = round(model.mean_dbm + (self._rng.gauss(0.0, model.noise_db) if model.noise_db else 0.0))
-                rssi_dbm = min(0.0, max(-127.0, rssi_dbm))
+                rssi_dbm = 0.0 if rssi_dbm >= 0.0 else (-127.0 if rssi_dbm <= -127.0 else rssi_dbm)   # 0..-127
             latency = f.latency_s
         if broadcast:            # every Crazyflie on this channel and data rate takes it; none acks
             for c in heard:

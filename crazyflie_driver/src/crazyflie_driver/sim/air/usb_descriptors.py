@@ -34,6 +34,12 @@ class DongleModel:
     def is_crazyradio_2(self) -> bool:
         return self.product == "Crazyradio 2.0"
 
+    @property
+    def splits_long_no_ack(self) -> bool:
+        """An unacked OUT of more than 32 bytes goes out as two radio packets of half its length: the
+        PA's "99.55" image, and every Crazyradio 2.0 (its legacy path since release 1.0)."""
+        return self.bcd_device == 0x9955 or self.is_crazyradio_2
+
 
 PA_053 = DongleModel("PA", 0x0053, "Bitcraze", "Crazyradio PA USB Dongle", 0x1D, 0xFF, 6, 10)
 #: The PA with the development firmware "99.55" swarm setups flash: an unacked OUT of more than 32

@@ -110,7 +110,7 @@ class SimulatedCrazyflie:
         self.in_bootloader = False               # rebooted into the bootloader: no firmware answers CRTP
         self._reset_armed = False                # an nRF RESET_INIT came: the next RESET is taken
         self.bootloader = SimBootloader()        # both chips' flash: kept across reboots
-        self.link = NrfLink(self._deliver_from_radio, self._pop_locked, self._rssi_positive,
+        self.link = NrfLink(self._dispatch, self._pop_locked, self._rssi_positive,
                             self.profile.rssi_in_empty_ack, self._system_command)
         self._ports: Dict[int, Callable[[int, int, bytes], None]] = {}
         self.decoded = DecodedValues()           # extremes of every value handed to the vehicle (tests read it)
@@ -427,9 +427,6 @@ class SimulatedCrazyflie:
             except Exception:
                 _log.exception("vehicle.external_measurement failed")
 
-    def _deliver_from_radio(self, raw: bytes) -> None:
-        self._dispatch(raw)
-
     def _dispatch(self, raw: bytes) -> None:
         if not raw or len(raw) > MAX_PAYLOAD + 1 or self.state.halted or not self.state.powered:
             return
@@ -505,7 +502,10 @@ class SimulatedCrazyflie:
             return None
         if self._tx_queued_at:
             self.state.tx_last_wait_s = self.now() - self._tx_queued_at.popleft()
-        return self._tx.popleft()
+        packet = self._tx.popleft()
+        port = packet[0] >> 4       # counted as it leaves the queue for an ack or the cable: what the host got
+        self.state.sent_by_port[port] = self.state.sent_by_port.get(port, 0) + 1
+        return packet
 
     def _clear_tx(self) -> None:
         self._tx.clear()
@@ -631,6 +631,7 @@ class SimulatedCrazyflie:
                 "setpoints": s.setpoints,
                 "last_generic_type": s.last_generic[0] if s.last_generic else None,
                 "packets_by_port": {str(k): v for k, v in s.packets_by_port.items()},
+                "sent_by_port": {str(k): v for k, v in s.sent_by_port.items()},
                 "tx_pending": len(self._tx),
                 "tx_dropped": s.tx_dropped,
                 "tx_last_wait_s": s.tx_last_wait_s,

@@ -46,6 +46,17 @@ class LogBlock:
         return sum(ct.size for _, ct in self.ops)
 
 
+def _op_items(data: bytes, v2: bool) -> List[Tuple[int, int, int]]:
+    """The ops of a CREATE/APPEND packet (``[cmd, block, ops...]``) as (type byte, variable id, the id
+    that means raw memory): a type byte and a u8 id each (V1), or a u16 id (V2); a partial op is ignored."""
+    stride = 3 if v2 else 2
+    items = []
+    for off in range(2, len(data) - stride + 1, stride):
+        var = struct.unpack_from("<H", data, off + 1)[0] if v2 else data[off + 1]
+        items.append((data[off], var, 0xFFFF if v2 else 0xFF))
+    return items
+
+
 class LogService:
     """Log variables of one Crazyflie, its blocks and the data they stream."""
 
@@ -64,6 +75,7 @@ class LogService:
         self._clock = clock
         self.blocks: Dict[int, LogBlock] = {}
         self.dropped = 0
+        self._commands = self._command_table()
 
     @property
     def ops_used(self) -> int:
@@ -118,45 +130,68 @@ class LogService:
         self._send(header, bytes([cmd, arg, result]))
 
     def _command(self, cmd: int, data: bytes) -> int:
-        v1_create = not self.v2 and cmd in (CMD_CREATE, CMD_APPEND)
-        v2_create = self.v2 and cmd in (CMD_CREATE_V2, CMD_APPEND_V2)
-        if v1_create or v2_create:
-            if len(data) < 2:
-                return ENOENT
-            stride = 3 if v2_create else 2
-            items = []
-            for off in range(2, len(data) - stride + 1, stride):
-                var = struct.unpack_from("<H", data, off + 1)[0] if v2_create else data[off + 1]
-                items.append((data[off], var, 0xFFFF if v2_create else 0xFF))
-            if cmd in (CMD_CREATE, CMD_CREATE_V2):
-                return self._create(data[1], items)
-            block = self.blocks.get(data[1])
-            return ENOENT if block is None else self._append(block, items)
-        if cmd == CMD_DELETE:
-            return ENOENT if len(data) < 2 or self.blocks.pop(data[1], None) is None else 0
-        if cmd == CMD_START or (self.v2 and cmd == CMD_START_V2):
-            block = self.blocks.get(data[1]) if len(data) > 1 else None
-            if block is None:
-                return ENOENT
-            if cmd == CMD_START:
-                period_s = (data[2] if len(data) > 2 else 0) * 0.010
-            else:
-                period_s = (struct.unpack_from("<H", data, 2)[0] if len(data) > 3 else 0) * 0.001
-            block.period_s = period_s
-            block.running = True
-            # like the firmware's timer: the first packet one period after START (period 0: next tick)
-            block.next_due = self._clock() + period_s if period_s > 0 else None
-            return 0
-        if cmd == CMD_STOP:
-            block = self.blocks.get(data[1]) if len(data) > 1 else None
-            if block is None:
-                return ENOENT
-            block.running = False
-            return 0
-        if cmd == CMD_RESET:
-            self.reset()
-            return 0
-        return ENOEXEC
+        handler = self._commands.get(cmd)
+        return ENOEXEC if handler is None else handler(data)
+
+    def _command_table(self) -> Dict[int, Callable[[bytes], int]]:
+        """The control commands this generation knows: the current firmware takes only the V2
+        create/append commands, the 2016 one only the V1 ones and no START_V2."""
+        commands: Dict[int, Callable[[bytes], int]] = {
+            CMD_DELETE: self._delete_command, CMD_START: self._start_command, CMD_STOP: self._stop_command,
+            CMD_RESET: self._reset_command}
+        if self.v2:
+            commands.update({CMD_CREATE_V2: self._create_command, CMD_APPEND_V2: self._append_command,
+                             CMD_START_V2: self._start_v2_command})
+        else:
+            commands.update({CMD_CREATE: self._create_command, CMD_APPEND: self._append_command})
+        return commands
+
+    def _create_command(self, data: bytes) -> int:
+        if len(data) < 2:
+            return ENOENT
+        return self._create(data[1], _op_items(data, self.v2))
+
+    def _append_command(self, data: bytes) -> int:
+        if len(data) < 2:
+            return ENOENT
+        block = self.blocks.get(data[1])
+        return ENOENT if block is None else self._append(block, _op_items(data, self.v2))
+
+    def _delete_command(self, data: bytes) -> int:
+        return ENOENT if len(data) < 2 or self.blocks.pop(data[1], None) is None else 0
+
+    def _start_command(self, data: bytes) -> int:
+        """START: the period in one byte of 10 ms."""
+        return self._start(data, (data[2] if len(data) > 2 else 0) * 0.010)
+
+    def _start_v2_command(self, data: bytes) -> int:
+        """START_V2: the period in a u16 of ms."""
+        return self._start(data, (struct.unpack_from("<H", data, 2)[0] if len(data) > 3 else 0) * 0.001)
+
+    def _start(self, data: bytes, period_s: float) -> int:
+        block = self._block_of(data)
+        if block is None:
+            return ENOENT
+        block.period_s = period_s
+        block.running = True
+        # like the firmware's timer: the first packet one period after START (period 0: next tick)
+        block.next_due = self._clock() + period_s if period_s > 0 else None
+        return 0
+
+    def _stop_command(self, data: bytes) -> int:
+        block = self._block_of(data)
+        if block is None:
+            return ENOENT
+        block.running = False
+        return 0
+
+    def _reset_command(self, data: bytes) -> int:
+        self.reset()
+        return 0
+
+    def _block_of(self, data: bytes) -> Optional[LogBlock]:
+        """The block a control packet names in its byte 1 (None when absent or not given)."""
+        return self.blocks.get(data[1]) if len(data) > 1 else None
 
     def _create(self, ident: int, items) -> int:
         if ident in self.blocks:

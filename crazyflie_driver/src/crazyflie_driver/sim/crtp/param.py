@@ -26,9 +26,19 @@ MISC_PERSISTENT_CLEAR = 5
 MISC_GET_DEFAULT = 6
 MISC_GET_EXTENDED_TYPE_V2 = 7
 MISC_GET_DEFAULT_V2 = 8
+#: The protocol version from which the firmware answers MISC_GET_EXTENDED_TYPE_V2 and MISC_GET_DEFAULT_V2.
+MISC_V2_FROM_PROTOCOL = 11
 
 Send = Callable[[int, bytes], bool]   # as ports.Send: whether the packet went out
 _log = logging.getLogger(__name__)
+
+
+def _persistent(e: Optional[T.ParamVar]) -> bool:
+    """Whether ``e`` is a parameter that can be stored (None: no such id)."""
+    return e is not None and e.persistent
+
+
+MiscAnswer = Callable[[int, Optional[T.ParamVar]], bytes]
 
 
 class ParamService:
@@ -51,6 +61,7 @@ class ParamService:
         self._send = send
         self.values: List[T.Number] = []
         self.stored: Dict[int, T.Number] = {}   # persistent storage (ids with a stored value)
+        self._misc_by_id = self._misc_table()
         self.reset_values()
 
     # --- values ---------------------------------------------------------------------------
@@ -180,47 +191,63 @@ class ParamService:
             return
         if not self.v2 or len(data) < 3:
             return  # the 2016 firmware knew only SET_BY_NAME
+        answer = self._misc_by_id.get(cmd)
+        if answer is None:
+            return
         ident = struct.unpack_from("<H", data, 1)[0]
-        prefix = data[:3]
         e = self.entries[ident] if ident < len(self.entries) else None
-        if cmd == MISC_GET_EXTENDED_TYPE:
-            if e is not None and e.persistent:
-                self._send(header, prefix + bytes([T.EXTENDED_PERSISTENT]))
-            else:
-                self._send(header, prefix + bytes([ENOENT]))
-        elif cmd == MISC_GET_EXTENDED_TYPE_V2 and self.protocol_version >= 11:
-            if e is not None and e.persistent:
-                self._send(header, prefix + bytes([0, T.EXTENDED_PERSISTENT]))
-            else:
-                self._send(header, prefix + bytes([ENOENT]))
-        elif cmd in (MISC_GET_DEFAULT, MISC_GET_DEFAULT_V2):
-            if cmd == MISC_GET_DEFAULT_V2 and self.protocol_version < 11:
-                return
-            if e is None or e.readonly:
-                self._send(header, prefix + bytes([ENOENT]))
-                return
-            value = T.pack(self.default_of(ident), T.CTYPES[e.ctype])
-            self._send(header, prefix + (b"\x00" if cmd == MISC_GET_DEFAULT_V2 else b"") + value)
-        elif cmd == MISC_PERSISTENT_STORE:
-            ok = e is not None and e.persistent
-            if ok:
-                self.stored[ident] = self.values[ident]
-            self._send(header, prefix + bytes([0 if ok else ENOENT]))
-        elif cmd == MISC_PERSISTENT_CLEAR:
-            ok = e is not None and e.persistent
-            if ok:
-                self.stored.pop(ident, None)
-            self._send(header, prefix + bytes([0 if ok else ENOENT]))
-        elif cmd == MISC_PERSISTENT_GET_STATE:
-            if not (e is not None and e.persistent):
-                self._send(header, prefix + bytes([ENOENT]))
-                return
-            ct = T.CTYPES[e.ctype]
-            default = T.pack(self.default_of(ident), ct)
-            if ident in self.stored:
-                self._send(header, prefix + b"\x01" + default + T.pack(self.stored[ident], ct))
-            else:
-                self._send(header, prefix + b"\x00" + default)
+        self._send(header, data[:3] + answer(ident, e))
+
+    def _misc_table(self) -> Dict[int, MiscAnswer]:
+        """The misc commands that name a parameter by id, each answering ``[cmd, id u16]`` + its bytes;
+        the V2 forms only from MISC_V2_FROM_PROTOCOL (silence before)."""
+        answers: Dict[int, MiscAnswer] = {
+            MISC_GET_EXTENDED_TYPE: self._extended_type, MISC_GET_DEFAULT: self._default,
+            MISC_PERSISTENT_STORE: self._persistent_store, MISC_PERSISTENT_CLEAR: self._persistent_clear,
+            MISC_PERSISTENT_GET_STATE: self._persistent_state}
+        if self.protocol_version >= MISC_V2_FROM_PROTOCOL:
+            answers.update({MISC_GET_EXTENDED_TYPE_V2: self._extended_type_v2, MISC_GET_DEFAULT_V2: self._default_v2})
+        return answers
+
+    def _extended_type(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        return bytes([T.EXTENDED_PERSISTENT]) if _persistent(e) else bytes([ENOENT])
+
+    def _extended_type_v2(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        """As GET_EXTENDED_TYPE with a status byte before the type."""
+        return bytes([0, T.EXTENDED_PERSISTENT]) if _persistent(e) else bytes([ENOENT])
+
+    def _default(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        if e is None or e.readonly:
+            return bytes([ENOENT])
+        return T.pack(self.default_of(ident), T.CTYPES[e.ctype])
+
+    def _default_v2(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        """As GET_DEFAULT with a status byte before the value."""
+        if e is None or e.readonly:
+            return bytes([ENOENT])
+        return b"\x00" + T.pack(self.default_of(ident), T.CTYPES[e.ctype])
+
+    def _persistent_store(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        if not _persistent(e):
+            return bytes([ENOENT])
+        self.stored[ident] = self.values[ident]
+        return bytes([0])
+
+    def _persistent_clear(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        if not _persistent(e):
+            return bytes([ENOENT])
+        self.stored.pop(ident, None)
+        return bytes([0])
+
+    def _persistent_state(self, ident: int, e: Optional[T.ParamVar]) -> bytes:
+        """Whether a value is stored, the default, then the stored value when there is one."""
+        if e is None or not e.persistent:
+            return bytes([ENOENT])
+        ct = T.CTYPES[e.ctype]
+        default = T.pack(self.default_of(ident), ct)
+        if ident in self.stored:
+            return b"\x01" + default + T.pack(self.stored[ident], ct)
+        return b"\x00" + default
 
     def _set_by_name(self, header: int, data: bytes) -> None:
         body = bytes(data[1:])

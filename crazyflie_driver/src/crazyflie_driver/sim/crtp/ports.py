@@ -146,32 +146,59 @@ def localization_port(state: SimState, hook: VehicleHook, emergency_stop: Callab
     return handle
 
 
+def _flags(result: Tuple[bool, bool]) -> bytes:
+    """An (success, state) answer of arm or recover as the two bytes the firmware sends."""
+    return bytes(int(v) for v in result)
+
+
 def supervisor_port(state: SimState, send: Send, supervisor_bits: Callable[[], int], arm: Request,
                     recover: Callable[[], Tuple[bool, bool]], emergency_stop: Callable[[str], None],
                     now: Callable[[], float]) -> Handler:
     """Port 9 (protocol 12): state queries on ch 0, arm / recover / e-stop on ch 1.
 
     ``arm(do_arm)`` and ``recover()`` return (success, armed) and (success, not crashed)."""
-    def handle(header: int, channel: int, data: bytes) -> None:
+    return _SupervisorPort(state, send, supervisor_bits, arm, recover, emergency_stop, now).handle
+
+
+class _SupervisorPort:
+    def __init__(self, state: SimState, send: Send, supervisor_bits: Callable[[], int], arm: Request,
+                 recover: Callable[[], Tuple[bool, bool]], emergency_stop: Callable[[str], None],
+                 now: Callable[[], float]) -> None:
+        self._state = state
+        self._send = send
+        self._supervisor_bits = supervisor_bits
+        self._arm = arm
+        self._recover = recover
+        self._emergency_stop = emergency_stop
+        self._now = now
+
+    def handle(self, header: int, channel: int, data: bytes) -> None:
         if not data:
             return
-        cmd = data[0]
         if channel == 0:
-            bits = supervisor_bits()
-            if 0x01 <= cmd <= 0x0B:
-                send(header, bytes([0x80 | cmd, (bits >> (cmd - 1)) & 1]))
-            elif cmd == 0x0C:
-                send(header, struct.pack("<BH", 0x8C, bits))
+            self._query(header, data[0])
         elif channel == 1:
-            if cmd == 1 and len(data) >= 2:
-                send(header, bytes([0x81]) + bytes(int(v) for v in arm(bool(data[1]))))
-            elif cmd == 2:
-                send(header, bytes([0x82]) + bytes(int(v) for v in recover()))
-            elif cmd == 3:
-                emergency_stop("supervisor emergency stop")
-            elif cmd == 4:
-                state.estop_watchdog = now()
-    return handle
+            self._command(header, data)
+
+    def _query(self, header: int, cmd: int) -> None:
+        """Commands 1..11 ask for one state bit (bit ``cmd - 1``), 12 for all of them (u16)."""
+        bits = self._supervisor_bits()
+        if 0x01 <= cmd <= 0x0B:
+            self._send(header, bytes([0x80 | cmd, (bits >> (cmd - 1)) & 1]))
+        elif cmd == 0x0C:
+            self._send(header, struct.pack("<BH", 0x8C, bits))
+
+    def _command(self, header: int, data: bytes) -> None:
+        """1 arm/disarm (answered), 2 recover (answered), 3 emergency stop, 4 its watchdog."""
+        cmd = data[0]
+        if cmd == 1 and len(data) >= 2:
+            self._send(header, bytes([0x81]) + _flags(self._arm(bool(data[1]))))
+        elif cmd == 2:
+            self._send(header, bytes([0x82]) + _flags(self._recover()))
+        elif cmd == 3:
+            self._emergency_stop("supervisor emergency stop")
+        elif cmd == 4:
+            self._state.estop_watchdog = self._now()
 
 
 def platform_port(send: Send, protocol_version: int, firmware_version: str, device_type: str,
@@ -181,31 +208,51 @@ def platform_port(send: Send, protocol_version: int, firmware_version: str, devi
 
     ``device_type_query`` false plays the 2016 firmware: no device type, and on ch 0 only the
     continuous-wave command, echoed."""
-    def handle(header: int, channel: int, data: bytes) -> None:
+    return _PlatformPort(send, protocol_version, firmware_version, device_type, device_type_query, arm,
+                         recover).handle
+
+
+class _PlatformPort:
+    def __init__(self, send: Send, protocol_version: int, firmware_version: str, device_type: str,
+                 device_type_query: bool, arm: Request, recover: Callable[[], Tuple[bool, bool]]) -> None:
+        self._send = send
+        self._protocol_version = protocol_version
+        self._firmware_version = firmware_version
+        self._device_type = device_type
+        self._device_type_query = device_type_query
+        self._arm = arm
+        self._recover = recover
+
+    def handle(self, header: int, channel: int, data: bytes) -> None:
         if not data:
             return
-        cmd = data[0]
         if channel == 1:
-            if cmd == 0:
-                send(header, struct.pack("<Bi", 0, protocol_version))
-            elif cmd == 1:
-                send(header, b"\x01" + firmware_version.encode("ascii")[:29])
-            elif cmd == 2 and device_type_query:
-                send(header, b"\x02" + device_type.encode("ascii")[:29])
-        elif channel == 0:
-            if not device_type_query:
-                if cmd == 0:
-                    send(header, bytes(data))
-                return
-            if cmd == 1 and len(data) >= 2:
-                send(header, bytes([1]) + bytes(int(v) for v in arm(bool(data[1]))))
-            elif cmd == 2:
-                send(header, bytes([2]) + bytes(int(v) for v in recover()))
-            elif cmd == 3:
-                send(header, b"")
-            else:
-                send(header, bytes(data))
-    return handle
+            self._version(header, data[0])
+        elif channel == 0 and self._device_type_query:
+            self._platform_command(header, data)
+        elif channel == 0 and data[0] == 0:
+            self._send(header, bytes(data))     # the 2016 firmware: continuous wave only, echoed
+
+    def _version(self, header: int, cmd: int) -> None:
+        """0 protocol version (i32), 1 firmware version, 2 device type (text, at most 29 bytes)."""
+        if cmd == 0:
+            self._send(header, struct.pack("<Bi", 0, self._protocol_version))
+        elif cmd == 1:
+            self._send(header, b"\x01" + self._firmware_version.encode("ascii")[:29])
+        elif cmd == 2 and self._device_type_query:
+            self._send(header, b"\x02" + self._device_type.encode("ascii")[:29])
+
+    def _platform_command(self, header: int, data: bytes) -> None:
+        """1 arm/disarm and 2 recover as on port 9, 3 answered empty, anything else echoed."""
+        cmd = data[0]
+        if cmd == 1 and len(data) >= 2:
+            self._send(header, bytes([1]) + _flags(self._arm(bool(data[1]))))
+        elif cmd == 2:
+            self._send(header, bytes([2]) + _flags(self._recover()))
+        elif cmd == 3:
+            self._send(header, b"")
+        else:
+            self._send(header, bytes(data))
 
 
 def link_port(send: Send) -> Handler:

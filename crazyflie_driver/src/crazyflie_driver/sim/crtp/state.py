@@ -24,6 +24,7 @@ class SimState:
     halted: str = ""                        # why the STM stopped on an assert ('' while it runs)
     estop_watchdog: Optional[float] = None
     packets_by_port: Dict[int, int] = field(default_factory=dict)
+    sent_by_port: Dict[int, int] = field(default_factory=dict)     # packets sent to the host (radio or cable)
     tx_dropped: int = 0
     tx_last_wait_s: float = 0.0             # time the last packet handed to the radio spent queued [s, world]
     reboots: int = 0

@@ -62,15 +62,15 @@ class OnboardFlight:
         """The row containers the world adds to and deletes from."""
         return self.estimator.models + (self.control.s, self.hl)
 
-    def add(self, rng: np.random.Generator, position: Vector, now: float) -> None:
-        self.estimator.add(rng, position, now)
-        self.control.add()
-        self.hl.append_row()
-
     def carried(self, i: int) -> None:
         """Row ``i`` was put somewhere by hand (a teleport of the room): its IMU filter reads the new
         rest state from the next sample instead of ringing from a jump no sensor could see."""
         self.estimator.s.acc_settled[i] = False
+
+    def add(self, rng: np.random.Generator, position: Vector, now: float) -> None:
+        self.estimator.add(rng, position, now)
+        self.control.add()
+        self.hl.append_row()
 
     def boot(self, i: int, truth: Sequence[float], now: float) -> None:
         self.estimator.boot(i, truth, now)
@@ -141,7 +141,7 @@ class OnboardFlight:
         yaw = start.yaw if args.get("use_current_yaw") else float(args.get("yaw", 0.0))
         duration = float(args.get("duration", 0.0))
         if command in ("takeoff", "land"):
-            return self._takeoff_or_land(i, command, args, start, yaw, duration, now)
+            return self._vertical(i, command, args, start, yaw, duration, now)
         if command == "go_to":
             return hl.go_to(i, start, args["goal"], float(args["yaw"]), duration, bool(args.get("relative")),
                             bool(args.get("linear")), now)
@@ -155,10 +155,10 @@ class OnboardFlight:
                                        bool(args.get("relative_yaw")), now)
         raise ValueError("unknown high-level command %r" % (command,))
 
-    def _takeoff_or_land(self, i: int, command: str, args: Dict, start: Evaluation, yaw: float,
-                         duration: float, now: float) -> int:
-        """takeoff / land: a relative height counts from the start; a velocity (<= 0: the default)
-        sets the duration from the distance."""
+    def _vertical(self, i: int, command: str, args: Dict, start: Evaluation, yaw: float, duration: float,
+                  now: float) -> int:
+        """Takeoff or land (v1 or v2): the goal height, relative to the start where asked; a velocity
+        (v2 with velocity, <= 0: the parameter's default) gives the duration instead."""
         hl = self.hl
         takeoff = command == "takeoff"
         height = float(args["height"])

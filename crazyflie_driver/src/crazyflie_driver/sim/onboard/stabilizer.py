@@ -316,8 +316,8 @@ class OnboardController:
         return m
 
     def _supervise(self, now: float, battery_empty: np.ndarray) -> Optional[np.ndarray]:
-        """The supervisor's setpoint watchdog and battery lock; the rows whose stale setpoint is levelled
-        (None: none)."""
+        """The supervisor's part of a tick: the setpoint watchdog (levels out after 0.5 s, cuts and
+        locks after 2 s) and the empty battery's lock. The rows to level out, or None for none."""
         s = self.s
         age = now - s.sp_time
         watched = age > WATCHDOG_LEVEL_S
@@ -339,7 +339,8 @@ class OnboardController:
         return level
 
     def _thrust(self) -> np.ndarray:
-        """The base thrust of every row: the setpoint's within the firmware's limits, 0 where locked."""
+        """The base thrust per row [counts]: the setpoint's, clamped as the firmware does for RPYT
+        (the position controller's goes as it is), 0 while locked or disarmed."""
         s = self.s
         raw = s.sp[:, 3]
         thrust = np.minimum(raw, MAX_THRUST) * (raw >= MIN_THRUST)
@@ -350,10 +351,9 @@ class OnboardController:
             thrust[off] = 0.0
         return thrust
 
-    def _control(self, tick: int, body: BodyRows, gyro_deg, thrust: np.ndarray,
-                 level: Optional[np.ndarray]) -> None:
-        """The controllers' run (every CONTROL_TICKS): crash check, attitude and rate loops, the
-        moment law, PID resets of idle rows (``thrust`` zeroed where a crash locks)."""
+    def _control(self, tick: int, body: BodyRows, gyro_deg, thrust: np.ndarray, level: Optional[np.ndarray]) -> None:
+        """The control ticks (500 Hz): tumble check, attitude and rate loops (or the moment law),
+        integrators reset where the thrust is 0. Zeroes ``thrust`` of rows that locked now."""
         s = self.s
         terms = _attitude_terms(body.quaternion)
         if self._tumble(terms[:, 2], thrust):
@@ -370,8 +370,8 @@ class OnboardController:
             self._reset(idle)
 
     def _mix(self, thrust: np.ndarray) -> np.ndarray:
-        """The motor commands (N,4) from the rate loop's output and ``thrust``: the mixer, its limits,
-        motor power overrides and the Brushless idle."""
+        """The motor commands (N,4) [counts]: the rate loops' output through the mixer on the thrust,
+        saturated as the firmware does; motor tests and a Brushless idle override it."""
         s = self.s
         m = s.rate_out @ MIX
         m += thrust[:, None]

@@ -23,7 +23,7 @@ import math
 import threading
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import Callable, Deque, Dict, FrozenSet, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, FrozenSet, List, Optional, Tuple
 
 import numpy as np
 
@@ -74,6 +74,24 @@ class BodyFaults:
 
 
 _NO_FAULTS = BodyFaults()
+
+
+def _finite_non_negative(what: str, value: float, unit: str) -> float:
+    if not 0 <= value < math.inf:
+        raise ValueError("%s must be a finite number >= 0 %s, got %r" % (what, unit, value))
+    return float(value)
+
+
+def _spans_until(now: float, **spans: Optional[float]) -> Dict[str, float]:
+    """``freeze``/``hide`` spans (s from ``now``; inf: for good; 0 ends it) as ``<what>_until`` world
+    times (-inf: not in force); spans left None are left out."""
+    out = {}
+    for what, span in spans.items():
+        if span is not None:
+            if not span >= 0:
+                raise ValueError("mocap %s must last >= 0 s, got %r" % (what, span))
+            out[what + "_until"] = now + float(span) if span > 0 else -math.inf
+    return out
 
 
 class MocapModel:
@@ -220,31 +238,28 @@ class MocapModel:
         """
         if name not in self.world.poses()[0]:
             raise KeyError("no vehicle called %r for motion capture to see" % (name,))
-        f = self._faults.get(name, _NO_FAULTS)
+        changes: Dict[str, Any] = {}
         if noise is not None:
-            if not 0 <= noise < math.inf:
-                raise ValueError("mocap noise must be a finite number >= 0 m, got %r" % (noise,))
-            f = replace(f, noise=float(noise))
+            changes["noise"] = _finite_non_negative("mocap noise", noise, "m")
         if latency is not None:
-            if not 0 <= latency < math.inf:
-                raise ValueError("mocap latency must be a finite number >= 0 s, got %r" % (latency,))
-            f = replace(f, latency=float(latency))
+            changes["latency"] = _finite_non_negative("mocap latency", latency, "s")
         if rate is not None:
-            if not 0 < rate <= self.rate:
-                raise ValueError("a body's mocap rate must be in (0, %g] Hz (the system's rate), got %r"
-                                 % (self.rate, rate))
-            f = replace(f, rate=None if rate == self.rate else float(rate))
+            changes["rate"] = self._body_rate(rate)
         if dropout is not None:
             if not 0.0 <= dropout <= 1.0:
                 raise ValueError("mocap dropout must be a probability 0..1, got %r" % (dropout,))
-            f = replace(f, dropout=float(dropout))
-        for what, span in (("freeze", freeze), ("hide", hide)):
-            if span is not None:
-                if not span >= 0:
-                    raise ValueError("mocap %s must last >= 0 s, got %r" % (what, span))
-                f = replace(f, **{what + "_until": now + float(span) if span > 0 else -math.inf})
+            changes["dropout"] = float(dropout)
+        changes.update(_spans_until(now, freeze=freeze, hide=hide))
+        f = replace(self._faults.get(name, _NO_FAULTS), **changes)
         self._set_faults(name, f)
         return f
+
+    def _body_rate(self, rate: float) -> Optional[float]:
+        """A body's own rate, at most the system's (None: the system's)."""
+        if not 0 < rate <= self.rate:
+            raise ValueError("a body's mocap rate must be in (0, %g] Hz (the system's rate), got %r"
+                             % (self.rate, rate))
+        return None if rate == self.rate else float(rate)
 
     def clear_body_faults(self, name: Optional[str] = None) -> None:
         """Forget the faults of body ``name`` (every body when None); hiding by ``set_visible`` stays."""

@@ -22,6 +22,8 @@ from crazyflie_driver.mocap.vrpn_server import VrpnTestServer
 LOOPBACK = "127.0.0.1"
 #: Delivered frames waiting for the sending thread, at most (older ones are dropped when it falls behind).
 BACKLOG_CYCLES = 100
+#: The smallest step between two report cycles' stamps [us]: VRPN stamps count whole microseconds.
+STAMP_STEP_US = 1
 
 
 def port_is_free(host: str, port: int) -> bool:
@@ -61,6 +63,7 @@ class WorldVrpnServer:
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self.cycles_sent = 0
+        self._last_stamp_us = 0                 # host time of the newest cycle queued [us since the epoch]
         mocap.add_listener(self._on_frames)
 
     @property
@@ -115,7 +118,12 @@ class WorldVrpnServer:
                 # behind steps in one go keeps its frame period, as a motion-capture system's stamps do
                 scheduled = self.world.wall_time_of(captured)
                 stamp = capture_wall_time(now_wall, world_now, captured, speed) if scheduled is None else scheduled
-                self._cycles.append((stamp, poses))
+                # a new schedule (the speed changed, a lag let go) maps a capture made under the old one
+                # differently: stamps still never go back, as a motion-capture system's do not
+                # (in whole microseconds: a float of a Unix time has a quarter-microsecond grain)
+                stamp_us = max(int(round(stamp * 1e6)), self._last_stamp_us + STAMP_STEP_US)
+                self._last_stamp_us = stamp_us
+                self._cycles.append((stamp_us / 1e6, poses))
         self._ready.set()
 
     def _send_loop(self) -> None:

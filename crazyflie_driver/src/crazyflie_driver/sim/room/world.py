@@ -338,7 +338,8 @@ class World:
         self.realtime_factor = 0.0                 # measured by the background thread
         self.overruns = 0                          # times the thread could not keep up and let go
         self.max_lag_s = MAX_LAG_S                 # world s the thread may trail its schedule and still catch up
-        self._anchor: Optional[Tuple[float, float]] = None     # the thread's schedule: (host time.time(), world time)
+        # the thread's schedule: (host time.time(), world time, speed), replaced whole, never in parts
+        self._anchor: Optional[Tuple[float, float, float]] = None
         self.ticks_behind = 0                      # how far world time trails wall time × speed, in ticks
         self._last_behind_warning = -math.inf
         self._speed_changed = threading.Event()    # set_speed: the thread starts a new schedule from now
@@ -541,9 +542,9 @@ class World:
         None when no thread steps in real time. A world running behind steps a tick later than
         this; one that let go of its lag (``overruns``) starts a new schedule."""
         anchor = self._anchor
-        if anchor is None or self.speed <= 0:
+        if anchor is None or anchor[2] <= 0:
             return None
-        return anchor[0] + (world_t - anchor[1]) / self.speed
+        return anchor[0] + (world_t - anchor[1]) / anchor[2]
 
     def set_speed(self, speed: float) -> None:
         """Run at ``speed`` × real time from now on (0: as fast as possible); world time goes on from
@@ -560,7 +561,7 @@ class World:
     def _run(self) -> None:
         """Real-time stepping: wake every WAKE_PERIOD_S of wall time (per ``speed``), step what is due."""
         wall0, world0 = _time.monotonic(), self.time
-        self._anchor = (_time.time(), world0)
+        self._anchor = (_time.time(), world0, self.speed)
         meter_wall, meter_world = wall0, world0
         wake_ticks = max(1, int(round(WAKE_PERIOD_S / FIRMWARE_TICK_S)))
         while not self._stop.is_set():
@@ -568,7 +569,7 @@ class World:
             if self._speed_changed.is_set():
                 self._speed_changed.clear()
                 wall0, world0 = now, self.time
-                self._anchor = (_time.time(), world0)
+                self._anchor = (_time.time(), world0, self.speed)
             if now - meter_wall >= METER_PERIOD_S:
                 self._meter((self.time - meter_world) / (now - meter_wall), world0 + (now - wall0) * self.speed)
                 meter_wall, meter_world = now, self.time
@@ -582,7 +583,7 @@ class World:
             if due * FIRMWARE_TICK_S > self.max_lag_s:
                 self.overruns += 1
                 wall0, world0 = now, self.time
-                self._anchor = (_time.time(), world0)
+                self._anchor = (_time.time(), world0, self.speed)
                 due = wake_ticks
             self.step(min(due, MAX_CHUNK_TICKS))
 

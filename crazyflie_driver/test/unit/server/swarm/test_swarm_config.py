@@ -6,8 +6,9 @@ import textwrap
 
 import pytest
 
+from crazyflie_driver.crtp.uri import parse_uri
 from crazyflie_driver.errors import SwarmConfigError
-from crazyflie_driver.server.swarm.config import load_swarm_file, parse_swarm
+from crazyflie_driver.server.swarm.config import dongle_per_channel, load_swarm_file, parse_swarm
 
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "config", "swarm_example.yaml")
 
@@ -230,3 +231,37 @@ def test_a_crazyswarm2_file_fault_is_named_with_its_line(text, says):
     with pytest.raises(SwarmConfigError) as e:
         parse_swarm(text, "crazyflies.yaml")
     assert str(e.value).startswith(says), str(e.value)
+
+
+def test_dongle_per_channel_keeps_pinned_channels_and_fills_the_lowest_free_dongle():
+    pinned = parse_uri("radio://1/90/2M/E7E7E7E701")
+    links = [(None, 80), (pinned, 90), (None, 80), (None, 100), (None, 90)]
+    assert dongle_per_channel(links) == {90: 1, 80: 0, 100: 2}
+    assert dongle_per_channel([]) == {}
+
+
+def test_logging_switches_per_type_and_per_crazyflie():
+    types = TYPES + "    enable_logging_imu: false\n    enable_logging_packets: true\n"
+    c = swarm("""
+        - {id: 1, channel: 80}
+        - {id: 2, channel: 80, enable_logging_imu: true, enable_logging_pose: false}
+    """, types)
+    assert dict(c.crazyflies[0].switches) == {"enable_logging_imu": False, "enable_logging_packets": True}
+    assert dict(c.crazyflies[1].switches) == {"enable_logging_imu": True, "enable_logging_packets": True,
+                                              "enable_logging_pose": False}
+    message = refused("""
+        - {id: 1, channel: 80, enable_logging_battery: maybe}
+    """)
+    assert message.startswith("s.yaml:2: ") and "enable_logging_battery must be true or false" in message
+
+
+def test_logging_switches_in_a_crazyswarm2_file():
+    c = parse_swarm("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\n    type: t\n"
+                    "  cf2:\n    uri: radio://0/80/2M/E7E7E7E702\n    type: t\n    enable_logging_imu: true\n"
+                    "robot_types:\n  t:\n    enable_logging_imu: false\n", "crazyflies.yaml")
+    assert [dict(cf.switches) for cf in c.crazyflies] == [{"enable_logging_imu": False},
+                                                         {"enable_logging_imu": True}]
+    with pytest.raises(SwarmConfigError) as e:
+        parse_swarm("robots:\n  cf1:\n    uri: radio://0/80/2M/E7E7E7E701\n    enable_logging_pose: 1\n",
+                    "crazyflies.yaml")
+    assert str(e.value).startswith("crazyflies.yaml:4: robots.cf1") and "true or false" in str(e.value)

@@ -34,3 +34,25 @@ def test_faults_named(params, words):
     with pytest.raises(SwarmConfigError) as e:
         options_from_params(params)
     assert words in str(e.value)
+
+
+def test_logging_switches_as_parameters_and_the_file_winning():
+    from crazyflie_driver.server.swarm.config import parse_swarm
+    from crazyflie_driver.server.swarm.policy import worker_config
+
+    options = options_from_params({"swarm_file": "s.yaml", "enable_logging": True, "enable_logging_imu": "false",
+                                   "enable_logging_battery": False, "enable_logging_packets": True})
+    assert dict(options.switches) == {"enable_logging_imu": False, "enable_logging_battery": False,
+                                      "enable_logging_packets": True}
+    c = parse_swarm("crazyflies:\n  - {id: 1, channel: 80}\n"
+                    "  - {id: 2, channel: 80, enable_logging_battery: true, enable_logging_packets: false,"
+                    " enable_logging_pose: false}\n")
+    first, second = (worker_config(cf, options, pose_period_ms=100) for cf in c.crazyflies)
+    assert first.disabled_topics == frozenset({"imu", "battery"}) and first.log_packets
+    assert first.battery_watch_ms > 0           # the topic is off, the safety monitor's battery is not
+    assert [b.topic_name for b in first.log_blocks] == ["pose"]
+    assert second.disabled_topics == frozenset({"imu"}) and not second.log_packets and second.log_blocks == ()
+    plain = worker_config(c.crazyflies[0], options_from_params({"swarm_file": "s.yaml"}))
+    assert plain.disabled_topics == frozenset() and not plain.log_packets     # packets off by default here
+    with pytest.raises(SwarmConfigError, match="enable_logging_pose"):
+        options_from_params({"swarm_file": "s.yaml", "enable_logging_pose": "perhaps"})

@@ -1,6 +1,7 @@
 """Broadcasts in the simulated air: packets to 0xFFE7E7E7E7 with acks off reach every simulated
 Crazyflie on that channel and data rate, are never acked, count in radio.numRxBc; the fake
-Crazyradio PA with the 99.55 firmware sends an OUT of two equal packets as two radio packets."""
+Crazyradio PA with the 99.55 firmware and every 2.0 send an OUT of two equal packets as two radio
+packets; a 2.0 in inline mode sends them inline, without a control transfer."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,6 +11,7 @@ from crazyflie_driver.protocol.high_level import takeoff_packet
 from crazyflie_driver.protocol.localization import packed_position_packets
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS, BroadcastLink
 from crazyflie_driver.radio.crazyradio import Crazyradio
+from crazyflie_driver.radio.link import open_link
 from crazyflie_driver.radio.shared_radio import RadioManager
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
@@ -35,7 +37,7 @@ def swarm(model):
     return world, medium, backend, RadioManager(backend), cfs
 
 
-@pytest.mark.parametrize("model,transfers", [("PA", 3), ("PA-99.55", 2)])
+@pytest.mark.parametrize("model,transfers", [("PA", 3), ("PA-99.55", 2), ("2.0", 2), ("2.0-5.0", 2)])
 def test_broadcast_reaches_every_crazyflie_on_the_channel_never_acked(model, transfers):
     world, medium, backend, manager, cfs = swarm(model)
     positions = [(ident, 0.5 * ident, 0.0, 0.0) for ident in range(1, 6)]
@@ -90,3 +92,40 @@ def test_pa_9955_splits_only_transfers_longer_than_32_bytes():
     finally:
         dongle.close()
     assert heard == [pair, pair, short + short]
+
+
+def test_crazyradio_2_in_inline_mode_broadcasts_inline_without_control_transfers():
+    """Once a unicast packet went inline, a burst carries the broadcast address and acks off in each
+    packet's header: every Crazyflie on the channel takes it, none acks it, the firmware answers each
+    OUT, and no vendor request leaves or re-enters inline mode."""
+    world, medium, backend, manager, cfs = swarm("2.0")
+    link = open_link("radio://0/%d/2M/E7E7E7E701" % CHANNEL, manager)
+    try:
+        assert link.poll()
+        dongle = backend.dongles[0]
+        controls, bulk_in = dongle.control_transfers, dongle.bulk_in
+        packets = packed_position_packets([(ident, 0.5 * ident, 0.0, 0.0) for ident in range(1, 5)]) * 2
+        with BroadcastLink(0, CHANNEL, manager=manager) as bc:
+            assert bc.sends_inline
+            assert bc.send_all(packets) == 2
+        assert link.poll()
+        assert dongle.control_transfers == controls                 # no address, ack or inline request
+        assert dongle.bulk_in == bulk_in + 3                        # two inline replies + the poll's
+        assert dongle.inline_mode == 1
+        for ident in range(1, 5):
+            assert cfs[ident].state.rx_broadcast == 2 and cfs[ident].state.external_measurements == 2
+        assert cfs[5].state.rx_broadcast == 0
+    finally:
+        link.close()
+
+
+def test_crazyradio_2_pairs_only_below_its_64_byte_endpoint():
+    """The 2.0 waits for more data after an OUT of exactly 64 bytes: two full 32-byte packets go alone."""
+    world, medium, backend, manager, cfs = swarm("2.0")
+    dongle = Crazyradio(0, backend=backend)
+    try:
+        assert dongle.two_per_transfer and dongle.max_pair_bytes == 63
+        with pytest.raises(ValueError):
+            dongle.send_no_ack(bytes(64))
+    finally:
+        dongle.close()

@@ -10,6 +10,7 @@ import pytest
 from crazyflie_driver.crtp.nrf_system import reboot_packets, stm_power_off_packet, stm_power_on_packet
 from crazyflie_driver.sim.crtp import tables as T
 from crazyflie_driver.sim.crtp.firmware import SimulatedCrazyflie
+from crazyflie_driver.sim.crtp.param import ParamService
 from crazyflie_driver.sim.crtp.ports import boot_text
 from support.sim_doubles import FakeVehicle, drain
 
@@ -80,6 +81,16 @@ def test_platform_versions(fw, proto, version, devtype):
         assert ask(cf, b"\xdd\x02") == []
     assert ask(cf, b"\xdd\x09") == []
 
+
+
+def test_platform_commands_on_channel_0():
+    cf, _ = make()
+    assert ask(cf, b"\xdc\x03") == [b"\xdc"]                           # answered with no payload
+    assert one(cf, b"\xdc\x00\x01") == b"\xdc\x00\x01"                  # others echoed (continuous wave)
+    assert one(cf, b"\xdc\x09\x02\x03") == b"\xdc\x09\x02\x03"
+    old, _ = make("2016.02")                                         # continuous wave only
+    assert one(old, b"\xdc\x00\x01") == b"\xdc\x00\x01"
+    assert ask(old, b"\xdc\x01\x01") == [] and ask(old, b"\xdc\x02") == [] and ask(old, b"\xdc\x03") == []
 
 # --- parameters -------------------------------------------------------------------------------
 def chained_crc(items):
@@ -201,6 +212,52 @@ def test_param_misc_set_by_name_and_extended_type():
     # the item's TOC type carries EXTENDED so cflib asks
     assert one(cf, b"\x2c\x02" + idb)[4] == 0x38                             # u8, EXTENDED, CORE
 
+
+
+def test_param_misc_defaults_and_persistent_storage_by_id():
+    table = [T.ParamVar("ring", "effect", "uint8_t", 6, persistent=True),
+             T.ParamVar("ring", "fullCharge", "float", 4.2),
+             T.ParamVar("cpu", "flash", "uint16_t", 1024, readonly=True)]
+    cf, _ = make(param_table=table)
+    eff, full, ro = (struct.pack("<H", param_id(cf, n)) for n in ("ring.effect", "ring.fullCharge", "cpu.flash"))
+    past = struct.pack("<H", 3)                                                   # past the table
+    misc = lambda cmd, ident: one(cf, bytes([0x2F, cmd]) + ident)  # noqa: E731
+    # GET_DEFAULT (6) and GET_DEFAULT_V2 (8, a status byte first); read-only or unknown: ENOENT
+    assert misc(6, full) == b"\x2f\x06" + full + struct.pack("<f", 4.2)
+    assert misc(8, full) == b"\x2f\x08" + full + b"\x00" + struct.pack("<f", 4.2)
+    for cmd in (6, 8):
+        for ident in (ro, past):
+            assert misc(cmd, ident) == bytes([0x2F, cmd]) + ident + b"\x02"
+    assert misc(2, past) == b"\x2f\x02" + past + b"\x02"                          # extended type: ENOENT
+    assert misc(7, full) == b"\x2f\x07" + full + b"\x02"
+    # persistent storage: state (4) = stored?, default[, stored]; store (3), clear (5)
+    assert misc(4, eff) == b"\x2f\x04" + eff + b"\x00\x06"
+    assert one(cf, b"\x2e" + eff + b"\x09") == b"\x2e" + eff + b"\x09"              # write 9
+    assert misc(3, eff) == b"\x2f\x03" + eff + b"\x00"
+    assert cf.params.stored == {param_id(cf, "ring.effect"): 9}
+    assert misc(4, eff) == b"\x2f\x04" + eff + b"\x01\x06\x09"
+    assert misc(5, eff) == b"\x2f\x05" + eff + b"\x00"
+    assert misc(4, eff) == b"\x2f\x04" + eff + b"\x00\x06"
+    for cmd in (3, 4, 5):                                                          # not persistent, or no such id
+        for ident in (full, past):
+            assert misc(cmd, ident) == bytes([0x2F, cmd]) + ident + b"\x02"
+    assert cf.params.stored == {}
+    assert ask(cf, b"\x2f\x02\x00") == [] and ask(cf, b"\x2f\x09" + eff) == []      # short; unknown command
+
+
+def test_param_misc_v2_commands_need_protocol_11_and_the_2016_firmware_answers_only_set_by_name():
+    sent = []
+    table = [T.ParamVar("ring", "effect", "uint8_t", 6, persistent=True)]
+    params = ParamService(T.GEN_CURRENT, 10, table, {}, lambda name, value: None,
+                          lambda header, data: sent.append(data) or True)
+    for cmd in (7, 8):
+        params.handle(0x2F, 3, bytes([cmd, 0, 0]))
+    assert sent == []
+    params.handle(0x2F, 3, bytes([2, 0, 0]))
+    assert sent == [bytes([2, 0, 0, T.EXTENDED_PERSISTENT])]
+    old, _ = make("2016.02")
+    for cmd in (2, 3, 4, 5, 6, 7, 8):
+        assert ask(old, bytes([0x2F, cmd, 0, 0])) == []
 
 # --- log ----------------------------------------------------------------------------------------
 def test_log_toc_info_and_items():
@@ -384,9 +441,10 @@ def test_emergency_stop_ports():
     assert v3.estops == 0 and ask(old, b"\x9c\x0c") == []
 
 
-def test_estop_watchdog_fires_after_one_second():
+@pytest.mark.parametrize("feed", [b"\x6d\x04", b"\x9d\x04"])      # localization or supervisor port
+def test_estop_watchdog_fires_after_one_second(feed):
     cf, v = make()
-    ask(cf, b"\x6d\x04")
+    ask(cf, feed)
     v.t = 0.9
     cf.tick(v.t)
     assert v.estops == 0
@@ -404,11 +462,13 @@ def test_empty_ack_formats():
 
 
 def test_one_downlink_per_uplink_and_reply_in_a_later_ack():
-    cf, _ = make()
+    cf, _ = make()                                  # (its boot text already taken: port 0)
     assert cf.handle_radio_packet(b"\xdd\x00") == b"\xf3"            # answer not ready yet
     assert cf.handle_radio_packet(b"\xdd\x01") == b"\xd5\x00\x0c\x00\x00\x00"
     assert cf.handle_radio_packet(b"\xff") == b"\xd1\x012026.08"
     assert cf.handle_radio_packet(b"\xff") == b"\xf7"
+    assert cf.state.sent_by_port.get(13) == 2      # two answers left in acks; empty acks are no packets
+    assert cf.snapshot()["sent_by_port"]["13"] == 2
 
 
 def test_safelink_dedupes_uplink_and_resends_lost_ack():

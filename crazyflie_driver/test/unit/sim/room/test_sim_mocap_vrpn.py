@@ -153,6 +153,36 @@ def test_frames_of_a_catch_up_burst_keep_their_capture_spacing():
     assert len(off_grid) <= world.overruns, np.round(off_grid, 4)     # a world that let go starts a new schedule
 
 
+def test_stamps_never_go_back_when_the_worlds_schedule_changes():
+    """An auto-paced world changes its speed and starts new schedules; a capture made under the old
+    schedule and delivered under the new one can map to an earlier host time than the capture sent
+    before it (here the schedule jumps 0.5 s back and forth every 50 ms of world time). The stamps still
+    strictly increase, as a motion-capture system's do."""
+    world = World(speed=1.0, seed=3)
+    world.add_vehicle("cf1", position=(0.0, 0.0, 0.0))
+    mocap = MocapModel(world, rate=100.0, seed=3).attach()
+    scheduled = world.wall_time_of
+    world.wall_time_of = lambda t: (lambda w: None if w is None else w - 0.5 * (int(t * 20) % 2))(scheduled(t))
+    stamps, lock = [], threading.Lock()
+
+    def on_pose(report):
+        with lock:
+            stamps.append(report.server_sec + report.server_usec * 1e-6)
+    server = WorldVrpnServer(world, mocap, port=0)
+    world.start()
+    try:
+        server.start()
+        with VrpnClient("127.0.0.1", server.port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
+            assert wait_until(lambda: len(stamps) > 40, timeout=10.0)
+    finally:
+        server.stop()
+        world.stop()
+    with lock:
+        steps = np.diff(stamps)
+    assert (steps > 0).all(), (steps.min(), np.argmin(steps), stamps[:3])
+    assert (steps < 1e-5).any()                # captures mapped back were held just after the one before
+
+
 def test_world_server_command_line_places_a_swarm_file_and_serves_vrpn():
     """``crazyflie_world_server --swarm FILE --vrpn PORT``: the swarm file's Crazyflies on the URIs the
     server derives (one dongle per channel), at their initial positions, one VRPN tracker each."""

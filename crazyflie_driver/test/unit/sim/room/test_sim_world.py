@@ -1,6 +1,7 @@
 """The simulated world: vehicles, readings, battery, tick listeners, real time, mocap, closed loop."""
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -224,6 +225,32 @@ def test_mocap_samples_at_its_rate_with_noise_latency_and_dropout():
     assert 120 < got < 280                        # 2 vehicles × 200 frames, half dropped
     assert dropping.frames_dropped + dropping.frames_captured == 400
 
+
+
+def test_body_faults_merge_with_what_the_body_has_and_refuse_out_of_range_values():
+    w = World(speed=0, seed=1)
+    w.add_vehicle("cf1")
+    m = MocapModel(w, rate=100.0, seed=4)
+    f = m.set_body_faults("cf1", 10.0, noise=0.01, latency=0.05, rate=20, dropout=0.25, freeze=2.0, hide=math.inf)
+    assert (f.noise, f.latency, f.rate, f.dropout, f.freeze_until, f.hide_until) == \
+        (0.01, 0.05, 20.0, 0.25, 12.0, math.inf)
+    f = m.set_body_faults("cf1", 11.0, rate=100, freeze=0)          # the system's rate; 0 ends the freeze
+    assert (f.noise, f.latency, f.rate, f.dropout, f.freeze_until, f.hide_until) == \
+        (0.01, 0.05, None, 0.25, -math.inf, math.inf)
+    for args, says in [({"noise": -0.1}, "noise must be a finite number >= 0 m"),
+                       ({"noise": math.nan}, "noise must be a finite"),
+                       ({"latency": math.inf}, "latency must be a finite number >= 0 s"),
+                       ({"rate": 0}, r"rate must be in \(0, 100\] Hz"),
+                       ({"rate": 101}, r"rate must be in \(0, 100\] Hz"),
+                       ({"dropout": 1.5}, "dropout must be a probability 0..1"),
+                       ({"freeze": -1}, "freeze must last >= 0 s"),
+                       ({"hide": math.nan}, "hide must last >= 0 s"),
+                       ({"noise": 0.5, "hide": -1}, "hide must last")]:            # nothing applied
+        with pytest.raises(ValueError, match=says):
+            m.set_body_faults("cf1", 12.0, **args)
+    assert m.body_faults(12.0)["cf1"] == f
+    with pytest.raises(KeyError, match="no vehicle called 'cf9'"):
+        m.set_body_faults("cf9", 12.0, noise=0.1)
 
 class PositionController:
     """A small offboard position PID (world frame, yaw held at 0) commanding raw RPYT."""
