@@ -34,7 +34,6 @@ import argparse
 import os
 import sys
 import time
-from typing import Any, Dict, List, Tuple
 
 try:
     import crazyflie_driver.srv  # noqa: F401  (the catkin workspace: source tools/env.sh first)
@@ -42,7 +41,7 @@ except ImportError:
     sys.exit("bench_faults: the catkin workspace is not on the path: source tools/env.sh first")
 
 from fault_table import harness  # noqa: E402
-from fault_table.harness import Bench, Row  # noqa: E402
+from fault_table.harness import Bench  # noqa: E402
 from fault_table.report import RUN_FIRST, table, write  # noqa: E402
 from fault_table.rows import rows  # noqa: E402
 
@@ -61,29 +60,15 @@ def main() -> int:
         return 1
     commit = harness.commit_line()
     t_start = time.monotonic()
-    results: List[Tuple[Row, Dict[str, Any]]] = []
-    bench = None
-    with harness.bench_master("cf_faults_", "bench_faults") as work:
-        try:
-            bench = Bench(work)
-            order = sorted(chosen, key=lambda r: (r.path != "chapter", r.key not in RUN_FIRST,
-                                                  RUN_FIRST.index(r.key) if r.key in RUN_FIRST else 0))
-            for row in order:
-                print("%s (%s path) ..." % (row.title, row.path), flush=True)
-                try:
-                    r = bench.run(row)
-                except Exception as e:
-                    r = {"error": "%s: %s" % (type(e).__name__, e)}
-                    if bench.graph is not None:
-                        bench.graph.stop()
-                        bench.graph = None
-                results.append((row, r))
-                print("\n".join(table([(row, r)])), flush=True)
-                if args.out != "-":                  # what is measured so far, should the run be cut short
-                    write(args, results, commit, time.monotonic() - t_start, partial=True)
-        finally:
-            if bench is not None:
-                bench.close()
+    order = sorted(chosen, key=lambda r: (r.path != "chapter", r.key not in RUN_FIRST,
+                                          RUN_FIRST.index(r.key) if r.key in RUN_FIRST else 0))
+
+    def write_so_far(results: harness.Results) -> None:
+        if args.out != "-":                  # what is measured so far, should the run be cut short
+            write(args, results, commit, time.monotonic() - t_start, partial=True)
+    results = harness.run_rows(Bench, order, "cf_faults_", "bench_faults",
+                               lambda row: "%s (%s path) ..." % (row.title, row.path),
+                               lambda row, r: table([(row, r)]), write_so_far)
     write(args, results, commit, time.monotonic() - t_start, partial=False)
     return 0 if all("error" not in r for _, r in results) else 1
 

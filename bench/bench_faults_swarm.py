@@ -62,25 +62,8 @@ def main() -> int:
         return 1
     commit = harness.commit_line()
     t_start = time.monotonic()
-    results: List[Tuple[SwarmRow, Dict[str, Any]]] = []
-    bench = None
-    with harness.bench_master("cf_faults_swarm_", "bench_faults_swarm") as work:
-        try:
-            bench = SwarmBench(work)
-            for row in chosen:
-                print("%s ..." % row.title, flush=True)
-                try:
-                    r = bench.run(row)
-                except Exception as e:
-                    r = {"error": "%s: %s" % (type(e).__name__, e)}
-                    if bench.graph is not None:
-                        bench.graph.stop()
-                        bench.graph = None
-                results.append((row, r))
-                print("\n".join(lines(row, r)), flush=True)
-        finally:
-            if bench is not None:
-                bench.close()
+    results = harness.run_rows(SwarmBench, chosen, "cf_faults_swarm_", "bench_faults_swarm",
+                               lambda row: "%s ..." % row.title, lines)
     head = ["fault table, swarm mode: %s (4 Crazyflies, cf1 and cf2 on one radio, cf3 and cf4 on one each), "
             "hovering at 0.5 m over their initial positions on the onboard high-level commander; the server's "
             "packed motion-capture broadcasts from the world's VRPN at 100 Hz; its emergency-stop watchdog "

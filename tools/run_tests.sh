@@ -17,8 +17,9 @@
 # run takes longer instead (the summary says how long starts were held back).
 # The rostests are isolated from each other: each has its own master (rostest picks a free port)
 # and its own world address and ports (test_rostest_ports.py holds that). One line per test as it
-# ends: "PASS <pkg>/<file>.test (<wall> s, CPU <cpu> s)" or FAIL with the log's tail; logs, the
-# pytest output and the measured durations (durations.txt) are in .ws/test_results/.
+# ends: "PASS <pkg>/<file>.test (<wall> s, CPU <cpu> s)" or FAIL with what rostest reported of the
+# failure and the log's tail, and the summary names each failure's exception ("why <id>: ...");
+# logs, the pytest output and the measured durations (durations.txt) are in .ws/test_results/.
 # CRAZYFLIE_ROSTESTS="driver_single.test hover_vicon.test" runs only those rostests ("none": none).
 set -uo pipefail
 
@@ -106,6 +107,17 @@ cpu_seconds() {
   awk 'NR == 2 { s = 0; for (i = 1; i <= 2; i++) { split($i, p, "m"); sub("s", "", p[2]); s += p[1] * 60 + p[2] } printf "%.0f", s }' "$1"
 }
 
+# What rostest reported for each failed or erroring test case: its block from "[...][FAILURE]" or
+# "[...][ERROR]" to the dashed line that closes it (at most 30 lines); the log's last 40 if none.
+failure_of() {
+  awk '/\]\[(FAILURE|ERROR)\]-*$/ { on = 1; n = 0 } on && n < 30 { print; n++; found = 1 }
+       on && /^--------------------+$/ { on = 0 } END { exit !found }' "$1" || tail -n 40 "$1"
+}
+# The last line of those blocks that names an exception ("AssertionError: ..."), for the summary.
+reason_of() {
+  failure_of "$1" | grep -E '^[A-Za-z_.]*(Error|Exception|Failure)\b' | tail -n 1 | cut -c1-400
+}
+
 ros_pass=0; ros_fail=0; failed=""; pytest_rc=1
 finish_job() {
   local id="$1" key rc took cpu; key="$(key_of "$1")"
@@ -123,7 +135,9 @@ finish_job() {
   else
     ros_fail=$((ros_fail + 1)); failed="$failed $id"
     echo "FAIL $id ($took s, CPU $cpu s)"
-    tail -n 40 "$(log_of "$id")" | sed 's/^/    /'
+    failure_of "$(log_of "$id")" | sed 's/^/    /'
+    echo "    -- the log's last 20 lines --"
+    tail -n 20 "$(log_of "$id")" | sed 's/^/    /'
   fi
 }
 
@@ -195,5 +209,6 @@ echo "tests took $(( $(date +%s) - t0 )) s (up to $most_running at a time; start
      "for want of $IDLE_CORES idle cores); load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "lint: $( [ "$lint_fail" -eq 0 ] && echo clean || echo FAILED ); types: $( [ "$types_fail" -eq 0 ] && echo clean || echo FAILED ); pytest: $py_pass passed, $py_fail failed;" \
      "rostest: $ros_pass passed, $ros_fail failed${failed:+ (failed:$failed)}"
+for id in $failed; do echo "why $id: $(reason_of "$(log_of "$id")")"; done
 echo "$((lint_pass + types_pass + py_pass + ros_pass)) passed, $((lint_fail + types_fail + py_fail + ros_fail)) failed"
 [ $((lint_fail + types_fail + py_fail + ros_fail)) -eq 0 ]

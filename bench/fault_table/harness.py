@@ -528,3 +528,35 @@ def bench_master(prefix: str, node: str) -> Iterator[str]:
             core.wait(15)
         except subprocess.TimeoutExpired:
             os.killpg(core.pid, signal.SIGKILL)
+
+
+Results = List[Tuple[Any, Dict[str, Any]]]
+
+
+def run_rows(make_bench: Callable[[str], Any], rows: List[Any], prefix: str, node: str,
+             announce: Callable[[Any], str], show: Callable[[Any, Dict[str, Any]], List[str]],
+             after_each: Callable[[Results], None] = lambda results: None) -> Results:
+    """Each row on one bench (``make_bench(work folder)``) under a private master, in the given order.
+    A row that raises is recorded as ``{"error": ...}``, its ROS graph stopped, and the run goes on;
+    ``after_each`` sees the results so far (to write what is measured should the run be cut short)."""
+    results: Results = []
+    bench = None
+    with bench_master(prefix, node) as work:
+        try:
+            bench = make_bench(work)
+            for row in rows:
+                print(announce(row), flush=True)
+                try:
+                    r = bench.run(row)
+                except Exception as e:
+                    r = {"error": "%s: %s" % (type(e).__name__, e)}
+                    if bench.graph is not None:
+                        bench.graph.stop()
+                        bench.graph = None
+                results.append((row, r))
+                print("\n".join(show(row, r)), flush=True)
+                after_each(results)
+        finally:
+            if bench is not None:
+                bench.close()
+    return results

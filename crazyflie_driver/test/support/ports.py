@@ -7,9 +7,9 @@ import socket
 #: Ports handed out here [TCP/UDP port numbers]: above the rostests' fixed ports (19840-19999) and
 #: below Linux's ephemeral range (net.ipv4.ip_local_port_range starts at 32768). A port from the
 #: ephemeral range, once closed here, can be given by the kernel to any other process binding port 0
-#: (every ROS node's XML-RPC and TCPROS servers) before the test's own server takes it: the test's
-#: clients then talk to that node (seen as a node logging "Inbound TCP/IP connection failed" in a
-#: rostest running beside the unit tests), or the test's server finds its port taken.
+#: (every ROS node's XML-RPC and TCPROS servers, in the rostests running beside the unit tests) before
+#: the test's own server takes it: the test's clients would then talk to that node, or the test's
+#: server find its port taken.
 FIRST, LAST = 20000, 32767
 
 

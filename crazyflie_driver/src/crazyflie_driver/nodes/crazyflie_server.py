@@ -58,6 +58,7 @@ from crazyflie_driver.server.log_plan import (
     IMU_TOPIC,
     MAGNETIC_FIELD_TOPIC,
     PRESSURE_TOPIC,
+    STATUS_TOPIC,
     TEMPERATURE_TOPIC,
     TOPIC_SWITCHES,
     LogBlockSpec,
@@ -179,7 +180,7 @@ class RosCrazyflie(WorkerListener):
         self._pose = next((PosePublisher(name(b.topic_name), self.frame_id_world)
                            for b in config.log_blocks if is_pose_block(b)), None)
         self._rssi_pub = rospy.Publisher(name("rssi"), Float32, queue_size=10)
-        self._status_pub = rospy.Publisher(name("status"), DiagnosticStatus, queue_size=10, latch=True)
+        self._status_pub = rospy.Publisher(name(STATUS_TOPIC), DiagnosticStatus, queue_size=10, latch=True)
         self._pubs = pubs       # one assignment: the worker thread reads it meanwhile
         self._subscribers.append(rospy.Subscriber(name("cmd_vel"), Twist, self._on_cmd_vel, queue_size=1,
                                                   tcp_nodelay=True))

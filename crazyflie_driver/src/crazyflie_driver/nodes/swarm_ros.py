@@ -13,7 +13,7 @@ import math
 import statistics
 import threading
 import time
-from typing import Any, Callable, Iterable, List, Optional
+from typing import Any, Callable, Dict, Iterable, List, Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -21,14 +21,20 @@ from std_srvs.srv import Empty, EmptyResponse
 
 from crazyflie_driver import usb_choice
 from crazyflie_driver.clock import WALL, Clock
-from crazyflie_driver.errors import CrazyflieError
+from crazyflie_driver.errors import CrazyflieError, LogConfigError, UnknownName
 from crazyflie_driver.nodes import swarm_mocap_sources
 from crazyflie_driver.nodes.ros_signals import publish_unless_shutting_down, shutting_down
 from crazyflie_driver.radio.crazyradio import list_radios
 from crazyflie_driver.server import radio_budget
 from crazyflie_driver.server.swarm.commands import SwarmMember
 from crazyflie_driver.server.swarm.config import LOG_SWITCHES, load_swarm_file
-from crazyflie_driver.server.swarm.options import options_from_params
+from crazyflie_driver.server.swarm.options import (
+    GENERIC_LOG_PERIODS,
+    GENERIC_LOG_TOPICS,
+    generic_log_note,
+    generic_log_variables_key,
+    options_from_params,
+)
 from crazyflie_driver.server.swarm.policy import REBOOT_ALL_SERVICE, SwarmPolicy, refusal_text
 from crazyflie_driver.server.worker import WorkerConfig
 from crazyflie_driver.srv import (
@@ -93,6 +99,8 @@ class ServerPort:
         try:
             ros = self._server.add(config)
         except rospy.ServiceException as e:
+            if isinstance(e.__cause__, (UnknownName, LogConfigError)):     # its log blocks, per its log TOC
+                raise LogConfigError(str(e)) from e
             raise CrazyflieError(str(e)) from e
         return SwarmMember(config.tf_prefix, str(ros.config.uri), ros.worker, ros.onboard_commands)
 
@@ -199,6 +207,7 @@ class RosSwarm:
                                       KeyValue("poses refused", str(p.stream.refused.get(m.name, 0)))]
                     if state != "ok" and p.stream.last_refusal.get(m.name):
                         status.message += "; last pose refused: %s" % p.stream.last_refusal[m.name]
+                note_log_topic_fault(status, p.log_topic_faults.get(m.name))
                 arr.status.append(status)
             for name, error in p.failed.items():
                 arr.status.append(DiagnosticStatus(level=DiagnosticStatus.ERROR, name="crazyflie_server swarm: %s"
@@ -241,6 +250,27 @@ class RosSwarm:
                 pass
 
 
+def note_log_topic_fault(status: DiagnosticStatus, fault: Optional[str]) -> None:
+    """A Crazyflie flying without its custom log topics is a warning at least, with the reason."""
+    if fault:
+        status.level = max(status.level, DiagnosticStatus.WARN)
+        status.message += "; no custom log topics: %s" % fault
+
+
+def generic_log_params() -> Dict[str, Any]:
+    """Crazyswarm's generic log topic parameters of this node, as they are set (checked by the options)."""
+    out: Dict[str, Any] = {}
+    for key in (GENERIC_LOG_TOPICS, GENERIC_LOG_PERIODS):
+        if rospy.has_param("~" + key):
+            out[key] = rospy.get_param("~" + key)
+    topics = out.get(GENERIC_LOG_TOPICS)
+    for topic in topics if isinstance(topics, list) else []:
+        key = generic_log_variables_key(str(topic))
+        if rospy.has_param("~" + key):
+            out[key] = rospy.get_param("~" + key)
+    return out
+
+
 def start_swarm(server) -> Optional[RosSwarm]:
     """Swarm mode when ``~swarm_file`` is set: checked options and file (a fault ends the node with its
     message), then everything else in a background thread."""
@@ -252,7 +282,11 @@ def start_swarm(server) -> Optional[RosSwarm]:
               + LOG_SWITCHES if rospy.has_param("~" + k)}
     if not params.get("swarm_file"):
         return None
+    params.update(generic_log_params())
     options = options_from_params(params)
+    note = generic_log_note(params, options.enable_logging)
+    if note:
+        rospy.logwarn("swarm: %s", note)
     load_swarm_file(options.swarm_file, options.swarm_types_file or None)     # file faults first, fast
     dongles = count_dongles(options.dongle_wait)
     config = load_swarm_file(options.swarm_file, options.swarm_types_file or None, dongles=dongles)

@@ -23,6 +23,7 @@ from crazyflie_driver.crtp.firmware_limits import (
 )
 from crazyflie_driver.errors import LogConfigError, UnknownName
 from crazyflie_driver.protocol.toc import check_toc_name
+from crazyflie_driver.server.raw_packets import PACKETS_TOPIC
 
 IMU_TOPIC = "imu"
 TEMPERATURE_TOPIC = "temperature"
@@ -71,8 +72,14 @@ DIAGNOSTIC_LOG_TOPICS: Tuple[Tuple[str, str, Tuple[str, ...]], ...] = (
     (POWER_STATE_TOPIC, BATTERY_TOPIC, ("pm.state",)),
     (SUPERVISOR_TOPIC, IMU_TOPIC, ("supervisor.info",)),    # current firmware only
 )
+STATUS_TOPIC = "status"            # the Crazyflie's DiagnosticStatus (nodes.crazyflie_server)
+# The node's own per-Crazyflie topics besides the log topics: what it subscribes to (nodes.crazyflie_server,
+# nodes.onboard_ros) and publishes. A custom log topic of one of these names would be a second type on it.
+NODE_TOPICS = frozenset({"cmd_vel", "emergency", "update_params", STATUS_TOPIC, PACKETS_TOPIC, "cmd_position",
+                         "cmd_hover", "cmd_full_state", "cmd_velocity_world", "cmd_stop", "external_position",
+                         "external_pose"})
 RESERVED_TOPIC_NAMES = frozenset(t for t, _, _ in FIXED_LOG_TOPICS) | {
-    RADIO_RSSI_TOPIC, POWER_STATE_TOPIC, SUPERVISOR_TOPIC, "cmd_vel", "emergency", "update_params"}
+    RADIO_RSSI_TOPIC, POWER_STATE_TOPIC, SUPERVISOR_TOPIC} | NODE_TOPICS
 
 
 @dataclass(frozen=True)

@@ -105,3 +105,21 @@ def test_custom_blocks_that_can_never_fit_are_refused_without_a_crazyflie():
     with pytest.raises(LogConfigError, match="130 log variables, .* at most 128 .* own topics need at least 2 "
                                              "blocks and 12 variables more"):
         check_custom_log_limits(many, enable_logging=True)
+
+
+def test_a_custom_topic_may_not_take_a_name_the_node_uses_per_crazyflie():
+    """Its own status and packets, and every topic the onboard commands subscribe to: read from the node's
+    source, so a topic added there and not here fails this test."""
+    import ast
+    import pathlib
+
+    from crazyflie_driver.server.log_plan import NODE_TOPICS
+    node = pathlib.Path(__file__).resolve().parents[3] / "src" / "crazyflie_driver" / "nodes" / "onboard_ros.py"
+    subscribed = {n.elts[0].value for n in ast.walk(ast.parse(node.read_text()))
+                  if isinstance(n, ast.Tuple) and len(n.elts) == 3 and isinstance(n.elts[0], ast.Constant)
+                  and isinstance(n.elts[0].value, str) and isinstance(n.elts[2], ast.Lambda)}
+    assert {"cmd_position", "external_pose"} <= subscribed            # the scan found the subscriptions
+    assert subscribed <= NODE_TOPICS
+    for name in sorted(NODE_TOPICS):
+        with pytest.raises(ValueError, match="clashes"):
+            validate_log_block_specs([LogBlockSpec(name, 10, ("pm.vbat",))])

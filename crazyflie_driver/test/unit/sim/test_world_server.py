@@ -297,3 +297,45 @@ def test_the_stack_connects_to_usb_0_of_a_world_in_another_process(served):
     finally:
         cf.close()
     assert not backend.cables[0].crtp_to_usb
+
+
+def test_each_dongle_has_its_own_connection_so_radios_transmit_at_once(served):
+    """Real Crazyradios transmit at the same time, each on its own USB device. The fake dongles of one
+    process each have their own connection to the world, so a packet of one never waits for another
+    dongle's round trip: counted, a packet of dongle 0 and one of dongle 1 are in the world's medium
+    at once (the world lets neither go before both are in). On one shared connection the second waited
+    for the first, which waited for the second: a burst on each of three radios cost the sum of all
+    their round trips."""
+    world, server, medium = served
+    inner = server.medium.transmit
+    both_in = threading.Barrier(2, timeout=5.0)
+    count = threading.Lock()
+    inside, most = [0], [0]
+
+    def gated(*args, **kwargs):
+        with count:
+            inside[0] += 1
+            most[0] = max(most[0], inside[0])
+        try:
+            both_in.wait()
+            return inner(*args, **kwargs)
+        finally:
+            with count:
+                inside[0] -= 1
+
+    server.medium.transmit = gated
+    replies = {}
+
+    def send(dongle, address):
+        try:
+            replies[dongle] = medium.transmit(dongle, 80, 2, address, b"\xff").acked
+        except CrazyflieError as e:
+            replies[dongle] = repr(e)
+
+    threads = [threading.Thread(target=send, args=(0, A1)), threading.Thread(target=send, args=(1, A2))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10.0)
+    assert most[0] == 2
+    assert replies == {0: True, 1: True}

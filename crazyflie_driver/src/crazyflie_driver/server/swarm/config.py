@@ -35,9 +35,11 @@ Crazyswarm2's ``crazyflies.yaml`` is read too::
       firmware_params: {...}                # for every Crazyflie
       # optional: firmware_logging, broadcasts (see notes)
 
-What such a file asks that this server takes from elsewhere (logging topics, broadcast repeats, a
-type without motion capture) is listed in ``SwarmConfig.notes``, for the node to log: nothing in
-it is dropped silently.
+Its ``firmware_logging.custom_topics`` (all, type, robot) become each Crazyflie's custom log topics
+(``server.swarm.file_logging``: the merge, the units, the checks). What such a file asks that this
+server takes from elsewhere (Crazyswarm2's fixed log topics, broadcast repeats, a type without
+motion capture) is listed in ``SwarmConfig.notes``, for the node to log: nothing in it is dropped
+silently.
 
 Radios: Crazyflies without a ``uri`` go to one Crazyradio per channel, in the order the channels
 first appear (``radio://<dongle>/<channel>/2M/E7E7E7E7<id>``); an explicit ``uri`` keeps its dongle,
@@ -55,14 +57,15 @@ from __future__ import annotations
 import math
 import numbers
 import re
-from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from dataclasses import dataclass, field, replace
+from typing import AbstractSet, Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import yaml
 
 from crazyflie_driver.crtp.uri import DATARATE_NAMES, MAX_CHANNEL, parse_uri
 from crazyflie_driver.errors import SwarmConfigError, UriError
-from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES
+from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES, LogBlockSpec
+from crazyflie_driver.server.swarm.file_logging import Level, crazyflie_log_topics, default_topics_note
 
 #: Address of a Crazyflie given by id: these four bytes, then the id.
 ADDRESS_PREFIX = "E7E7E7E7"
@@ -114,6 +117,8 @@ class SwarmCrazyflie:
     group_mask: int = 0                      # 0: leave the firmware's (every Crazyflie is in group 0 anyway)
     line: int = 0                            # where the entry starts in the file (0: unknown)
     switches: Switches = ()                  # logging switches: the type's, then its own
+    log_blocks: Tuple[LogBlockSpec, ...] = ()    # custom log topics the file gives it (Crazyswarm2's firmware_logging)
+    log_error: str = ""                      # why its custom log topics cannot be flown: it is not connected
 
     @property
     def name(self) -> str:
@@ -186,6 +191,10 @@ class _Doc:
 
     def error(self, path: Sequence[Any], what: str) -> SwarmConfigError:
         return SwarmConfigError("%s:%d: %s" % (self.source, self.line(*path), what))
+
+    def mapping(self, path: Sequence[Any], where: str, value: Any, known: AbstractSet[str]) -> Dict[str, Any]:
+        """``value`` (at ``path``, called ``where``) as a mapping whose keys are all in ``known`` (None: empty)."""
+        return _mapping(self, path, where, value, known)
 
 
 def _read(path: str) -> str:
@@ -348,14 +357,16 @@ def _with_default_type(types: Dict[str, CrazyflieType]) -> Dict[str, CrazyflieTy
 
 
 # -- Crazyswarm2's crazyflies.yaml ------------------------------------------------------------------
-_CS2_TOP_KEYS = {"fileversion", "robots", "robot_types", "all"}
-_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging"} | set(
-    LOG_SWITCHES)
+# Keys of Crazyswarm2's own example files that change nothing here: a robot's ``role`` (a label for the
+# user's scripts) and a top-level ``relative: false``; ``relative: true`` is refused (not supported).
+_CS2_TOP_KEYS = {"fileversion", "robots", "robot_types", "all", "relative"}
+_CS2_ROBOT_KEYS = {"enabled", "uri", "initial_position", "type", "firmware_params", "firmware_logging",
+                   "role"} | set(LOG_SWITCHES)
 _CS2_TYPE_KEYS = {"motion_capture", "big_quad", "battery", "firmware_params", "firmware_logging"} | set(LOG_SWITCHES)
 _CS2_ALL_KEYS = {"firmware_params", "firmware_logging", "broadcasts"}
 
 
-def _mapping(doc: _Doc, path: Sequence[Any], where: str, value: Any, known: set) -> Dict[str, Any]:
+def _mapping(doc: _Doc, path: Sequence[Any], where: str, value: Any, known: AbstractSet[str]) -> Dict[str, Any]:
     """``value`` as a mapping whose keys are all in ``known`` (None: empty)."""
     value = {} if value is None else value
     if not isinstance(value, dict):
@@ -368,22 +379,41 @@ def _mapping(doc: _Doc, path: Sequence[Any], where: str, value: Any, known: set)
 
 
 def _logging_note(where: str, logging: Any) -> List[str]:
-    if isinstance(logging, dict) and logging.get("enabled"):
-        return ["%s.firmware_logging: log topics in swarm mode come from the server's parameters "
-                "(~pose_period_ms, enable_logging), not from the file" % where]
-    return []
+    note = default_topics_note(where, logging)
+    return [note] if note else []
 
 
 def _parse_crazyswarm2(doc: _Doc, data: Dict[str, Any], dongles: Optional[int]) -> SwarmConfig:
     """A Crazyswarm2 file, read into the same swarm as a Crazyswarm 1 file (the robot's name is its
     tf_prefix; a robot with ``enabled: false`` is left out; ``enabled`` missing counts as true)."""
     _mapping(doc, [], "a Crazyswarm2 swarm file", data, _CS2_TOP_KEYS)
+    if data.get("relative", False) is not False:
+        raise doc.error(["relative"], "relative: %r is not supported: remove it or set it to false (positions "
+                        "are in the world frame)" % (data["relative"],))
     notes: List[str] = []
     types = _cs2_types(doc, data.get("robot_types") or {}, notes)
     swarm_params = _cs2_all(doc, data.get("all"), notes)
     entries = _cs2_robots(doc, data["robots"], notes)
-    return SwarmConfig(doc.source, _crazyflies(doc, [item for _, item in entries], types, swarm_params, dongles,
-                                               paths=[here for here, _ in entries]), types, tuple(notes))
+    crazyflies = _crazyflies(doc, [item for _, item in entries], types, swarm_params, dongles,
+                             paths=[here for here, _ in entries])
+    crazyflies = tuple(_with_log_topics(doc, data, cf, here[1], notes) for cf, (here, _) in zip(crazyflies, entries))
+    return SwarmConfig(doc.source, crazyflies, types, tuple(dict.fromkeys(notes)))
+
+
+def _with_log_topics(doc: _Doc, data: Dict[str, Any], cf: SwarmCrazyflie, name: Any,
+                     notes: List[str]) -> SwarmCrazyflie:
+    """``cf`` with its custom log topics: ``all``'s, its type's and its own ``firmware_logging`` merged
+    (``server.swarm.file_logging``); a fault in them goes to ``log_error``, not to the whole swarm."""
+    def raw(body: Any) -> Any:
+        return body.get("firmware_logging") if isinstance(body, dict) else None
+    raw_types = data.get("robot_types")
+    raw_types = raw_types if isinstance(raw_types, dict) else {}
+    levels: List[Level] = [(["all", "firmware_logging"], "all", raw(data.get("all"))),
+                           (["robot_types", cf.type, "firmware_logging"], "robot_types.%s" % cf.type,
+                            raw(raw_types.get(cf.type))),
+                           (["robots", name, "firmware_logging"], "robots.%s" % name, raw(data["robots"][name]))]
+    blocks, error = crazyflie_log_topics(doc, [level for level in levels if level[2] is not None], notes)
+    return replace(cf, log_blocks=blocks, log_error=error) if blocks or error else cf
 
 
 def _cs2_types(doc: _Doc, raw_types: Any, notes: List[str]) -> Dict[str, CrazyflieType]:

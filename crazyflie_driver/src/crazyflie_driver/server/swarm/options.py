@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, Optional, Tuple
 
 from crazyflie_driver.errors import SwarmConfigError
 from crazyflie_driver.radio.broadcast import DEFAULT_REPEAT_INTERVAL_S, DEFAULT_REPEATS
+from crazyflie_driver.server.add_config import AddConfigError, log_blocks_from_params
+from crazyflie_driver.server.log_plan import LogBlockSpec
 from crazyflie_driver.server.swarm.config import LOG_SWITCHES, Switches
 from crazyflie_driver.server.swarm.watch import DEFAULT_HOLD_S, DEFAULT_STALE_AFTER_S
 
@@ -40,6 +42,39 @@ class SwarmOptions:
     mocap_rate: float = 100.0       # Hz, the motion capture's frame rate: the most the stream sends
     emergency_watchdog: bool = True     # broadcast the emergency-stop watchdog keep-alive (swarm.heartbeat)
     switches: Switches = ()             # HEAD's logging switches given as parameters (the swarm file's win)
+    log_blocks: Tuple[LogBlockSpec, ...] = ()   # Crazyswarm's genericLogTopics, for every Crazyflie
+
+
+#: Crazyswarm's server parameters of its generic log topics (crazyswarm_server.cpp); the per-topic
+#: ``genericLogTopic_<name>_Variables`` come beside them.
+GENERIC_LOG_TOPICS = "genericLogTopics"
+GENERIC_LOG_PERIODS = "genericLogTopicFrequencies"
+
+
+def generic_log_variables_key(topic: str) -> str:
+    return "genericLogTopic_%s_Variables" % topic
+
+
+def generic_log_blocks(params: Mapping[str, Any], enable_logging: bool) -> Tuple[LogBlockSpec, ...]:
+    """Crazyswarm's generic log topics from the server's parameters, the same names and meaning as
+    ``crazyflie_add``'s (each "frequency" is a period in ms); as in Crazyswarm's server they exist only
+    with ``~enable_logging`` (its shipped launch file lists a topic whose variables are commented out).
+    SwarmConfigError naming the parameter and the fix."""
+    if not enable_logging or GENERIC_LOG_TOPICS not in params:
+        return ()
+    try:
+        return log_blocks_from_params(params)
+    except AddConfigError as e:
+        raise SwarmConfigError("swarm mode: %s" % e) from None
+
+
+def generic_log_note(params: Mapping[str, Any], enable_logging: bool) -> Optional[str]:
+    """Why generic log topics given as parameters are not published, or None."""
+    if params.get(GENERIC_LOG_TOPICS) and not enable_logging:
+        return ("~genericLogTopics %s given but ~enable_logging is false: no generic log topics (as in Crazyswarm's "
+                "server, they come with enable_logging; set it true, and enable_logging_imu etc. false for the "
+                "sensor topics you do not want)" % (params[GENERIC_LOG_TOPICS],))
+    return None
 
 
 def _bool(name: str, v: Any) -> bool:
@@ -84,6 +119,7 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
             raise SwarmConfigError("parameter ~pose_period_ms must be auto (the radio budget chooses), 0 (no pose "
                                    "topic) or 10..2550 ms in whole milliseconds, got %r" % (period,))
         period = int(period)
+    enable_logging = _bool("enable_logging", params.get("enable_logging", False))
     return SwarmOptions(
         swarm_file=str(params.get("swarm_file", "")),
         swarm_types_file=str(params.get("swarm_types_file", "") or ""),
@@ -98,10 +134,11 @@ def options_from_params(params: Mapping[str, Any]) -> SwarmOptions:
         broadcast_repeats=int(repeats),
         broadcast_interval=_number("broadcast_interval", params.get("broadcast_interval",
                                                                    DEFAULT_REPEAT_INTERVAL_S), 0),
-        enable_logging=_bool("enable_logging", params.get("enable_logging", False)),
+        enable_logging=enable_logging,
         pose_period_ms=period,
         dongle_wait=_number("dongle_wait", params.get("dongle_wait", 30.0), 0),
         mocap_rate=_number("mocap_rate", params.get("mocap_rate", 100.0), 0, strict=True),
         emergency_watchdog=_bool("emergency_watchdog", params.get("emergency_watchdog", True)),
         switches=tuple((n, _bool(n, params[n])) for n in LOG_SWITCHES if n in params),
+        log_blocks=generic_log_blocks(params, enable_logging),
     )

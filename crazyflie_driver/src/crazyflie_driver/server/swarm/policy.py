@@ -18,9 +18,9 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Proto
 
 from crazyflie_driver.clock import Clock
 from crazyflie_driver.crtp.uri import parse_uri
-from crazyflie_driver.errors import CommandRejected, CommandValueError, CrazyflieError
+from crazyflie_driver.errors import CommandRejected, CommandValueError, CrazyflieError, LogConfigError
 from crazyflie_driver.server import radio_budget
-from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES
+from crazyflie_driver.server.log_plan import PACKETS_SWITCH, POSE_SWITCH, TOPIC_SWITCHES, LogBlockSpec
 from crazyflie_driver.server.onboard_pose import pose_block
 from crazyflie_driver.server.param_names import Lookup
 from crazyflie_driver.server.swarm import estimator_placement
@@ -30,6 +30,14 @@ from crazyflie_driver.server.swarm.config import SwarmConfig, SwarmCrazyflie
 from crazyflie_driver.server.swarm.heartbeat import Heartbeat
 from crazyflie_driver.server.swarm.mocap_stream import MocapStream
 from crazyflie_driver.server.swarm.options import SwarmOptions
+from crazyflie_driver.server.swarm.unsupervised import (
+    LeftOut,
+    hearing_broadcasts,
+    lock_on_ground,
+    locked_text,
+    unanswered_text,
+    unicast,
+)
 from crazyflie_driver.server.swarm.watch import SwarmWatch
 from crazyflie_driver.server.worker import WorkerConfig, WorkerState
 
@@ -71,7 +79,8 @@ class SwarmServer(Protocol):
         ...
 
     def add(self, config: WorkerConfig) -> SwarmMember:
-        """Connect and serve one Crazyflie; CrazyflieError or ValueError naming why it was not added."""
+        """Connect and serve one Crazyflie; CrazyflieError or ValueError naming why it was not added
+        (LogConfigError when its log blocks do not fit its firmware or name a variable it lacks)."""
         ...
 
     def served_workers(self) -> Iterable[Any]:
@@ -99,7 +108,8 @@ def pose_periods(config: SwarmConfig, options: SwarmOptions) -> Dict[str, int]:
     return radio_budget.pose_log_periods({cf.tf_prefix: cf.uri for cf in config.crazyflies})
 
 
-def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0) -> WorkerConfig:
+def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int = 0,
+                  custom_topics: bool = True) -> WorkerConfig:
     """The battery logged for the safety monitor even with the sensor topics off. No parameter read-back at
     connect: reading every parameter of 49 Crazyflies one by one takes
     ten times longer than connecting them (warm TOC cache); writes still convert by the TOC's types.
@@ -107,15 +117,34 @@ def worker_config(cf: SwarmCrazyflie, options: SwarmOptions, pose_period_ms: int
     would fill their radio. crazyflie_ros HEAD's logging switches: the Crazyflie's (its own, then its
     type's), else the server's parameter, else on, except ``packets`` (off, as the sensor topics are in
     swarm mode: one publisher fewer per Crazyflie); ``enable_logging_pose: false`` drops the pose block.
-    ``enable_logging_battery: false`` drops the battery topic, not the safety monitor's battery watch."""
+    ``enable_logging_battery: false`` drops the battery topic, not the safety monitor's battery watch.
+    ``custom_topics`` false leaves out the custom log topics (they cannot be served to this Crazyflie)."""
     switches = dict(options.switches)
     switches.update(cf.switches)
     blocks = (pose_block(pose_period_ms),) if pose_period_ms and switches.get(POSE_SWITCH, True) else ()
     return WorkerConfig(uri=cf.uri, tf_prefix=cf.tf_prefix, enable_logging=options.enable_logging,
-                        enable_parameters=False, log_blocks=blocks, keepalive_period=SWARM_KEEPALIVE_S,
+                        enable_parameters=False,
+                        log_blocks=blocks + (custom_log_blocks(cf, options) if custom_topics else ()),
+                        keepalive_period=SWARM_KEEPALIVE_S,
                         battery_watch_ms=BATTERY_WATCH_MS,
                         disabled_topics=frozenset(t for n, t in TOPIC_SWITCHES if not switches.get(n, True)),
                         log_packets=switches.get(PACKETS_SWITCH, False))
+
+
+def custom_log_blocks(cf: SwarmCrazyflie, options: SwarmOptions) -> Tuple[LogBlockSpec, ...]:
+    """The Crazyflie's custom log topics: the server's generic ones (Crazyswarm's parameters), each replaced
+    by a topic of the same name from the swarm file (Crazyswarm2's firmware_logging), then the file's others."""
+    own = {b.topic_name for b in cf.log_blocks}
+    return tuple(b for b in options.log_blocks if b.topic_name not in own) + cf.log_blocks
+
+
+def custom_topics_dropped(cf: SwarmCrazyflie, options: SwarmOptions, why: str) -> str:
+    """The error logged for a Crazyflie connected without its custom log topics."""
+    names = "".join(" " + b.topic_name for b in custom_log_blocks(cf, options))
+    return ("swarm: %s flies WITHOUT its custom log topics%s (from ~genericLogTopics and the swarm file's "
+            "firmware_logging): %s; fix them there (each variable in its log TOC, each topic's values in one log "
+            "block). Connected anyway: it hears the swarm's broadcasts, so it must be supervised"
+            % (cf.tf_prefix, names, why))
 
 
 def initial_position_params(position: Sequence[float]) -> Dict[str, Any]:
@@ -179,6 +208,8 @@ class SwarmPolicy:
         self.recovering = False                  # reboot_all is waiting for the Crazyflies to come back
         self.placement = estimator_placement.EstimatorPlacement(self.clock)
         self.pose_periods: Dict[str, int] = {}
+        self.locked: Dict[str, str] = {}        # name -> URI: left out, motors locked on the ground
+        self.log_topic_faults: Dict[str, str] = {}           # name -> why it flies without its custom log topics
         self._placement_attempts: Dict[str, int] = {}      # failed initial-position writes, per Crazyflie
         self._first_fixes: Optional[ThreadPoolExecutor] = None
         self._land_logged_at: Dict[str, float] = {}
@@ -209,6 +240,7 @@ class SwarmPolicy:
         if not self.members:
             LOG.error("swarm: no Crazyflie of %s could be added; no swarm services", self.config.source)
             return False
+        self.lock_left_out()
         version = min(m.worker.cf.protocol_version for m in self.members)
         self.broadcaster = SwarmBroadcaster([m.uri for m in self.members], version, self.server.radio_manager(),
                                             repeats=self.options.broadcast_repeats,
@@ -225,7 +257,7 @@ class SwarmPolicy:
     def add(self, cf: SwarmCrazyflie) -> Tuple[Optional[SwarmMember], Optional[str]]:
         """Connect one Crazyflie and configure it: (member, None) or (None, reason)."""
         try:
-            member = self.server.add(worker_config(cf, self.options, self.pose_periods.get(cf.tf_prefix, 0)))
+            member = self._connect(cf)
         except (CrazyflieError, ValueError) as e:
             return None, str(e)
         params = dict(cf.params)
@@ -245,6 +277,42 @@ class SwarmPolicy:
         except (CrazyflieError, ValueError) as e:
             LOG.warning("swarm: %s: %s", cf.tf_prefix, e)
         return member, None
+
+    def _connect(self, cf: SwarmCrazyflie) -> SwarmMember:
+        """Add one Crazyflie to the server. One whose custom log topics cannot be served (a fault in the file,
+        or its firmware refuses them) is connected without them, with an error: left unconnected it would
+        still hear the broadcast takeoff and fly unsupervised."""
+        period = self.pose_periods.get(cf.tf_prefix, 0)
+        if cf.log_error:
+            self.log_topic_faults[cf.tf_prefix] = cf.log_error
+            LOG.error(custom_topics_dropped(cf, self.options, cf.log_error))
+            return self.server.add(worker_config(cf, self.options, period, custom_topics=False))
+        try:
+            return self.server.add(worker_config(cf, self.options, period))
+        except LogConfigError as e:
+            if not custom_log_blocks(cf, self.options):
+                raise
+            self.log_topic_faults[cf.tf_prefix] = str(e)
+            LOG.error(custom_topics_dropped(cf, self.options, str(e)))
+        return self.server.add(worker_config(cf, self.options, period, custom_topics=False))
+
+    def lock_left_out(self) -> None:
+        """Before the first broadcast: lock the motors of each Crazyflie of the file that was not added but
+        listens on a channel the swarm broadcasts on (``unsupervised``); name the ones that do not answer."""
+        left_out = [LeftOut(cf.tf_prefix, cf.uri, self.failed[cf.tf_prefix]) for cf in self.config.crazyflies
+                    if cf.tf_prefix in self.failed]
+        for cf in hearing_broadcasts(left_out, [m.uri for m in self.members]):
+            try:
+                with unicast(cf.uri, self.server.radio_manager()) as send:
+                    acked = lock_on_ground(send)
+            except CrazyflieError as e:
+                LOG.error(unanswered_text(cf, str(e)))
+                continue
+            if acked:
+                self.locked[cf.name] = cf.uri
+                LOG.error(locked_text(cf))
+            else:
+                LOG.error(unanswered_text(cf, "not acknowledged"))
 
     def live_members(self) -> List[SwarmMember]:
         """The members whose worker the server still serves (one that gave up is left out)."""

@@ -3,8 +3,9 @@
 ``LocalMedium`` lives in the process that owns the world: a registry of ``SimulatedCrazyflie`` by
 (channel, datarate, address), per-dongle fault injection (packet loss and ack loss in percent of
 round trips, added latency, unplug) and a per-Crazyflie RSSI model. ``RemoteMedium`` is the same
-interface for another process: it forwards every call to a world server (``sim.world_server``) over a
-loopback TCP connection with a small binary framing (see ``sim.air.world_framing``).
+interface for another process: it forwards every call to a world server (``sim.world_server``) over
+loopback TCP, one connection per dongle (as real dongles, they transmit at the same time) and one for
+control calls, with a small binary framing (see ``sim.air.world_framing``).
 """
 from __future__ import annotations
 
@@ -263,8 +264,23 @@ def _percent(name: str, value: float) -> float:
     return v
 
 
+class _Lane:
+    """One connection to the world server and the lock that keeps its requests one at a time."""
+
+    __slots__ = ("lock", "conn")
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.conn: Optional[framing.Connection] = None
+
+
 class RemoteMedium:
-    """The ``Medium`` of a world server in another process (loopback TCP, one request at a time)."""
+    """The ``Medium`` of a world server in another process (loopback TCP).
+
+    Each dongle's radio packets have a connection of their own (control calls share one more), one
+    request at a time on each: real Crazyradios transmit at the same time, so a packet of one fake
+    dongle must not wait for another dongle's round trip (docs/simulation.md, "Crazyradio timing").
+    """
 
     def __init__(self, host: Optional[str] = None, port: Optional[int] = None, timeout: float = 5.0) -> None:
         if host is not None and port is None and ":" in host:
@@ -275,8 +291,8 @@ class RemoteMedium:
             port = DEFAULT_PORT if port is None else port
             self.host, self.port = parse_address("%s:%d" % (host or DEFAULT_HOST, port))
         self.timeout = float(timeout)
-        self._lock = threading.Lock()
-        self._conn: Optional[framing.Connection] = None
+        self._lock = threading.Lock()       # guards ``_lanes`` (the dict), not the requests
+        self._lanes: Dict[Optional[int], _Lane] = {}     # by dongle; None: control calls
         self.speed = 1.0
         """The world's speed [world s / wall s] its latest radio reply carried (1.0 before the first)."""
 
@@ -294,35 +310,47 @@ class RemoteMedium:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         return framing.Connection(sock)
 
-    def _request(self, op: int, body: bytes) -> Tuple[int, bytes]:
-        """One request/response; reconnects once if the connection dropped since the last call."""
-        with self._lock:
+    def _lane(self, key: Optional[int]) -> _Lane:
+        lane = self._lanes.get(key)
+        if lane is None:
+            with self._lock:
+                lane = self._lanes.setdefault(key, _Lane())
+        return lane
+
+    def _request(self, op: int, body: bytes, lane_key: Optional[int] = None) -> Tuple[int, bytes]:
+        """One request/response on the connection of ``lane_key`` (a dongle, None for control calls);
+        reconnects once if that connection dropped since its last call."""
+        lane = self._lane(lane_key)
+        with lane.lock:
             for attempt in (0, 1):
-                conn = self._conn
+                conn = lane.conn
                 fresh = conn is None
                 if conn is None:
-                    conn = self._conn = self._connect()
+                    conn = lane.conn = self._connect()
                 try:
                     conn.send(op, body)
                     return conn.receive()
                 except (OSError, EOFError) as e:
                     conn.close()
-                    self._conn = None
+                    lane.conn = None
                     if fresh or attempt:
                         raise WorldNotRunning("simulated world at %s went away (%s)" % (self.address, e)) from None
             raise AssertionError("unreachable")
 
     def close(self) -> None:
         with self._lock:
-            if self._conn is not None:
-                self._conn.close()
-                self._conn = None
+            lanes = list(self._lanes.values())
+        for lane in lanes:
+            with lane.lock:
+                if lane.conn is not None:
+                    lane.conn.close()
+                    lane.conn = None
 
     # --- Medium ------------------------------------------------------------------------------
     def transmit(self, dongle: int, channel: int, datarate: int, address: bytes,
                  data: bytes, ack_enabled: bool = True, arc: int = 3) -> AirReply:
         request = framing.encode_transmit(dongle, channel, datarate, address, data, ack_enabled, arc)
-        status, body = self._request(framing.OP_TRANSMIT, request)
+        status, body = self._request(framing.OP_TRANSMIT, request, dongle)
         if status != framing.STATUS_OK:
             raise CrazyflieError("world server refused a radio packet: %s" % body.decode("utf-8", "replace"))
         reply, self.speed = framing.decode_air_reply(body, AirReply)

@@ -1,6 +1,7 @@
 """The swarm file: radios assigned by channel, parameters layered, every fault named with its line."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import textwrap
 
@@ -210,7 +211,7 @@ def test_a_crazyswarm2_file_gives_the_same_swarm_its_names_and_layers_and_says_w
                       "ring.effect": 7}                     # all, then the type, then the robot's own
     t = config.type_of(config.crazyflies[0])
     assert (t.battery_voltage_warning, t.battery_voltage_critical) == (3.9, 3.6)
-    assert [n.split(":")[0] for n in config.notes] == ["all.firmware_logging", "all.broadcasts"]
+    assert [n.split(":")[0] for n in config.notes] == ["all.firmware_logging.default_topics", "all.broadcasts"]
 
 
 @pytest.mark.parametrize("text, says", [
@@ -231,6 +232,21 @@ def test_a_crazyswarm2_file_fault_is_named_with_its_line(text, says):
     with pytest.raises(SwarmConfigError) as e:
         parse_swarm(text, "crazyflies.yaml")
     assert str(e.value).startswith(says), str(e.value)
+
+
+def test_the_keys_of_crazyswarm2s_own_files_that_change_nothing_load():
+    """A robot's ``role`` (a label for the user's scripts) and a top-level ``relative: false``, as in
+    Crazyswarm2's crazyflies.yaml; ``relative: true`` is refused by name."""
+    text = CRAZYSWARM2.replace("    type: cf21\n    firmware_params:\n      ring",
+                               "    type: cf21\n    role: pursuer\n    firmware_params:\n      ring", 1)
+    assert "role: pursuer" in text
+    def unplaced(config):           # the robots, but for the lines they are on
+        return [dataclasses.replace(cf, line=0) for cf in config.crazyflies]
+    base = parse_swarm(CRAZYSWARM2, "crazyflies.yaml")
+    assert unplaced(parse_swarm(text + "relative: false\n", "crazyflies.yaml")) == unplaced(base)
+    with pytest.raises(SwarmConfigError) as e:
+        parse_swarm(text + "relative: true\n", "crazyflies.yaml")
+    assert "relative: True is not supported: remove it or set it to false" in str(e.value)
 
 
 def test_dongle_per_channel_keeps_pinned_channels_and_fills_the_lowest_free_dongle():

@@ -56,3 +56,36 @@ def test_logging_switches_as_parameters_and_the_file_winning():
     assert plain.disabled_topics == frozenset() and not plain.log_packets     # packets off by default here
     with pytest.raises(SwarmConfigError, match="enable_logging_pose"):
         options_from_params({"swarm_file": "s.yaml", "enable_logging_pose": "perhaps"})
+
+
+CRAZYSWARM_LOGS = {"genericLogTopics": ["log1", "zlog"], "genericLogTopicFrequencies": [10, 100],
+                   "genericLogTopic_log1_Variables": ["pm.vbat"], "genericLogTopic_zlog_Variables": ["stateEstimate.z"]}
+
+
+def test_crazyswarm_generic_log_topics_with_enable_logging_periods_in_ms():
+    from crazyflie_driver.server.log_plan import LogBlockSpec
+    o = options_from_params(dict(CRAZYSWARM_LOGS, enable_logging=True))
+    assert o.log_blocks == (LogBlockSpec("log1", 10, ("pm.vbat",)), LogBlockSpec("zlog", 100, ("stateEstimate.z",)))
+
+
+def test_crazyswarm_generic_log_topics_without_enable_logging_are_not_published_and_said():
+    from crazyflie_driver.server.swarm.options import generic_log_note
+    # Crazyswarm's shipped launch file lists log1 with its variables commented out: not a fault without logging
+    params = {"genericLogTopics": ["log1"], "genericLogTopicFrequencies": [10]}
+    assert options_from_params(params).log_blocks == ()
+    assert "~enable_logging is false: no generic log topics" in generic_log_note(params, False)
+    assert generic_log_note(params, True) is None and generic_log_note({}, False) is None
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"genericLogTopicFrequencies": [10]}, "~genericLogTopics has 2 entries but ~genericLogTopicFrequencies has 1"),
+    ({"genericLogTopic_zlog_Variables": None}, "~genericLogTopic_zlog_Variables is not set"),
+    ({"genericLogTopicFrequencies": [5, 100]}, "period 5 ms is outside 10..2550 ms"),
+    ({"genericLogTopic_log1_Variables": ["vbat"]}, "variable 'vbat' is not of the form group.name"),
+])
+def test_crazyswarm_generic_log_topic_faults_name_the_parameter(change, words):
+    params = dict(CRAZYSWARM_LOGS, enable_logging=True, **change)
+    params = {k: v for k, v in params.items() if v is not None}
+    with pytest.raises(SwarmConfigError) as e:
+        options_from_params(params)
+    assert words in str(e.value), str(e.value)

@@ -17,6 +17,7 @@ from crazyflie_driver.errors import (
     EmergencyActive,
     FlightRefused,
     LinkLost,
+    LogConfigError,
 )
 from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
 from crazyflie_driver.radio.shared_radio import RadioManager
@@ -393,3 +394,81 @@ def test_swarm_workers_log_their_battery_for_the_safety_monitor_with_the_sensor_
     from crazyflie_driver.server.swarm.policy import BATTERY_WATCH_MS, worker_config
     wc = worker_config(config.crazyflies[0], SwarmOptions(swarm_file=EXAMPLE))
     assert wc.enable_logging is False and wc.battery_watch_ms == BATTERY_WATCH_MS > 0
+
+
+CS2_LOGS = """\
+robots:
+  cf1: {uri: "radio://0/80/2M/E7E7E7E701"}
+  cf2:
+    uri: radio://0/80/2M/E7E7E7E702
+    firmware_logging: {custom_topics: {zlog: {frequency: 500}}}
+  cf3:
+    uri: radio://0/80/2M/E7E7E7E703
+    firmware_logging: {custom_topics: {log1: {frequency: 20, vars: [stateEstimate.z]}}}
+  cf4:
+    uri: radio://0/80/2M/E7E7E7E704
+    firmware_logging: {custom_topics: {bad: {frequency: 20, vars: [nosuch.x]}}}
+all:
+  firmware_logging:
+    enabled: true
+    custom_topics: {zlog: {frequency: 10, vars: [stateEstimate.z]}}
+"""
+
+
+class LogTocPort(Port):
+    """A server whose Crazyflies lack every log variable of group ``nosuch``; ``seen``: each add's config."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: List[Any] = []
+
+    def add(self, config) -> SwarmMember:
+        self.seen.append(config)
+        if any(v.startswith("nosuch.") for b in config.log_blocks for v in b.variables):
+            raise LogConfigError("could not add %s: log topic 'bad': unknown log variable(s) nosuch.x" % config.uri)
+        return super().add(config)
+
+
+def started(port: Port, **options) -> SwarmPolicy:
+    from crazyflie_driver.server.swarm.config import parse_swarm
+    options = dict(dict(swarm_file="crazyflies.yaml", emergency_watchdog=False, pose_period_ms=0), **options)
+    p = SwarmPolicy(port, SwarmOptions(**options), parse_swarm(CS2_LOGS, "crazyflies.yaml"),
+                    spawn=lambda target, name: None)
+    assert p.start() is True
+    return p
+
+
+def test_custom_log_topics_reach_each_worker_the_files_over_the_parameters_of_the_same_name():
+    from crazyflie_driver.server.log_plan import LogBlockSpec
+    generic = (LogBlockSpec("log1", 100, ("pm.vbat",)), LogBlockSpec("acc", 10, ("acc.z",)))
+    port = LogTocPort()
+    p = started(port, enable_logging=True, log_blocks=generic)
+    seen = {c.tf_prefix: c.log_blocks for c in port.seen}
+    z = LogBlockSpec("zlog", 100, ("stateEstimate.z",))
+    assert seen["cf1"] == generic + (z,)
+    assert seen["cf3"] == (generic[1], z, LogBlockSpec("log1", 50, ("stateEstimate.z",)))
+    assert sorted(p.log_topic_faults) == ["cf2", "cf4"]
+    assert p.log_topic_faults["cf2"] == p.config.crazyflies[1].log_error
+
+
+def test_a_crazyflie_whose_custom_topics_cannot_be_served_is_connected_without_them_never_left_unsupervised():
+    port = LogTocPort()
+    p = started(port)
+    # cf2: a fault in the file; cf4: a variable its firmware lacks. Both fly with the swarm, without custom topics.
+    assert [m.name for m in p.members] == ["cf1", "cf2", "cf3", "cf4"] and p.failed == {}
+    # the adds run in parallel: in name order, cf4's two tries in theirs
+    assert sorted(((c.tf_prefix, [b.topic_name for b in c.log_blocks]) for c in port.seen),
+                  key=lambda row: (row[0], -len(row[1]))) == [
+        ("cf1", ["zlog"]), ("cf2", []), ("cf3", ["zlog", "log1"]), ("cf4", ["zlog", "bad"]), ("cf4", [])]
+    assert p.log_topic_faults["cf2"].startswith("crazyflies.yaml:5: robots.cf2.firmware_logging.custom_topics"
+                                                ".zlog.frequency: the Crazyflie's log timer cannot do 500 Hz")
+    assert p.log_topic_faults["cf4"] == ("could not add radio://0/80/2M/E7E7E7E704: log topic 'bad': unknown log "
+                                         "variable(s) nosuch.x")
+
+
+def test_a_crazyflie_refused_for_its_link_is_not_tried_again():
+    port = LogTocPort()
+    port.refuse = {"cf1"}
+    p = started(port)
+    assert p.failed == {"cf1": "could not add radio://0/80/2M/E7E7E7E701: no answer"}
+    assert [c.tf_prefix for c in port.seen].count("cf1") == 1

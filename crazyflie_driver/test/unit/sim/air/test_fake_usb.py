@@ -7,6 +7,8 @@ import pytest
 import usb.core
 import usb.util
 
+from crazyflie_driver.radio.broadcast import BROADCAST_ADDRESS
+from crazyflie_driver.radio.crazyradio import Crazyradio
 from crazyflie_driver.sim.air.dongle_timing import DongleTiming
 from crazyflie_driver.sim.air.fake_usb import FakeUsbBackend
 from support.cflib_find_patch import install_find_patch
@@ -470,3 +472,31 @@ def test_inline_mode_timing_is_one_bulk_round_trip(medium):
     dev.write(1, b"\x09\x12\x50\xe7\xe7\xe7\xe7\xe7\xff")
     dev.read(0x81, 64)
     assert clock.now - t0 == pytest.approx(0.0008 + 0.0007)
+
+
+def test_inline_broadcast_burst_counted_per_packet():
+    """A 2.0 in inline mode, 9 broadcast packets (a 17-pose burst): per packet one packet to the world,
+    one OUT, one IN, no vendor request and one wait that ends 0.6 ms (the round trip less the ack wait)
+    after its OUT began, so the time the world took to answer (here 0.25 ms) lies inside it."""
+    clock = FakeClock()
+    world_s = 0.00025
+
+    def answer(tx):
+        clock.now += world_s            # the host time of a request to the world's process
+        return AirReply(False, b"", retries=3, power_detector=False)
+
+    medium = ScriptedMedium(answer)
+    backend = FakeUsbBackend(medium, model="2.0", clock=clock)
+    radio = Crazyradio(0, backend=backend)
+    radio.send_inline(80, 2, b"\xe7\xe7\xe7\xe7\x01", b"\xff")
+    d = backend.dongles[0]
+    sent, waits = len(medium.transmits), len(clock.sleeps)
+    controls, outs, ins = d.control_transfers, d.bulk_out, d.bulk_in
+    t0 = clock.now
+    for i in range(9):
+        assert not radio.send_inline(80, 2, BROADCAST_ADDRESS, bytes([0x61, 9, i]) + bytes(22), ack=False).ack
+    assert len(medium.transmits) - sent == 9
+    assert all(tx.address == BROADCAST_ADDRESS and not tx.ack_enabled for tx in medium.transmits[sent:])
+    assert (d.control_transfers - controls, d.bulk_out - outs, d.bulk_in - ins) == (0, 9, 9)
+    assert clock.sleeps[waits:] == pytest.approx([0.0006 - world_s] * 9)
+    assert clock.now - t0 == pytest.approx(9 * 0.0006)

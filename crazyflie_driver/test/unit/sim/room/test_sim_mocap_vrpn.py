@@ -2,6 +2,7 @@
 vehicle with the mocap model's poses; a body the model loses is not sent."""
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
 import signal
@@ -9,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from typing import Iterator, List, Tuple
 
 import numpy as np
 
@@ -27,6 +29,45 @@ def wait_until(cond, timeout=5.0):
             return True
         time.sleep(0.01)
     return cond()
+
+
+class Reports:
+    """What the client received: (world time at receipt [s], the server's stamp [s]) per report."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self._rows: List[Tuple[float, float]] = []
+        self._lock = threading.Lock()
+
+    def on_pose(self, report) -> None:
+        with self._lock:
+            self._rows.append((float(self.world.time), report.server_sec + report.server_usec * 1e-6))
+
+    def rows(self) -> List[Tuple[float, float]]:
+        with self._lock:
+            return list(self._rows)
+
+    def stamps(self) -> List[float]:
+        return [s for _, s in self.rows()]
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._rows)
+
+
+@contextlib.contextmanager
+def vrpn_stream(world: World, mocap: MocapModel) -> Iterator[Reports]:
+    """The world running and serving its motion capture over VRPN, the stack's client reading it."""
+    reports = Reports(world)
+    server = WorldVrpnServer(world, mocap, port=0)
+    world.start()
+    try:
+        server.start()
+        with VrpnClient("127.0.0.1", server.port, on_pose=reports.on_pose, retry_min=0.1, retry_max=0.4):
+            yield reports
+    finally:
+        server.stop()
+        world.stop()
 
 
 def test_one_tracker_per_vehicle_with_the_mocap_model_poses():
@@ -89,23 +130,9 @@ def test_each_delivered_frame_is_sent_once_with_the_model_rate_and_dropouts():
     world = World(speed=1.0, seed=7)
     world.add_vehicle("cf1", position=(0.0, 0.0, 0.0))
     mocap = MocapModel(world, rate=100.0, dropout=0.3, latency=0.02, seed=7).attach()
-    got, lock = [], threading.Lock()
-
-    def on_pose(report):
-        with lock:
-            got.append((float(world.time), report.server_sec + report.server_usec * 1e-6))
-
-    server = WorldVrpnServer(world, mocap, port=0)
-    world.start()
-    try:
-        server.start()
-        with VrpnClient("127.0.0.1", server.port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
-            assert wait_until(lambda: len(got) > 150, timeout=20.0)
-    finally:
-        server.stop()
-        world.stop()
-    with lock:
-        reports = list(got)
+    with vrpn_stream(world, mocap) as got:
+        assert wait_until(lambda: len(got) > 150, timeout=20.0)
+    reports = got.rows()
     world_span = reports[-1][0] - reports[0][0]
     fraction = (len(reports) - 1) / (world_span * 100.0)
     assert 0.6 < fraction < 0.8, fraction                 # 70 % of the captures arrive
@@ -124,31 +151,17 @@ def test_frames_of_a_catch_up_burst_keep_their_capture_spacing():
     world = World(speed=1.0, seed=3)
     world.add_vehicle("cf1", position=(0.0, 0.0, 0.0))
     mocap = MocapModel(world, rate=100.0, seed=3).attach()
-    stamps, lock = [], threading.Lock()
-
-    def on_pose(report):
-        with lock:
-            stamps.append(report.server_sec + report.server_usec * 1e-6)
-
     stalls = []
 
     def stall(world_t):
         if not stalls:
             stalls.append(world_t)
             time.sleep(0.08)
-    server = WorldVrpnServer(world, mocap, port=0)
-    world.start()
-    try:
-        server.start()
-        with VrpnClient("127.0.0.1", server.port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
-            assert wait_until(lambda: len(stamps) > 5, timeout=10.0)
-            world.add_tick_listener(stall, period=10.0, first=world.time + 0.2)
-            assert wait_until(lambda: stalls and len(stamps) > 60, timeout=10.0)
-    finally:
-        server.stop()
-        world.stop()
-    with lock:
-        steps = np.diff(stamps)
+    with vrpn_stream(world, mocap) as got:
+        assert wait_until(lambda: len(got) > 5, timeout=10.0)
+        world.add_tick_listener(stall, period=10.0, first=world.time + 0.2)
+        assert wait_until(lambda: stalls and len(got) > 60, timeout=10.0)
+    steps = np.diff(got.stamps())
     off_grid = steps[np.abs(steps - 0.01) >= 0.001]
     assert len(off_grid) <= world.overruns, np.round(off_grid, 4)     # a world that let go starts a new schedule
 
@@ -163,22 +176,10 @@ def test_stamps_never_go_back_when_the_worlds_schedule_changes():
     mocap = MocapModel(world, rate=100.0, seed=3).attach()
     scheduled = world.wall_time_of
     world.wall_time_of = lambda t: (lambda w: None if w is None else w - 0.5 * (int(t * 20) % 2))(scheduled(t))
-    stamps, lock = [], threading.Lock()
-
-    def on_pose(report):
-        with lock:
-            stamps.append(report.server_sec + report.server_usec * 1e-6)
-    server = WorldVrpnServer(world, mocap, port=0)
-    world.start()
-    try:
-        server.start()
-        with VrpnClient("127.0.0.1", server.port, on_pose=on_pose, retry_min=0.1, retry_max=0.4):
-            assert wait_until(lambda: len(stamps) > 40, timeout=10.0)
-    finally:
-        server.stop()
-        world.stop()
-    with lock:
-        steps = np.diff(stamps)
+    with vrpn_stream(world, mocap) as got:
+        assert wait_until(lambda: len(got) > 40, timeout=10.0)
+    stamps = got.stamps()
+    steps = np.diff(stamps)
     assert (steps > 0).all(), (steps.min(), np.argmin(steps), stamps[:3])
     assert (steps < 1e-5).any()                # captures mapped back were held just after the one before
 
