@@ -62,6 +62,9 @@ class SwarmLinkLost(unittest.TestCase):
         takeoff(groupMask=1, height=HEIGHT, duration=rospy.Duration(2.0))     # cf1, cf2, cf3
         self.assertTrue(wait_until(lambda: all(self.hover_error(n) < TOL for n in every), 20.0),
                         {n: self.state(n)["position"] for n in every})
+        # "keep hovering" is judged from where each hovered when the radio went: the take-off's overshoot
+        # (4-5 cm, settling over seconds through the z integrator) is not the unplug's doing
+        hovered = {n: self.state(n)["position"] for n in others}
         self.world.set_dongle_faults(1, unplugged=True)
         try:
             # both ends are the world's stamps (how often this loop looks does not count)
@@ -73,7 +76,7 @@ class SwarmLinkLost(unittest.TestCase):
                 if stopped_at is None and not any(s["motors"]):
                     self.assertIsNotNone(s["locked_at"], s)     # stopped by its firmware, locked
                     stopped_at = s["locked_at"]
-                worst = max(worst, max(self.hover_error(n) for n in others))
+                worst = max(worst, max(math.dist(self.state(n)["position"], hovered[n]) for n in others))
                 if stopped_at is not None and s["position"][2] < 0.03:
                     break
                 time.sleep(0.02)
@@ -83,7 +86,7 @@ class SwarmLinkLost(unittest.TestCase):
             self.assertGreaterEqual(stopped_at - unplugged_at, WATCHDOG_S - KEEPALIVE_S - 0.05)
             self.assertLessEqual(stopped_at - unplugged_at, WATCHDOG_S + 0.1)
             self.assertLess(self.state("cf3")["position"][2], 0.03, self.state("cf3"))
-            self.assertLess(worst, TOL)
+            self.assertLess(worst, TOL, "moved from where they hovered when radio 1 went")
 
             def cf3_link_lost_on_diagnostics():
                 msg = self.diagnostics.latest()
