@@ -113,9 +113,9 @@ failure_of() {
   awk '/\]\[(FAILURE|ERROR)\]-*$/ { on = 1; n = 0 } on && n < 30 { print; n++; found = 1 }
        on && /^--------------------+$/ { on = 0 } END { exit !found }' "$1" || tail -n 40 "$1"
 }
-# The last line of those blocks that names an exception ("AssertionError: ..."), for the summary.
+# The first line of the last of those blocks (rostest puts the exception's message there), for the summary.
 reason_of() {
-  failure_of "$1" | grep -E '^[A-Za-z_.]*(Error|Exception|Failure)\b' | tail -n 1 | cut -c1-400
+  failure_of "$1" | awk 'take { print; take = 0 } /\]\[(FAILURE|ERROR)\]-*$/ { take = 1 }' | tail -n 1 | cut -c1-400
 }
 
 ros_pass=0; ros_fail=0; failed=""; pytest_rc=1

@@ -333,7 +333,8 @@ class SwarmPolicy:
         A Crazyflie the watch landed is watched again once it takes off."""
         commands = self._flight_commands("/takeoff")
         targets = commands.targets(group_mask)
-        if self.stream is not None:     # the server places the estimators: not before they are placed
+        if self.options.mocap != "none":    # the server places the estimators: not before they are placed
+            # (decided by the options, not by the stream: a takeoff can come between start and start_stream)
             missing = self.placement.missing([m.name for m in targets])
             if missing:
                 raise CommandValueError(estimator_placement.refusal(missing))

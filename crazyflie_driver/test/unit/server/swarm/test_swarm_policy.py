@@ -248,6 +248,21 @@ def test_a_first_fix_lost_on_the_radio_asks_for_the_next_pose_and_the_takeoff_wa
     assert p.placement.missing(["cf1"], wait_s=0.0) == []
 
 
+def test_a_takeoff_before_the_stream_started_waits_for_the_placements_too():
+    """The node advertises /takeoff once ``start`` returns; the stream starts after it. A takeoff in
+    between once went out unchecked, to estimators still at the origin."""
+    port = Port()
+    p = policy(port, mocap="vrpn")
+    p.start()
+    assert p.stream is None
+    with running_clock(port.clock), pytest.raises(CommandValueError, match="no first motion-capture pose"):
+        p.takeoff(0, 0.5, 2.0)
+    assert broadcasts(port) == []
+    for m in p.members:
+        p.placement.placed(m.name)
+    assert p.takeoff(0, 0.5, 2.0) > 0 and len(broadcasts(port)) > 0
+
+
 def test_the_watch_lands_a_crazyflie_whose_pose_went_stale_or_whose_link_was_lost_once_each():
     port = Port()
     p = policy(port, mocap="vrpn", stale_after=0.2, stale_hold=0.5)
