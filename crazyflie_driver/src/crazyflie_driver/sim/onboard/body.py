@@ -17,3 +17,5 @@ class BodyRows(Protocol):
     position: np.ndarray               # (N, 3) world frame, m
     velocity: np.ndarray               # (N, 3) world frame, m/s
     quaternion: np.ndarray             # (N, 4) x, y, z, w (body -> world)
+    omega: np.ndarray                  # (N, 3) body frame, rad/s (what an ideal gyro reads)
+    specific_force: np.ndarray         # (N, 3) body frame, m/s² (what an ideal accelerometer reads)

@@ -14,7 +14,7 @@ import numpy as np
 from crazyflie_driver.crtp.quaternion import compress_quaternion
 from crazyflie_driver.sim.onboard.body import BodyRows
 from crazyflie_driver.sim.onboard.estimator import DEFAULTS as ESTIMATOR_DEFAULTS
-from crazyflie_driver.sim.onboard.estimator import PREDICT_EVERY, Estimator
+from crazyflie_driver.sim.onboard.estimator import PREDICT_EVERY, Estimator, ImuSource
 from crazyflie_driver.sim.onboard.high_level import DEFAULT_VELOCITY, EBUSY, HL_RATE_EVERY, HighLevelPlans
 from crazyflie_driver.sim.onboard.mellinger import ATTITUDE_DEFAULTS as MELLINGER_ATTITUDE_DEFAULTS
 from crazyflie_driver.sim.onboard.mellinger import MELLINGER_EVERY
@@ -60,7 +60,12 @@ class OnboardFlight:
     @property
     def models(self):
         """The row containers the world adds to and deletes from."""
-        return (self.estimator.s, self.control.s, self.hl)
+        return self.estimator.models + (self.control.s, self.hl)
+
+    def carried(self, i: int) -> None:
+        """Row ``i`` was put somewhere by hand (a teleport of the room): its IMU filter reads the new
+        rest state from the next sample instead of ringing from a jump no sensor could see."""
+        self.estimator.s.acc_settled[i] = False
 
     def add(self, rng: np.random.Generator, position: Vector, now: float) -> None:
         self.estimator.add(rng, position, now)
@@ -199,13 +204,15 @@ class OnboardFlight:
         return self.estimator.measure(i, position, quaternion, bodies.position[i].copy(), now)
 
     # --- the tick ------------------------------------------------------------------------------------
-    def step(self, tick: int, now: float, bodies: BodyRows, stab, ground_asl: float) -> bool:
-        """Before the stabilizer's tick: estimator prediction, then (100 Hz) the position controller.
+    def step(self, tick: int, now: float, bodies: BodyRows, stab, ground_asl: float,
+             imu: Optional[ImuSource] = None) -> bool:
+        """Before the stabilizer's tick: estimator loop (``imu`` gives its readings), then (100 Hz) the
+        position controller.
 
         Returns True when it wrote new setpoints into the stabilizer's rows."""
         wrote = False
         if tick % MELLINGER_EVERY == 0:     # every stage here runs on even ticks only, but the mode check
-            self.estimator.update(tick, now, stab.thrust, bodies.position)
+            self.estimator.update(tick, now, stab.thrust, bodies, MELLINGER_EVERY, imu)
             wrote = self._high_level_tick(now, stab) if tick % HL_RATE_EVERY == 0 else False
         if self.control.pending:            # every tick, before the controllers, as the firmware's
             wrote = self._new_setpoints(tick, bodies, stab, ground_asl) or wrote

@@ -13,6 +13,7 @@ from typing import Dict
 
 import numpy as np
 
+from crazyflie_driver.sim.onboard.imu_filter import GYRO_LPF_HZ
 from crazyflie_driver.sim.vehicle_rows import Rows
 
 GRAVITY = 9.81
@@ -21,8 +22,11 @@ GYRO_RESIDUAL_BIAS_DPS = 0.05         # after the firmware's at-rest bias estima
 GYRO_RAW_OFFSET_DPS = 2.0             # zero-rate offset of the raw registers (datasheet ±5)
 GYRO_LSB_PER_DPS = 16.4               # ±2000 deg/s range
 ACC_NOISE_G = 0.008                   # rms at 94 Hz
+ACC_RANGE_G = 16.0                    # full scale the current firmware configures (±16 g)
+GYRO_BANDWIDTH_HZ = 98.0              # DLPF bandwidth the gyro noise figure is given at
 ACC_RESIDUAL_BIAS_G = 0.005           # after calibration (EST)
-ACC_VIBRATION_G = 0.08                # extra rms at hover thrust (EST, 0.5-1.5 m/s²)
+ACC_VIBRATION_G = 0.08                # extra rms at hover thrust of the raw samples, before the firmware's
+                                      # 30 Hz low-pass (EST, 0.5-1.5 m/s²; white at the 1 kHz read rate)
 GYRO_VIBRATION_DPS = 0.3            # extra rms at hover thrust, after the 80 Hz LPF (EST)
 MAG_FIELD_WORLD = np.array([0.21, 0.0, -0.43])   # gauss: north along +x, 64° inclination (EST)
 MAG_NOISE_GAUSS = 0.004
@@ -71,6 +75,32 @@ def gyro_measured(s: SensorStates, omega: np.ndarray, thrust_fraction: np.ndarra
     """Calibrated gyro (N,3) in deg/s for the controller and ``gyro.*`` (standard signs)."""
     sigma = GYRO_NOISE_DPS + GYRO_VIBRATION_DPS * vibration(thrust_fraction)
     return np.degrees(omega) + s.gyro_bias + rng.standard_normal(omega.shape) * sigma[:, None]
+
+
+def acc_raw(s: SensorStates, specific_force: np.ndarray, thrust_fraction: np.ndarray, samples: int,
+            rng: np.random.Generator) -> np.ndarray:
+    """``samples`` raw accelerometer readings (samples, N, 3) in m/s² of every vehicle at 1 kHz, as
+    the sensors task reads them before its low-pass filter: the specific force (N,3), the residual
+    bias, white noise with the vibration's, clipped at the full scale. The vibration figure is of
+    the raw sensor: the rotors turn at about 300 Hz at hover, where the firmware's 30 Hz
+    second-order filter passes 0.5 %, so 0.08 g after it would need some 17 g of raw vibration,
+    beyond the sensor's ±16 g range."""
+    sigma = (ACC_NOISE_G + ACC_VIBRATION_G * vibration(thrust_fraction)) * GRAVITY
+    noise = rng.standard_normal((samples,) + specific_force.shape) * sigma[:, None]
+    full_scale = ACC_RANGE_G * GRAVITY
+    return np.clip(noise + (specific_force + s.acc_bias * GRAVITY), -full_scale, full_scale)
+
+
+def gyro_means(s: SensorStates, rows: np.ndarray, omega: np.ndarray, thrust_fraction: np.ndarray,
+               window_s: float, rng: np.random.Generator) -> np.ndarray:
+    """The mean gyro readings (N,3, rad/s) of ``rows`` over ``window_s`` that the Kalman filter
+    predicts with, given their true mean body rates: the white noise passes the firmware's 80 Hz
+    low-pass (rms scaled by the root of the bandwidth ratio; the vibration figure is already after
+    it) and then averages down as over 2·B·window independent samples; the bias stays."""
+    vib = vibration(thrust_fraction)[:, None]
+    gyro_lpf = GYRO_NOISE_DPS * math.sqrt(GYRO_LPF_HZ / GYRO_BANDWIDTH_HZ) + GYRO_VIBRATION_DPS * vib
+    gyro_sigma = np.radians(gyro_lpf) / math.sqrt(max(2.0 * GYRO_LPF_HZ * window_s, 1.0))
+    return omega + np.radians(s.gyro_bias[rows]) + rng.standard_normal(omega.shape) * gyro_sigma
 
 
 def pressure_hpa(altitude_m: float) -> float:

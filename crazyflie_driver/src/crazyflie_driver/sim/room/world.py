@@ -278,6 +278,9 @@ class Vehicle:
             b.velocity[i] = 0.0
             b.omega[i] = 0.0
             b.quaternion[i] = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+            b.acceleration[i] = 0.0
+            b.specific_force[i] = (0.0, 0.0, b.gravity[i] if b.position[i, 2] <= 0.0 else 0.0)
+            w.flight.carried(i)
             self._cache_tick = -1
 
     def __repr__(self) -> str:
@@ -287,6 +290,23 @@ class Vehicle:
 def _tilt_cos(q: np.ndarray) -> float:
     """Cosine of the angle between the body's z axis and the world's (quaternion x, y, z, w)."""
     return float(1.0 - 2.0 * (q[0] * q[0] + q[1] * q[1]))
+
+
+class _Imu:
+    """The vehicles' IMU as the onboard estimator reads it (``estimator.ImuSource``)."""
+
+    def __init__(self, sensors: _sensors.SensorStates, bodies: BodyStates, rng: np.random.Generator) -> None:
+        self._sensors, self._bodies, self._rng = sensors, bodies, rng
+
+    def acc_raw(self, samples: int) -> np.ndarray:
+        b = self._bodies
+        fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
+        return _sensors.acc_raw(self._sensors, b.specific_force, fraction, samples, self._rng)
+
+    def gyro_means(self, rows: np.ndarray, omega: np.ndarray, window_s: float) -> np.ndarray:
+        b = self._bodies
+        fraction = (b.thrust[rows] @ _ONES4) * b.inv_mass[rows, 0] / b.gravity[rows]
+        return _sensors.gyro_means(self._sensors, rows, omega, fraction, window_s, self._rng)
 
 
 class World:
@@ -306,6 +326,7 @@ class World:
         self.battery = _battery.BatteryStates()
         self.flight = _flight.OnboardFlight()
         self.rng = np.random.default_rng(seed)
+        self._imu = _Imu(self.sensors, self.bodies, self.rng)
         self._lock = threading.RLock()
         self._vehicles: Dict[str, Vehicle] = {}
         self._order: List[Vehicle] = []
@@ -427,7 +448,7 @@ class World:
         if len(self._order):
             b = self.bodies
             onboard = self.onboard
-            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl):
+            if self.flight.step(k, self.time, b, onboard.s, self.ground_asl, self._imu):
                 onboard.dirty = True
             if k % CONTROL_TICKS == 0:
                 thrust_fraction = (b.thrust @ _ONES4) * b.inv_mass[:, 0] / b.gravity
