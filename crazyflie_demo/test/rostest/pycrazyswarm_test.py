@@ -43,6 +43,12 @@ ON_GROUND_Z_M = 0.02
 CLIMB_EXCLUDED_M = 0.05           # below this under 1 m: still climbing (or landing), not on the figure-8's plane
 STREAM_HEIGHT_M = 0.5             # cmd_full_state.py's take-off height and figure-8 plane
 PATH_BOUND_M = 0.10               # every flown point near the planned figure-8, every planned point flown
+# velocity_circle.py steers by streamed velocities with a 1/s pull toward its planned point, so its path
+# is off by about the onboard velocity error times 1 s; the Kalman filter's velocity error reaches
+# 0.15 m/s at worst on bench_onboard's figure-8 (docs/simulation.md, "Onboard estimator"). Measured
+# with it: 3.8 cm mean, 12.1 cm at worst. The mean tells the circle was flown, the worst a runaway.
+VELOCITY_PATH_MEAN_BOUND_M = 0.06
+VELOCITY_PATH_MAX_BOUND_M = 0.20
 WAYPOINT_BOUND_M = 0.05           # each timed waypoint reached this close
 SEPARATION_M = 0.5                # the swap's lanes keep the two this far apart
 PRESS_TIMEOUT_S = 60.0            # world s for what a script does before the operator's go-ahead
@@ -409,7 +415,8 @@ class PycrazyswarmScripts(unittest.TestCase):
               "most %.3f m; cf2 highest %.3f m" % (len(high), off.max(), off.mean(), missed.max(),
                                                    rec.positions("cf2")[:, 2].max()))
         self.assertGreater(len(high), 100)
-        self.assertLess(off.max(), PATH_BOUND_M, "cf1 strayed from the circle")
+        self.assertLess(off.mean(), VELOCITY_PATH_MEAN_BOUND_M, "cf1 flew off the circle")
+        self.assertLess(off.max(), VELOCITY_PATH_MAX_BOUND_M, "cf1 strayed from the circle")
         self.assertLess(missed.max(), PATH_BOUND_M, "cf1 did not fly the whole circle")
         self.check_landed_home(rec)
 
