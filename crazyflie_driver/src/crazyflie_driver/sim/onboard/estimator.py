@@ -280,6 +280,9 @@ class Estimator:
         acc = mean[:, :3]
         gyro = imu.gyro_means(rows, mean[:, 3:], float(PREDICT_EVERY) * 1e-3) if imu is not None else mean[:, 3:]
         ok = dt > 0.0
+        # the firmware adds the process noise of every 1 ms loop as it runs: the loops since the
+        # last prediction go in before this one's A·P·A' (only the current loop's after it)
+        kalman.add_process_noise(k, rows[ok], now_ms - 1.0)
         rows_p = rows[ok]
         acc, gyro, dt = acc[ok], gyro[ok], dt[ok]
         # all rows share one loop period but a reset row may have a shorter one
