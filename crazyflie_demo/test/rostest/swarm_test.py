@@ -16,8 +16,8 @@ from crazyflie_driver.server.swarm.config import load_swarm_file
 
 FLIGHT_TIMEOUT_S = 100.0
 # Per Crazyflie, over the figure-8 and its settling second. The onboard Kalman filter predicts from the
-# thrust alone in flight and misses the body's drag, so its velocity estimate lags: 4.2-4.4 cm mean
-# (worst Crazyflie 4.7 cm) and 9.1-9.7 cm at worst, at the figure's start, in three runs beside two busy
+# thrust alone in flight and misses the body's drag, so its velocity estimate lags: 4.2-4.6 cm mean
+# (worst Crazyflie 4.8 cm) and 9.0-9.9 cm at worst, at the figure's start, in six runs beside two busy
 # loops (docs/simulation.md, "Onboard estimator"; 2.3 cm mean with the drag taken out of the physics).
 FIGURE8_MEAN_BOUND_M = 0.06
 FIGURE8_MAX_BOUND_M = 0.15
