@@ -26,13 +26,19 @@ class NoisyImu:
         return omega
 
 
-def _predicted_acc(monkeypatch, imu, seconds: float):
+def _resting_kalman():
+    """One estimator row on the Kalman filter at the origin, and a body at rest (1 g on body z)."""
     est = E.Estimator()
     est.add(np.random.default_rng(0), (0.0, 0.0, 0.0), 0.0)
     est.set_param(0, "stabilizer.estimator", 2, (0.0, 0.0, 0.0), 0.0)
     bodies = types.SimpleNamespace(specific_force=np.array([[0.0, 0.0, G]]), omega=np.zeros((1, 3)),
                                    position=np.zeros((1, 3)), velocity=np.zeros((1, 3)),
                                    quaternion=np.array([[0.0, 0.0, 0.0, 1.0]]))
+    return est, bodies
+
+
+def _predicted_acc(monkeypatch, imu, seconds: float):
+    est, bodies = _resting_kalman()
     seen = []
     predict = kalman.predict
     monkeypatch.setattr(kalman, "predict", lambda k, rows, acc, *a: (seen.append(acc[0].copy()),
@@ -60,12 +66,7 @@ def test_process_noise_of_the_loops_before_a_prediction_goes_in_before_it():
     """estimator_kalman.c adds each 1 ms loop's process noise as the loop runs and predicts every
     10th: the noise of loops 1-9 is in P when the prediction at 10 ms propagates it, which puts the
     velocity's noise into the position-velocity covariance (2 % of it at the start)."""
-    est = E.Estimator()
-    est.add(np.random.default_rng(0), (0.0, 0.0, 0.0), 0.0)
-    est.set_param(0, "stabilizer.estimator", 2, (0.0, 0.0, 0.0), 0.0)
-    bodies = types.SimpleNamespace(specific_force=np.array([[0.0, 0.0, G]]), omega=np.zeros((1, 3)),
-                                   position=np.zeros((1, 3)), velocity=np.zeros((1, 3)),
-                                   quaternion=np.array([[0.0, 0.0, 0.0, 1.0]]))
+    est, bodies = _resting_kalman()
     ref = kalman.KalmanStates()
     ref.append_row(**{name: np.array(getattr(est.k, name)[0], copy=True) for name in kalman.KalmanStates.FIELDS})
     rows = np.array([0])
